@@ -1,0 +1,52 @@
+// A motion on the SMPL-22 skeleton: per-frame local joint rotations (axis-angle) and pelvis
+// translation in the z-up world, at a frame rate. The in-memory twin of the clip file layout.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+#include "motionpipe/math/rotation.h"
+#include "motionpipe/skeleton/skeleton.h"
+
+namespace motionpipe {
+
+struct Motion {
+  double fps = 30.0;
+  std::vector<float> poses;  // [T, 22, 3] axis-angle; joint 0 is the global orientation
+  std::vector<float> trans;  // [T, 3] pelvis position, metres, z-up
+
+  int64_t num_frames() const { return static_cast<int64_t>(trans.size() / 3); }
+  double duration_seconds() const { return fps > 0 ? static_cast<double>(num_frames()) / fps : 0; }
+
+  // A motion of `frames` frames in the rest pose standing upright (global orientation Rx(90)).
+  static Motion Rest(int64_t frames, double fps, double pelvis_height);
+
+  Mat3 LocalRotation(int64_t frame, int joint) const;
+  void SetLocalRotation(int64_t frame, int joint, const Mat3& rotation);
+  Vec3 Translation(int64_t frame) const;
+  void SetTranslation(int64_t frame, const Vec3& position);
+};
+
+// Checks shapes (poses = T*66, trans = T*3, T >= min_frames), fps > 0 and that every value is
+// finite. The message names `origin` and the first bad frame.
+Status ValidateMotion(const Motion& motion, const std::string& origin, int64_t min_frames = 1);
+
+// All frames' local rotation matrices, [T*22].
+std::vector<Mat3> LocalRotations(const Motion& motion);
+
+// Forward kinematics of every frame: joint positions [T, 22, 3] (float, metres, z-up).
+std::vector<float> ComputeJoints(const Skeleton& skeleton, const Motion& motion);
+
+// Frames [begin, end) of the motion.
+Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end);
+
+// Resampling to another frame rate. ByIndex picks source frames, the field's convention for AMASS
+// 120 -> 30 fps (numpy's arange(0, T, src/dst).astype(int): output frame i is source frame
+// floor(i * src/dst)). Interpolate slerps rotations and lerps translation, for rates that do not
+// divide.
+enum class ResampleMethod { kByIndex, kInterpolate };
+Motion Resample(const Motion& motion, double target_fps, ResampleMethod method = ResampleMethod::kByIndex);
+
+}  // namespace motionpipe

@@ -1,0 +1,150 @@
+#include "motionpipe/formats/motionfix.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace motionpipe {
+
+namespace {
+
+struct SideArrays {
+  std::vector<int64_t> offsets{0};
+  std::vector<float> poses, trans, joints;
+};
+
+void AppendSide(SideArrays* side, const Motion& motion, const std::vector<float>& joints, bool with_joints) {
+  side->poses.insert(side->poses.end(), motion.poses.begin(), motion.poses.end());
+  side->trans.insert(side->trans.end(), motion.trans.begin(), motion.trans.end());
+  if (with_joints) side->joints.insert(side->joints.end(), joints.begin(), joints.end());
+  side->offsets.push_back(side->offsets.back() + motion.num_frames());
+}
+
+void AddSide(Npz* npz, const std::string& prefix, const SideArrays& side, int64_t n, bool with_joints) {
+  const int64_t frames = side.offsets.back();
+  npz->Add(prefix + "_offsets", NpyArray::Int64({n + 1}, side.offsets));
+  npz->Add(prefix + "_poses", NpyArray::Float32({frames, kNumJoints, 3}, side.poses));
+  npz->Add(prefix + "_trans", NpyArray::Float32({frames, 3}, side.trans));
+  if (with_joints) npz->Add(prefix + "_joints", NpyArray::Float32({frames, kNumJoints, 3}, side.joints));
+}
+
+struct LoadedSide {
+  std::vector<int64_t> offsets;
+  std::vector<float> poses, trans, joints;
+};
+
+Result<LoadedSide> LoadSide(const Npz& npz, const std::string& prefix, int64_t n, const std::string& origin) {
+  LoadedSide side;
+  MP_ASSIGN_OR_RETURN(const NpyArray* off, GetShaped(npz, prefix + "_offsets", {n + 1}, origin));
+  MP_ASSIGN_OR_RETURN(side.offsets, off->ToInt64(origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* poses, GetShaped(npz, prefix + "_poses", {-1, kNumJoints, 3}, origin));
+  const int64_t frames = poses->shape[0];
+  if (side.offsets.front() != 0 || side.offsets.back() != frames) {
+    return DataLoss(origin + ": '" + prefix + "_offsets' must run from 0 to " + std::to_string(frames));
+  }
+  for (size_t k = 1; k < side.offsets.size(); ++k) {
+    if (side.offsets[k] < side.offsets[k - 1]) return DataLoss(origin + ": '" + prefix + "_offsets' decreases");
+  }
+  MP_ASSIGN_OR_RETURN(side.poses, poses->ToFloat32(origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* trans, GetShaped(npz, prefix + "_trans", {frames, 3}, origin));
+  MP_ASSIGN_OR_RETURN(side.trans, trans->ToFloat32(origin));
+  if (npz.Find(prefix + "_joints")) {
+    MP_ASSIGN_OR_RETURN(const NpyArray* joints, GetShaped(npz, prefix + "_joints", {frames, kNumJoints, 3}, origin));
+    MP_ASSIGN_OR_RETURN(side.joints, joints->ToFloat32(origin));
+  }
+  return side;
+}
+
+void Extract(const LoadedSide& side, size_t index, double fps, Motion* motion, std::vector<float>* joints) {
+  const int64_t begin = side.offsets[index], end = side.offsets[index + 1];
+  motion->fps = fps;
+  motion->poses.assign(side.poses.begin() + begin * kNumJoints * 3, side.poses.begin() + end * kNumJoints * 3);
+  motion->trans.assign(side.trans.begin() + begin * 3, side.trans.begin() + end * 3);
+  if (!side.joints.empty()) {
+    joints->assign(side.joints.begin() + begin * kNumJoints * 3, side.joints.begin() + end * kNumJoints * 3);
+  }
+}
+
+}  // namespace
+
+Npz TripletsToNpz(const std::vector<Triplet>& triplets) {
+  const auto n = static_cast<int64_t>(triplets.size());
+  const bool with_joints = !triplets.empty() && std::all_of(triplets.begin(), triplets.end(), [](const Triplet& t) {
+    return !t.source_joints.empty() && !t.target_joints.empty();
+  });
+  std::vector<std::string> ids, texts, splits;
+  std::vector<double> fps;
+  std::vector<int32_t> edit_start, edit_end;
+  SideArrays source, target;
+  for (const Triplet& t : triplets) {
+    ids.push_back(t.id);
+    texts.push_back(t.text);
+    splits.push_back(t.split);
+    fps.push_back(t.source.fps);
+    edit_start.push_back(t.edit_start);
+    edit_end.push_back(t.edit_end);
+    AppendSide(&source, t.source, t.source_joints, with_joints);
+    AppendSide(&target, t.target, t.target_joints, with_joints);
+  }
+  Npz npz;
+  npz.Add("format", NpyArray::ScalarString(kTripletsFormat));
+  npz.Add("ids", NpyArray::Strings({n}, ids));
+  npz.Add("texts", NpyArray::Strings({n}, texts));
+  npz.Add("splits", NpyArray::Strings({n}, splits));
+  npz.Add("fps", NpyArray::Float64({n}, fps));
+  AddSide(&npz, "source", source, n, with_joints);
+  AddSide(&npz, "target", target, n, with_joints);
+  npz.Add("edit_start", NpyArray::Int32({n}, edit_start));
+  npz.Add("edit_end", NpyArray::Int32({n}, edit_end));
+  return npz;
+}
+
+Result<std::vector<Triplet>> TripletsFromNpz(const Npz& npz, const std::string& origin) {
+  MP_ASSIGN_OR_RETURN(const NpyArray* format, GetShaped(npz, "format", {}, origin));
+  MP_ASSIGN_OR_RETURN(auto format_text, format->ToStrings(origin));
+  if (format_text.front() != kTripletsFormat) {
+    return DataLoss(origin + ": format is '" + format_text.front() + "', expected '" + kTripletsFormat + "'");
+  }
+  MP_ASSIGN_OR_RETURN(const NpyArray* ids_a, GetShaped(npz, "ids", {-1}, origin));
+  const int64_t n = ids_a->shape[0];
+  MP_ASSIGN_OR_RETURN(auto ids, ids_a->ToStrings(origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* texts_a, GetShaped(npz, "texts", {n}, origin));
+  MP_ASSIGN_OR_RETURN(auto texts, texts_a->ToStrings(origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* splits_a, GetShaped(npz, "splits", {n}, origin));
+  MP_ASSIGN_OR_RETURN(auto splits, splits_a->ToStrings(origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* fps_a, GetShaped(npz, "fps", {n}, origin));
+  MP_ASSIGN_OR_RETURN(auto fps, fps_a->ToFloat64(origin));
+  MP_ASSIGN_OR_RETURN(LoadedSide source, LoadSide(npz, "source", n, origin));
+  MP_ASSIGN_OR_RETURN(LoadedSide target, LoadSide(npz, "target", n, origin));
+  std::vector<int64_t> edit_start(static_cast<size_t>(n), -1), edit_end(static_cast<size_t>(n), -1);
+  if (npz.Find("edit_start")) {
+    MP_ASSIGN_OR_RETURN(const NpyArray* es, GetShaped(npz, "edit_start", {n}, origin));
+    MP_ASSIGN_OR_RETURN(edit_start, es->ToInt64(origin));
+    MP_ASSIGN_OR_RETURN(const NpyArray* ee, GetShaped(npz, "edit_end", {n}, origin));
+    MP_ASSIGN_OR_RETURN(edit_end, ee->ToInt64(origin));
+  }
+  std::vector<Triplet> triplets(static_cast<size_t>(n));
+  for (size_t k = 0; k < triplets.size(); ++k) {
+    Triplet& t = triplets[k];
+    t.id = ids[k];
+    t.text = texts[k];
+    t.split = splits[k];
+    t.edit_start = static_cast<int32_t>(edit_start[k]);
+    t.edit_end = static_cast<int32_t>(edit_end[k]);
+    Extract(source, k, fps[k], &t.source, &t.source_joints);
+    Extract(target, k, fps[k], &t.target, &t.target_joints);
+    MP_RETURN_IF_ERROR(ValidateMotion(t.source, origin + ": triplet '" + t.id + "' source"));
+    MP_RETURN_IF_ERROR(ValidateMotion(t.target, origin + ": triplet '" + t.id + "' target"));
+  }
+  return triplets;
+}
+
+Status WriteTriplets(const std::string& path, const std::vector<Triplet>& triplets, bool compress) {
+  return WriteNpz(path, TripletsToNpz(triplets), compress);
+}
+
+Result<std::vector<Triplet>> ReadTriplets(const std::string& path) {
+  MP_ASSIGN_OR_RETURN(const Npz npz, ReadNpz(path));
+  return TripletsFromNpz(npz, path);
+}
+
+}  // namespace motionpipe

@@ -1,0 +1,153 @@
+#include "motionpipe/motion/motion.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace motionpipe {
+
+Motion Motion::Rest(int64_t frames, double fps, double pelvis_height) {
+  Motion motion;
+  motion.fps = fps;
+  motion.poses.assign(static_cast<size_t>(frames) * kNumJoints * 3, 0.0f);
+  motion.trans.assign(static_cast<size_t>(frames) * 3, 0.0f);
+  const Vec3 upright = MatrixToAxisAngle(YUpToZUp());
+  for (int64_t frame = 0; frame < frames; ++frame) {
+    motion.poses[static_cast<size_t>(frame) * kNumJoints * 3] = static_cast<float>(upright.x);
+    motion.trans[static_cast<size_t>(frame) * 3 + 2] = static_cast<float>(pelvis_height);
+  }
+  return motion;
+}
+
+Mat3 Motion::LocalRotation(int64_t frame, int joint) const {
+  const float* aa = &poses[(static_cast<size_t>(frame) * kNumJoints + static_cast<size_t>(joint)) * 3];
+  return AxisAngleToMatrix({aa[0], aa[1], aa[2]});
+}
+
+void Motion::SetLocalRotation(int64_t frame, int joint, const Mat3& rotation) {
+  const Vec3 aa = MatrixToAxisAngle(rotation);
+  float* out = &poses[(static_cast<size_t>(frame) * kNumJoints + static_cast<size_t>(joint)) * 3];
+  out[0] = static_cast<float>(aa.x);
+  out[1] = static_cast<float>(aa.y);
+  out[2] = static_cast<float>(aa.z);
+}
+
+Vec3 Motion::Translation(int64_t frame) const {
+  const float* t = &trans[static_cast<size_t>(frame) * 3];
+  return {t[0], t[1], t[2]};
+}
+
+void Motion::SetTranslation(int64_t frame, const Vec3& position) {
+  float* t = &trans[static_cast<size_t>(frame) * 3];
+  t[0] = static_cast<float>(position.x);
+  t[1] = static_cast<float>(position.y);
+  t[2] = static_cast<float>(position.z);
+}
+
+Status ValidateMotion(const Motion& motion, const std::string& origin, int64_t min_frames) {
+  if (motion.trans.size() % 3 != 0) return DataLoss(origin + ": translation is not [T, 3]");
+  const int64_t frames = motion.num_frames();
+  if (motion.poses.size() != static_cast<size_t>(frames) * kNumJoints * 3) {
+    return DataLoss(origin + ": poses hold " + std::to_string(motion.poses.size()) +
+                    " values, expected T*66 = " + std::to_string(frames * kNumJoints * 3));
+  }
+  if (frames < min_frames) {
+    return DataLoss(origin + ": " + std::to_string(frames) + " frames, need at least " +
+                    std::to_string(min_frames));
+  }
+  if (!(motion.fps > 0) || !std::isfinite(motion.fps)) {
+    return DataLoss(origin + ": frame rate must be positive, got " + std::to_string(motion.fps));
+  }
+  for (size_t k = 0; k < motion.poses.size(); ++k) {
+    if (!std::isfinite(motion.poses[k])) {
+      return DataLoss(origin + ": non-finite rotation at frame " + std::to_string(k / (kNumJoints * 3)));
+    }
+  }
+  for (size_t k = 0; k < motion.trans.size(); ++k) {
+    if (!std::isfinite(motion.trans[k])) {
+      return DataLoss(origin + ": non-finite translation at frame " + std::to_string(k / 3));
+    }
+  }
+  return Status::Ok();
+}
+
+std::vector<Mat3> LocalRotations(const Motion& motion) {
+  const int64_t frames = motion.num_frames();
+  std::vector<Mat3> out(static_cast<size_t>(frames) * kNumJoints);
+  for (int64_t frame = 0; frame < frames; ++frame) {
+    for (int joint = 0; joint < kNumJoints; ++joint) {
+      out[static_cast<size_t>(frame) * kNumJoints + static_cast<size_t>(joint)] =
+          motion.LocalRotation(frame, joint);
+    }
+  }
+  return out;
+}
+
+std::vector<float> ComputeJoints(const Skeleton& skeleton, const Motion& motion) {
+  const int64_t frames = motion.num_frames();
+  std::vector<float> joints(static_cast<size_t>(frames) * kNumJoints * 3);
+  std::array<Mat3, kNumJoints> local;
+  std::array<Mat3, kNumJoints> global;
+  std::array<Vec3, kNumJoints> positions;
+  for (int64_t frame = 0; frame < frames; ++frame) {
+    for (int joint = 0; joint < kNumJoints; ++joint) local[static_cast<size_t>(joint)] = motion.LocalRotation(frame, joint);
+    ForwardKinematicsFrame(skeleton, local.data(), motion.Translation(frame), global.data(), positions.data());
+    float* out = &joints[static_cast<size_t>(frame) * kNumJoints * 3];
+    for (int joint = 0; joint < kNumJoints; ++joint) {
+      out[joint * 3 + 0] = static_cast<float>(positions[static_cast<size_t>(joint)].x);
+      out[joint * 3 + 1] = static_cast<float>(positions[static_cast<size_t>(joint)].y);
+      out[joint * 3 + 2] = static_cast<float>(positions[static_cast<size_t>(joint)].z);
+    }
+  }
+  return joints;
+}
+
+Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end) {
+  begin = std::clamp<int64_t>(begin, 0, motion.num_frames());
+  end = std::clamp<int64_t>(end, begin, motion.num_frames());
+  Motion out;
+  out.fps = motion.fps;
+  const size_t pose_stride = kNumJoints * 3;
+  out.poses.assign(motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(begin) * pose_stride),
+                   motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(end) * pose_stride));
+  out.trans.assign(motion.trans.begin() + begin * 3, motion.trans.begin() + end * 3);
+  return out;
+}
+
+Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) {
+  const int64_t frames = motion.num_frames();
+  if (frames == 0 || target_fps <= 0 || std::abs(target_fps - motion.fps) < 1e-9) {
+    Motion same = motion;
+    if (target_fps > 0) same.fps = target_fps;
+    return same;
+  }
+  const double step = motion.fps / target_fps;  // source frames per output frame
+  // Output frames cover the same duration: the last output frame maps inside the source.
+  const int64_t out_frames = std::max<int64_t>(1, static_cast<int64_t>(std::floor((frames - 1) / step + 1e-9)) + 1);
+  Motion out;
+  out.fps = target_fps;
+  out.poses.resize(static_cast<size_t>(out_frames) * kNumJoints * 3);
+  out.trans.resize(static_cast<size_t>(out_frames) * 3);
+  for (int64_t frame = 0; frame < out_frames; ++frame) {
+    const double src = static_cast<double>(frame) * step;
+    if (method == ResampleMethod::kByIndex) {
+      const int64_t index = std::min<int64_t>(frames - 1, static_cast<int64_t>(std::floor(src + 1e-9)));
+      std::copy_n(&motion.poses[static_cast<size_t>(index) * kNumJoints * 3], kNumJoints * 3,
+                  &out.poses[static_cast<size_t>(frame) * kNumJoints * 3]);
+      std::copy_n(&motion.trans[static_cast<size_t>(index) * 3], 3, &out.trans[static_cast<size_t>(frame) * 3]);
+      continue;
+    }
+    const int64_t lo = std::min<int64_t>(frames - 1, static_cast<int64_t>(std::floor(src)));
+    const int64_t hi = std::min<int64_t>(frames - 1, lo + 1);
+    const double t = src - static_cast<double>(lo);
+    for (int joint = 0; joint < kNumJoints; ++joint) {
+      const Quat a = MatrixToQuat(motion.LocalRotation(lo, joint));
+      const Quat b = MatrixToQuat(motion.LocalRotation(hi, joint));
+      out.SetLocalRotation(frame, joint, QuatToMatrix(Slerp(a, b, t)));
+    }
+    const Vec3 pa = motion.Translation(lo), pb = motion.Translation(hi);
+    out.SetTranslation(frame, (1 - t) * pa + t * pb);
+  }
+  return out;
+}
+
+}  // namespace motionpipe

@@ -1,0 +1,154 @@
+#include <gtest/gtest.h>
+
+#include "motionpipe/formats/amass.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/formats/humanml3d.h"
+#include "motionpipe/formats/motionfix.h"
+#include "test_util.h"
+
+namespace motionpipe {
+namespace {
+
+Clip MakeClip(const std::string& id, int64_t frames, uint32_t seed) {
+  Clip clip;
+  clip.id = id;
+  clip.source = "test";
+  clip.motion = testing::SmoothMotion(frames, seed);
+  clip.texts = {"a person walks in a circle", "walk in a circle"};
+  clip.segments = {{0, static_cast<int32_t>(frames / 2), "walk", PartBit(BodyPart::kGlobal) | PartBit(BodyPart::kLeftLeg)},
+                   {static_cast<int32_t>(frames / 4), static_cast<int32_t>(frames), "wave right hand", PartBit(BodyPart::kRightArm)}};
+  return clip;
+}
+
+TEST(Clips, WriteReadRoundTrip) {
+  std::vector<Clip> clips = {MakeClip("a", 40, 1), MakeClip("b", 25, 2)};
+  clips[1].texts.clear();
+  const std::string path = ::testing::TempDir() + "/clips.npz";
+  ASSERT_TRUE(WriteClips(path, clips).ok());
+  auto back = ReadClips(path);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  ASSERT_EQ(back->size(), 2u);
+  EXPECT_EQ((*back)[0].motion.poses, clips[0].motion.poses);
+  EXPECT_EQ((*back)[1].motion.trans, clips[1].motion.trans);
+  EXPECT_EQ((*back)[0].texts, clips[0].texts);
+  EXPECT_TRUE((*back)[1].texts.empty());
+  ASSERT_EQ((*back)[0].segments.size(), 2u);
+  EXPECT_EQ((*back)[0].segments[1].text, "wave right hand");
+  EXPECT_EQ((*back)[0].segments[1].parts, PartBit(BodyPart::kRightArm));
+  EXPECT_EQ((*back)[1].segments[0].end_frame, 12);
+}
+
+TEST(Clips, InvalidClipsAreRefusedWithTheirName) {
+  Clip clip = MakeClip("bad", 20, 1);
+  clip.segments[0].end_frame = 99;
+  const Status s = WriteClips(::testing::TempDir() + "/bad.npz", {clip});
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("clip 'bad': segment 'walk' [0, 99)"), std::string::npos) << s.message();
+  Clip nan = MakeClip("nan", 20, 1);
+  nan.motion.poses[5] = std::numeric_limits<float>::infinity();
+  EXPECT_FALSE(WriteClips(::testing::TempDir() + "/nan.npz", {nan}).ok());
+}
+
+TEST(Clips, DamagedOffsetsAreDataLoss) {
+  Npz npz = ClipsToNpz({MakeClip("a", 10, 1)});
+  npz.Add("offsets", NpyArray::Int64({2}, {0, 11}));
+  auto bad = ClipsFromNpz(npz, "x.npz");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kDataLoss);
+  npz = ClipsToNpz({MakeClip("a", 10, 1)});
+  npz.Add("format", NpyArray::ScalarString("something else"));
+  EXPECT_FALSE(ClipsFromNpz(npz, "x.npz").ok());
+}
+
+TEST(Amass, ReadsSmplhAndSmplxLayoutsAndResamples) {
+  const Motion motion = testing::SmoothMotion(120, 4, 120);
+  Npz smplh = AmassNpzFromMotion(motion);
+  auto clip = AmassClipFromNpz(smplh, "walk_poses.npz");
+  ASSERT_TRUE(clip.ok()) << clip.status().ToString();
+  EXPECT_EQ(clip->motion.poses, motion.poses);
+  EXPECT_EQ(clip->motion.fps, 120);
+  // SMPL-X: 165 columns, float64, and mocap_frame_rate.
+  Npz smplx;
+  std::vector<double> poses(120 * 165, 0.0);
+  for (int64_t f = 0; f < 120; ++f) {
+    for (int c = 0; c < 66; ++c) poses[static_cast<size_t>(f * 165 + c)] = motion.poses[static_cast<size_t>(f * 66 + c)];
+  }
+  smplx.Add("poses", NpyArray::Float64({120, 165}, poses));
+  smplx.Add("trans", NpyArray::Float32({120, 3}, motion.trans));
+  smplx.Add("mocap_frame_rate", NpyArray::ScalarFloat64(120));
+  const std::string path = ::testing::TempDir() + "/smplx.npz";
+  ASSERT_TRUE(WriteNpz(path, smplx).ok());
+  auto resampled = ReadAmassNpz(path, 30);
+  ASSERT_TRUE(resampled.ok()) << resampled.status().ToString();
+  EXPECT_EQ(resampled->motion.num_frames(), 30);
+  EXPECT_FLOAT_EQ(resampled->motion.poses[66], motion.poses[4 * 66]);
+  Npz broken = smplh;
+  broken.Add("poses", NpyArray::Float32({120, 10}, std::vector<float>(1200, 0)));
+  auto bad = AmassClipFromNpz(broken, "b.npz");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("b.npz: 'poses' has shape (120, 10)"), std::string::npos);
+}
+
+TEST(LoadMotionFile, DispatchesOnContentAndKeepsSegmentsWhenResampling) {
+  const std::string amass = ::testing::TempDir() + "/any_amass.npz";
+  ASSERT_TRUE(WriteNpz(amass, AmassNpzFromMotion(testing::SmoothMotion(60, 2, 60))).ok());
+  auto a = LoadMotionFile(amass, 30);
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ(a->front().motion.num_frames(), 30);
+  const std::string clips = ::testing::TempDir() + "/any_clips.npz";
+  Clip clip = MakeClip("c", 60, 3);
+  clip.motion.fps = 60;
+  ASSERT_TRUE(WriteClips(clips, {clip}).ok());
+  auto c = LoadMotionFile(clips, 30);
+  ASSERT_TRUE(c.ok());
+  ASSERT_EQ(c->front().segments.size(), 2u);
+  EXPECT_EQ(c->front().segments[0].end_frame, 15);  // frames [0, 30) at 60 fps -> [0, 15) at 30
+  const std::string junk = ::testing::TempDir() + "/junk.npz";
+  Npz npz;
+  npz.Add("x", NpyArray::Float32({1}, {1}));
+  ASSERT_TRUE(WriteNpz(junk, npz).ok());
+  EXPECT_FALSE(LoadMotionFile(junk).ok());
+}
+
+TEST(Triplets, RoundTripWithJointsAndEditRange) {
+  std::vector<Triplet> triplets(2);
+  for (size_t k = 0; k < 2; ++k) {
+    triplets[k].id = "t" + std::to_string(k);
+    triplets[k].text = k ? "raise the right arm higher" : "walk faster";
+    triplets[k].split = k ? "test" : "train";
+    triplets[k].source = testing::SmoothMotion(30 + static_cast<int64_t>(k) * 5, static_cast<uint32_t>(k));
+    triplets[k].target = testing::SmoothMotion(28, static_cast<uint32_t>(k) + 10);
+    triplets[k].source_joints = ComputeJoints(Skeleton::Smpl22(), triplets[k].source);
+    triplets[k].target_joints = ComputeJoints(Skeleton::Smpl22(), triplets[k].target);
+  }
+  triplets[1].edit_start = 5;
+  triplets[1].edit_end = 20;
+  const std::string path = ::testing::TempDir() + "/triplets.npz";
+  ASSERT_TRUE(WriteTriplets(path, triplets).ok());
+  auto back = ReadTriplets(path);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  ASSERT_EQ(back->size(), 2u);
+  EXPECT_EQ((*back)[1].text, "raise the right arm higher");
+  EXPECT_EQ((*back)[1].source.poses, triplets[1].source.poses);
+  EXPECT_EQ((*back)[1].target_joints, triplets[1].target_joints);
+  EXPECT_EQ((*back)[1].edit_end, 20);
+  EXPECT_EQ((*back)[0].edit_start, -1);
+}
+
+TEST(HumanML3D, JointsConvertFromYUpToZUp) {
+  std::vector<float> joints(2 * 22 * 3, 0.0f);
+  joints[15 * 3 + 1] = 1.6f;  // head 1.6 m up (y)
+  joints[10 * 3 + 2] = 0.2f;  // left foot forward (+z in y-up)
+  const std::string path = ::testing::TempDir() + "/000001.npy";
+  ASSERT_TRUE(WriteNpy(path, NpyArray::Float32({2, 22, 3}, joints)).ok());
+  auto seq = ReadHumanML3DJoints(path);
+  ASSERT_TRUE(seq.ok());
+  EXPECT_EQ(seq->frames, 2);
+  EXPECT_FLOAT_EQ(seq->joints[15 * 3 + 2], 1.6f);
+  EXPECT_FLOAT_EQ(seq->joints[10 * 3 + 1], -0.2f);  // forward is -y in our z-up world
+  ASSERT_TRUE(WriteNpy(path, NpyArray::Float32({2, 21, 3}, std::vector<float>(126, 0))).ok());
+  EXPECT_FALSE(ReadHumanML3DJoints(path).ok());
+}
+
+}  // namespace
+}  // namespace motionpipe

@@ -1,0 +1,33 @@
+#include "motionpipe/base/file.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+namespace motionpipe {
+namespace {
+
+TEST(Sha256, KnownVectors) {
+  EXPECT_EQ(Sha256Hex(""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  EXPECT_EQ(Sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(Sha256Hex("abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq"),
+            "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+  EXPECT_EQ(Sha256Hex(std::string(1000000, 'a')), "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+}
+
+TEST(File, AtomicWriteReplacesAndLeavesNoTemporaries) {
+  const std::string dir = ::testing::TempDir() + "/atomic";
+  ASSERT_TRUE(MakeDirs(dir).ok());
+  const std::string path = dir + "/out.txt";
+  ASSERT_TRUE(WriteFileAtomic(path, "first").ok());
+  ASSERT_TRUE(WriteFileAtomic(path, "second").ok());
+  EXPECT_EQ(*ReadFile(path), "second");
+  int entries = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) entries += entry.is_regular_file();
+  EXPECT_EQ(entries, 1);
+  EXPECT_EQ(ReadFile(dir + "/missing").status().code(), StatusCode::kNotFound);
+  EXPECT_FALSE(WriteFileAtomic(dir + "/no/such/dir/file", "x").ok());
+}
+
+}  // namespace
+}  // namespace motionpipe

@@ -1,0 +1,138 @@
+#include "motionpipe/skeleton/skeleton.h"
+
+#include <gtest/gtest.h>
+
+#include "motionpipe/base/file.h"
+#include "motionpipe/motion/motion.h"
+#include "test_util.h"
+
+namespace motionpipe {
+namespace {
+
+TEST(Skeleton, EmbeddedFactsMatchTheDataFile) {
+  const Skeleton& s = Skeleton::Smpl22();
+  ASSERT_EQ(s.joint_names().size(), 22u);
+  EXPECT_EQ(s.parents(), (std::vector<int>{-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19}));
+  EXPECT_EQ(s.joint_names()[15], "head");
+  EXPECT_EQ(s.JointIndex("left_wrist"), 20);
+  EXPECT_EQ(s.part_of_joint(0), BodyPart::kGlobal);
+  EXPECT_EQ(s.part_of_joint(20), BodyPart::kLeftArm);
+  EXPECT_EQ(s.part_of_joint(11), BodyPart::kRightLeg);
+  auto text = ReadFile(testing::DataDir() + "/skeleton/smpl22.json");
+  ASSERT_TRUE(text.ok());
+  auto loaded = Skeleton::FromJson(*text, "smpl22.json");
+  ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
+  for (int j = 0; j < kNumJoints; ++j) {
+    EXPECT_NEAR(Norm(loaded->rest_offsets()[static_cast<size_t>(j)]), loaded->bone_lengths()[static_cast<size_t>(j)], 1e-12);
+  }
+}
+
+TEST(Skeleton, TPoseArmsPointSidewaysFileDirectionsHangDown) {
+  const Skeleton& t = Skeleton::Smpl22();
+  EXPECT_GT(t.rest_offsets()[18].x, 0.2);  // left elbow to the body's left (+x)
+  EXPECT_LT(t.rest_offsets()[19].x, -0.2);
+  auto text = ReadFile(testing::DataDir() + "/skeleton/smpl22.json");
+  auto raw = Skeleton::FromJson(*text, "smpl22.json", RestPose::kFileDirections);
+  ASSERT_TRUE(raw.ok());
+  EXPECT_LT(raw->rest_offsets()[18].y, -0.2);  // hanging down
+  EXPECT_GT(raw->rest_offsets()[15].z, 0.1);   // the file's head offset points forward
+  EXPECT_GT(t.rest_offsets()[15].y, 0.1);      // SMPL's head sits above the neck
+}
+
+TEST(Skeleton, BadJsonNamesTheOriginAndField) {
+  auto bad = Skeleton::FromJson("{\"joint_names\": []}", "my.json");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("my.json"), std::string::npos);
+  auto broken = Skeleton::FromJson("{not json", "broken.json");
+  ASSERT_FALSE(broken.ok());
+  EXPECT_NE(broken.status().message().find("broken.json: malformed JSON"), std::string::npos);
+}
+
+TEST(ForwardKinematics, RestPoseStandsUprightInZUp) {
+  const Skeleton& s = Skeleton::Smpl22();
+  const Motion rest = Motion::Rest(1, 30, s.RestPelvisHeight());
+  const std::vector<float> joints = ComputeJoints(s, rest);
+  const auto z = [&](int j) { return joints[static_cast<size_t>(j * 3 + 2)]; };
+  const auto x = [&](int j) { return joints[static_cast<size_t>(j * 3 + 0)]; };
+  EXPECT_NEAR(z(7), 0.0, 1e-6);   // left ankle on the floor
+  EXPECT_NEAR(z(10), 0.0, 1e-6);  // left foot on the floor
+  EXPECT_GT(z(15), z(12));  // head above neck above pelvis
+  EXPECT_GT(z(12), z(0));
+  EXPECT_GT(x(1), 0);  // left hip on +x (the body's left at heading 0)
+  EXPECT_GT(x(20), 0.5);
+  EXPECT_LT(x(21), -0.5);
+  // Pelvis to head along z equals the spine, neck and head lengths (all vertical in the rest pose).
+  const auto& len = s.bone_lengths();
+  EXPECT_NEAR(z(15) - z(0), len[3] + len[6] + len[9] + len[12] + len[15], 1e-6);
+  // Feet point forward: SMPL forward (+z body) is -y in the z-up world at heading 0.
+  EXPECT_LT(joints[10 * 3 + 1] - joints[7 * 3 + 1], -0.1);
+}
+
+TEST(ForwardKinematics, KneeBendMovesTheAnkleBackward) {
+  const Skeleton& s = Skeleton::Smpl22();
+  Motion motion = Motion::Rest(1, 30, 1.0);
+  motion.SetLocalRotation(0, 4, RotX(kPi / 2));  // left knee: 90 degrees about the body's x axis
+  const std::vector<float> joints = ComputeJoints(s, motion);
+  const Vec3 knee{joints[4 * 3], joints[4 * 3 + 1], joints[4 * 3 + 2]};
+  const Vec3 ankle{joints[7 * 3], joints[7 * 3 + 1], joints[7 * 3 + 2]};
+  // The shin turns from hanging down to horizontal: same height as the knee, one shin length away.
+  EXPECT_NEAR(ankle.z, knee.z, 1e-6);
+  EXPECT_NEAR(Norm(ankle - knee), s.bone_lengths()[7], 1e-6);
+  EXPECT_GT(ankle.y - knee.y, 0.4);  // behind the body (forward is -y)
+}
+
+TEST(ForwardKinematics, BoneLengthsStayFixedUnderAnyPose) {
+  const Skeleton& s = Skeleton::Smpl22();
+  const Motion motion = testing::SmoothMotion(40, 9);
+  const std::vector<float> joints = ComputeJoints(s, motion);
+  for (int64_t frame = 0; frame < motion.num_frames(); ++frame) {
+    for (int j = 1; j < kNumJoints; ++j) {
+      const int p = s.parents()[static_cast<size_t>(j)];
+      const float* a = &joints[static_cast<size_t>((frame * kNumJoints + j) * 3)];
+      const float* b = &joints[static_cast<size_t>((frame * kNumJoints + p) * 3)];
+      const double len = std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+      EXPECT_NEAR(len, s.bone_lengths()[static_cast<size_t>(j)], 1e-5);
+    }
+  }
+}
+
+TEST(Motion, ValidateRejectsNaNAndBadShapes) {
+  Motion motion = testing::SmoothMotion(10, 1);
+  EXPECT_TRUE(ValidateMotion(motion, "m").ok());
+  motion.trans[7] = std::nanf("");
+  const Status nan = ValidateMotion(motion, "clip.npz");
+  EXPECT_FALSE(nan.ok());
+  EXPECT_NE(nan.message().find("clip.npz: non-finite translation at frame 2"), std::string::npos);
+  Motion empty;
+  EXPECT_FALSE(ValidateMotion(empty, "e").ok());
+  motion = testing::SmoothMotion(10, 1);
+  motion.poses.pop_back();
+  EXPECT_FALSE(ValidateMotion(motion, "m").ok());
+}
+
+TEST(Motion, ResampleByIndexFollowsNumpyArange) {
+  const Motion motion = testing::SmoothMotion(994, 3, 120);
+  const Motion down = Resample(motion, 30);
+  EXPECT_EQ(down.num_frames(), 249);  // len(np.arange(0, 994, 4))
+  EXPECT_EQ(down.fps, 30);
+  for (int64_t frame : {0, 1, 100, 248}) {
+    EXPECT_EQ(down.trans[static_cast<size_t>(frame * 3)], motion.trans[static_cast<size_t>(frame * 4 * 3)]);
+  }
+  const Motion odd = Resample(testing::SmoothMotion(100, 3, 100), 30);
+  EXPECT_EQ(odd.num_frames(), 30);  // len(np.arange(0, 100, 10/3))
+}
+
+TEST(Motion, ResampleInterpolateIsSmoothAndExactAtSamples) {
+  const Motion motion = testing::SmoothMotion(61, 5, 30);
+  const Motion up = Resample(motion, 60, ResampleMethod::kInterpolate);
+  EXPECT_EQ(up.num_frames(), 121);
+  for (int joint = 0; joint < kNumJoints; ++joint) {
+    EXPECT_LT(MaxAbsDiff(up.LocalRotation(20, joint), motion.LocalRotation(10, joint)), 1e-6);
+  }
+  const Vec3 mid = up.Translation(21);
+  const Vec3 expect = 0.5 * (motion.Translation(10) + motion.Translation(11));
+  EXPECT_LT(Norm(mid - expect), 1e-6);
+}
+
+}  // namespace
+}  // namespace motionpipe
