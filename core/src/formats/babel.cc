@@ -39,9 +39,11 @@ Result<BabelLabel> ParseLabel(const nlohmann::json& node, const std::string& whe
     }
     label.start_t = node["start_t"].get<double>();
     label.end_t = node["end_t"].get<double>();
-    if (!std::isfinite(label.start_t) || !std::isfinite(label.end_t) || label.end_t < label.start_t) {
-      return DataLoss(where + ": label '" + label.proc_label + "' has end_t before start_t");
+    if (!std::isfinite(label.start_t) || !std::isfinite(label.end_t) || std::abs(label.start_t) > 86400 ||
+        std::abs(label.end_t) > 86400) {
+      return DataLoss(where + ": label '" + label.proc_label + "' has an implausible start_t/end_t");
     }
+    if (label.end_t < label.start_t) return DataLoss(where + ": label '" + label.proc_label + "' has end_t before start_t");
   } else {
     label.start_t = 0;
     label.end_t = duration;
@@ -71,7 +73,10 @@ Result<std::vector<BabelSequence>> ParseBabel(const std::string& json_text, cons
     if (node.contains("feat_p") && node["feat_p"].is_string()) seq.feat_p = node["feat_p"].get<std::string>();
     if (!node.contains("dur") || !node["dur"].is_number()) return DataLoss(where + ": missing numeric 'dur'");
     seq.duration = node["dur"].get<double>();
-    if (!std::isfinite(seq.duration) || seq.duration < 0) return DataLoss(where + ": 'dur' must be >= 0");
+    // A day is far beyond any capture session; larger values are corrupt and would overflow frame counts.
+    if (!std::isfinite(seq.duration) || seq.duration < 0 || seq.duration > 86400) {
+      return DataLoss(where + ": 'dur' must be between 0 and 86400 seconds");
+    }
     const bool has_frame = node.contains("frame_ann") && !node["frame_ann"].is_null();
     const nlohmann::json* ann = nullptr;
     if (has_frame) {
