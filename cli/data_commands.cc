@@ -6,6 +6,8 @@
 
 #include "commands.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/corpus/corpus.h"
+#include "motionpipe/corpus/inspect.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/features/temos135.h"
 #include "motionpipe/formats/amass.h"
@@ -147,6 +149,44 @@ void AddDataCommands(CLI::App& app, int* exit_code) {
                       clip.texts.size(), clip.segments.size(), clip.source.c_str());
         }
       }
+    });
+  }
+  {  // synth-corpus
+    auto* cmd = data->add_subcommand("synth-corpus",
+                                     "Generate the procedural motion corpus (AMASS npz + BABEL JSON + MotionFix-style triplets)");
+    static corpus::CorpusOptions options;
+    static int64_t triplets = -1;
+    static bool no_amass = false, no_joints = false;
+    cmd->add_option("--out", options.out_dir, "Output directory")->required();
+    cmd->add_option("--seed", options.seed, "Random seed (same seed, same bytes)")->capture_default_str();
+    cmd->add_option("--clips", options.clips, "Number of clips")->capture_default_str()->check(CLI::PositiveNumber);
+    cmd->add_option("--triplets", triplets, "Number of editing triplets (default: as many as clips)");
+    cmd->add_option("--fps", options.fps, "Frame rate")->capture_default_str()->check(CLI::PositiveNumber);
+    cmd->add_option("--threads", options.threads, "OpenMP threads (0 = all cores)")->capture_default_str();
+    cmd->add_option("--shard-size", options.shard_size, "Clips or triplets per shard file")->capture_default_str();
+    cmd->add_option("--min-seconds", options.script.min_seconds, "Shortest clip")->capture_default_str();
+    cmd->add_option("--max-seconds", options.script.max_seconds, "Longest clip")->capture_default_str();
+    cmd->add_flag("--no-amass", no_amass, "Skip the per-clip AMASS-style npz files");
+    cmd->add_flag("--no-triplet-joints", no_joints, "Do not store FK joint positions with the triplets");
+    cmd->callback([exit_code] {
+      options.triplets = triplets;
+      options.write_amass = !no_amass;
+      options.triplet_joints = !no_joints;
+      auto summary = corpus::GenerateCorpus(options);
+      if (!summary.ok()) return void(*exit_code = Fail(summary.status()));
+      std::printf("%s: %lld clips (%lld frames) + %lld triplets in %.1f s (%lld scripts resampled by the plausibility gate)\n",
+                  options.out_dir.c_str(), static_cast<long long>(summary->clips), static_cast<long long>(summary->frames),
+                  static_cast<long long>(summary->triplets), summary->seconds, static_cast<long long>(summary->rejected));
+    });
+  }
+  {  // inspect
+    auto* cmd = data->add_subcommand("inspect", "Summarise a generated corpus (through the real loaders)");
+    static std::string dir;
+    cmd->add_option("dir", dir, "Corpus directory")->required()->check(CLI::ExistingDirectory);
+    cmd->callback([exit_code] {
+      auto report = corpus::InspectCorpus(dir);
+      if (!report.ok()) return void(*exit_code = Fail(report.status()));
+      std::fputs(corpus::FormatCorpusReport(*report).c_str(), stdout);
     });
   }
   {  // roundtrip

@@ -15,8 +15,8 @@ Clip MakeClip(const std::string& id, int64_t frames, uint32_t seed) {
   clip.source = "test";
   clip.motion = testing::SmoothMotion(frames, seed);
   clip.texts = {"a person walks in a circle", "walk in a circle"};
-  clip.segments = {{0, static_cast<int32_t>(frames / 2), "walk", PartBit(BodyPart::kGlobal) | PartBit(BodyPart::kLeftLeg)},
-                   {static_cast<int32_t>(frames / 4), static_cast<int32_t>(frames), "wave right hand", PartBit(BodyPart::kRightArm)}};
+  clip.segments = {{0, static_cast<int32_t>(frames / 2), "walk", PartBit(BodyPart::kGlobal) | PartBit(BodyPart::kLeftLeg), ""},
+                   {static_cast<int32_t>(frames / 4), static_cast<int32_t>(frames), "wave right hand", PartBit(BodyPart::kRightArm), ""}};
   return clip;
 }
 

@@ -25,7 +25,7 @@ TEST(NumpyInterop, NumpyLoadsOurClipFile) {
   a.id = "upright";
   a.motion = Motion::Rest(12, 30, 0.9);
   a.texts = {"a person waves — with the right hand"};
-  a.segments = {{0, 12, "wave", PartBit(BodyPart::kRightArm)}};
+  a.segments = {{0, 12, "wave", PartBit(BodyPart::kRightArm), ""}};
   Clip b;
   b.id = "second";
   b.motion = testing::SmoothMotion(20, 3);

@@ -31,7 +31,7 @@ Status ValidateClip(const Clip& clip, const std::string& origin) {
 }
 
 Npz ClipsToNpz(const std::vector<Clip>& clips) {
-  std::vector<std::string> ids, sources, texts, seg_text;
+  std::vector<std::string> ids, sources, texts, seg_text, seg_action;
   std::vector<double> fps;
   std::vector<int64_t> offsets{0}, text_offsets{0}, seg_offsets{0};
   std::vector<float> poses, trans, joints;
@@ -52,6 +52,7 @@ Npz ClipsToNpz(const std::vector<Clip>& clips) {
       seg_start.push_back(seg.start_frame);
       seg_end.push_back(seg.end_frame);
       seg_text.push_back(seg.text);
+      seg_action.push_back(seg.action);
       for (int part = 0; part < kNumBodyParts; ++part) seg_parts.push_back((seg.parts >> part) & 1);
     }
     seg_offsets.push_back(static_cast<int64_t>(seg_start.size()));
@@ -75,6 +76,9 @@ Npz ClipsToNpz(const std::vector<Clip>& clips) {
   npz.Add("seg_end", NpyArray::Int32({segs}, seg_end));
   npz.Add("seg_text", NpyArray::Strings({segs}, seg_text));
   npz.Add("seg_parts", NpyArray::Bool({segs, kNumBodyParts}, seg_parts));
+  if (std::any_of(seg_action.begin(), seg_action.end(), [](const std::string& a) { return !a.empty(); })) {
+    npz.Add("seg_action", NpyArray::Strings({segs}, seg_action));
+  }
   return npz;
 }
 
@@ -135,6 +139,11 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
   MP_ASSIGN_OR_RETURN(auto seg_text, stext_a->ToStrings(origin + ": 'seg_text'"));
   MP_ASSIGN_OR_RETURN(const NpyArray* sparts_a, GetShaped(npz, "seg_parts", {segs, kNumBodyParts}, origin));
   MP_ASSIGN_OR_RETURN(auto seg_parts, sparts_a->ToInt64(origin + ": 'seg_parts'"));
+  std::vector<std::string> seg_action;
+  if (npz.Find("seg_action")) {
+    MP_ASSIGN_OR_RETURN(const NpyArray* saction_a, GetShaped(npz, "seg_action", {segs}, origin));
+    MP_ASSIGN_OR_RETURN(seg_action, saction_a->ToStrings(origin + ": 'seg_action'"));
+  }
 
   std::vector<Clip> clips(static_cast<size_t>(n));
   for (int64_t i = 0; i < n; ++i) {
@@ -154,6 +163,7 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
       seg.start_frame = static_cast<int32_t>(seg_start[sidx]);
       seg.end_frame = static_cast<int32_t>(seg_end[sidx]);
       seg.text = seg_text[sidx];
+      if (!seg_action.empty()) seg.action = seg_action[sidx];
       for (int part = 0; part < kNumBodyParts; ++part) {
         if (seg_parts[sidx * kNumBodyParts + static_cast<size_t>(part)]) seg.parts |= static_cast<PartSet>(1u << part);
       }

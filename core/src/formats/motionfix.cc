@@ -71,7 +71,7 @@ Npz TripletsToNpz(const std::vector<Triplet>& triplets) {
   const bool with_joints = !triplets.empty() && std::all_of(triplets.begin(), triplets.end(), [](const Triplet& t) {
     return !t.source_joints.empty() && !t.target_joints.empty();
   });
-  std::vector<std::string> ids, texts, splits;
+  std::vector<std::string> ids, texts, splits, kinds;
   std::vector<double> fps;
   std::vector<int32_t> edit_start, edit_end;
   SideArrays source, target;
@@ -82,6 +82,7 @@ Npz TripletsToNpz(const std::vector<Triplet>& triplets) {
     fps.push_back(t.source.fps);
     edit_start.push_back(t.edit_start);
     edit_end.push_back(t.edit_end);
+    kinds.push_back(t.edit_kind);
     AppendSide(&source, t.source, t.source_joints, with_joints);
     AppendSide(&target, t.target, t.target_joints, with_joints);
   }
@@ -95,6 +96,9 @@ Npz TripletsToNpz(const std::vector<Triplet>& triplets) {
   AddSide(&npz, "target", target, n, with_joints);
   npz.Add("edit_start", NpyArray::Int32({n}, edit_start));
   npz.Add("edit_end", NpyArray::Int32({n}, edit_end));
+  if (std::any_of(kinds.begin(), kinds.end(), [](const std::string& k) { return !k.empty(); })) {
+    npz.Add("edit_kind", NpyArray::Strings({n}, kinds));
+  }
   return npz;
 }
 
@@ -122,6 +126,11 @@ Result<std::vector<Triplet>> TripletsFromNpz(const Npz& npz, const std::string& 
     MP_ASSIGN_OR_RETURN(const NpyArray* ee, GetShaped(npz, "edit_end", {n}, origin));
     MP_ASSIGN_OR_RETURN(edit_end, ee->ToInt64(origin));
   }
+  std::vector<std::string> kinds;
+  if (npz.Find("edit_kind")) {
+    MP_ASSIGN_OR_RETURN(const NpyArray* ek, GetShaped(npz, "edit_kind", {n}, origin));
+    MP_ASSIGN_OR_RETURN(kinds, ek->ToStrings(origin));
+  }
   std::vector<Triplet> triplets(static_cast<size_t>(n));
   for (size_t k = 0; k < triplets.size(); ++k) {
     Triplet& t = triplets[k];
@@ -130,6 +139,7 @@ Result<std::vector<Triplet>> TripletsFromNpz(const Npz& npz, const std::string& 
     t.split = splits[k];
     t.edit_start = static_cast<int32_t>(edit_start[k]);
     t.edit_end = static_cast<int32_t>(edit_end[k]);
+    if (!kinds.empty()) t.edit_kind = kinds[k];
     Extract(source, k, fps[k], &t.source, &t.source_joints);
     Extract(target, k, fps[k], &t.target, &t.target_joints);
     MP_RETURN_IF_ERROR(ValidateMotion(t.source, origin + ": triplet '" + t.id + "' source"));

@@ -195,106 +195,116 @@ Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::stri
   return members;
 }
 
-void ZipWriter::Add(const std::string& name, std::string_view data, bool deflate) {
+void ZipWriter::Add(const std::string& name, std::string data, bool deflate) {
   Entry entry;
   entry.name = name;
-  entry.crc = Crc32(data);
-  entry.size = data.size();
-  entry.offset = out_.size();
-  std::string compressed;
-  if (deflate) {
-    compressed = Deflate(data);
-    entry.method = 8;
-  }
-  const std::string_view payload = deflate ? std::string_view(compressed) : data;
-  entry.compressed_size = payload.size();
-  const bool zip64 = entry.size >= k32Max || entry.compressed_size >= k32Max;
-  Put32(&out_, kLocalSig);
-  Put16(&out_, zip64 ? 45 : 20);
-  Put16(&out_, 0);  // flags
-  Put16(&out_, entry.method);
-  Put16(&out_, 0);       // time 00:00
-  Put16(&out_, 0x21);    // date 1980-01-01: fixed so that the same content gives the same bytes
-  Put32(&out_, entry.crc);
-  Put32(&out_, zip64 ? k32Max : static_cast<uint32_t>(entry.compressed_size));
-  Put32(&out_, zip64 ? k32Max : static_cast<uint32_t>(entry.size));
-  Put16(&out_, static_cast<uint16_t>(name.size()));
-  Put16(&out_, zip64 ? 20 : 0);
-  out_ += name;
-  if (zip64) {
-    Put16(&out_, 0x0001);
-    Put16(&out_, 16);
-    Put64(&out_, entry.size);
-    Put64(&out_, entry.compressed_size);
-  }
-  out_.append(payload.data(), payload.size());
+  entry.data = std::move(data);
+  entry.deflate = deflate;
   entries_.push_back(std::move(entry));
 }
 
 std::string ZipWriter::Finish() {
-  const uint64_t dir_offset = out_.size();
+  // Compress every member independently and in parallel.
+  const auto count = static_cast<int64_t>(entries_.size());
+#pragma omp parallel for schedule(dynamic)
+  for (int64_t k = 0; k < count; ++k) {
+    Entry& entry = entries_[static_cast<size_t>(k)];
+    entry.crc = Crc32(entry.data);
+    entry.size = entry.data.size();
+    if (entry.deflate) {
+      entry.data = Deflate(entry.data);
+      entry.method = 8;
+    }
+    entry.compressed_size = entry.data.size();
+  }
+  std::string out;
+  for (Entry& entry : entries_) {
+    entry.offset = out.size();
+    const bool zip64 = entry.size >= k32Max || entry.compressed_size >= k32Max;
+    Put32(&out, kLocalSig);
+    Put16(&out, zip64 ? 45 : 20);
+    Put16(&out, 0);  // flags
+    Put16(&out, entry.method);
+    Put16(&out, 0);     // time 00:00
+    Put16(&out, 0x21);  // date 1980-01-01: fixed so that the same content gives the same bytes
+    Put32(&out, entry.crc);
+    Put32(&out, zip64 ? k32Max : static_cast<uint32_t>(entry.compressed_size));
+    Put32(&out, zip64 ? k32Max : static_cast<uint32_t>(entry.size));
+    Put16(&out, static_cast<uint16_t>(entry.name.size()));
+    Put16(&out, zip64 ? 20 : 0);
+    out += entry.name;
+    if (zip64) {
+      Put16(&out, 0x0001);
+      Put16(&out, 16);
+      Put64(&out, entry.size);
+      Put64(&out, entry.compressed_size);
+    }
+    out += entry.data;
+    std::string().swap(entry.data);
+  }
+  const uint64_t dir_offset = out.size();
   for (const Entry& entry : entries_) {
     const bool big_sizes = entry.size >= k32Max || entry.compressed_size >= k32Max;
     const bool big_offset = entry.offset >= k32Max;
     const uint16_t extra_len = static_cast<uint16_t>((big_sizes ? 16 : 0) + (big_offset ? 8 : 0));
-    Put32(&out_, kCentralSig);
-    Put16(&out_, 45);  // made by: spec 4.5
-    Put16(&out_, (big_sizes || big_offset) ? 45 : 20);
-    Put16(&out_, 0);
-    Put16(&out_, entry.method);
-    Put16(&out_, 0);
-    Put16(&out_, 0x21);
-    Put32(&out_, entry.crc);
-    Put32(&out_, big_sizes ? k32Max : static_cast<uint32_t>(entry.compressed_size));
-    Put32(&out_, big_sizes ? k32Max : static_cast<uint32_t>(entry.size));
-    Put16(&out_, static_cast<uint16_t>(entry.name.size()));
-    Put16(&out_, extra_len ? static_cast<uint16_t>(extra_len + 4) : 0);
-    Put16(&out_, 0);  // comment
-    Put16(&out_, 0);  // disk
-    Put16(&out_, 0);  // internal attributes
-    Put32(&out_, 0x81A40000u);  // external attributes: regular file, 0644
-    Put32(&out_, big_offset ? k32Max : static_cast<uint32_t>(entry.offset));
-    out_ += entry.name;
+    Put32(&out, kCentralSig);
+    Put16(&out, 45);  // made by: spec 4.5
+    Put16(&out, (big_sizes || big_offset) ? 45 : 20);
+    Put16(&out, 0);
+    Put16(&out, entry.method);
+    Put16(&out, 0);
+    Put16(&out, 0x21);
+    Put32(&out, entry.crc);
+    Put32(&out, big_sizes ? k32Max : static_cast<uint32_t>(entry.compressed_size));
+    Put32(&out, big_sizes ? k32Max : static_cast<uint32_t>(entry.size));
+    Put16(&out, static_cast<uint16_t>(entry.name.size()));
+    Put16(&out, extra_len ? static_cast<uint16_t>(extra_len + 4) : 0);
+    Put16(&out, 0);  // comment
+    Put16(&out, 0);  // disk
+    Put16(&out, 0);  // internal attributes
+    Put32(&out, 0x81A40000u);  // external attributes: regular file, 0644
+    Put32(&out, big_offset ? k32Max : static_cast<uint32_t>(entry.offset));
+    out += entry.name;
     if (extra_len) {
-      Put16(&out_, 0x0001);
-      Put16(&out_, extra_len);
+      Put16(&out, 0x0001);
+      Put16(&out, extra_len);
       if (big_sizes) {
-        Put64(&out_, entry.size);
-        Put64(&out_, entry.compressed_size);
+        Put64(&out, entry.size);
+        Put64(&out, entry.compressed_size);
       }
-      if (big_offset) Put64(&out_, entry.offset);
+      if (big_offset) Put64(&out, entry.offset);
     }
   }
-  const uint64_t dir_size = out_.size() - dir_offset;
+  const uint64_t dir_size = out.size() - dir_offset;
   const bool zip64 = entries_.size() >= 0xFFFF || dir_offset >= k32Max || dir_size >= k32Max;
   if (zip64) {
-    const uint64_t record = out_.size();
-    Put32(&out_, kZip64EndSig);
-    Put64(&out_, 44);
-    Put16(&out_, 45);
-    Put16(&out_, 45);
-    Put32(&out_, 0);
-    Put32(&out_, 0);
-    Put64(&out_, entries_.size());
-    Put64(&out_, entries_.size());
-    Put64(&out_, dir_size);
-    Put64(&out_, dir_offset);
-    Put32(&out_, kZip64LocatorSig);
-    Put32(&out_, 0);
-    Put64(&out_, record);
-    Put32(&out_, 1);
+    const uint64_t record = out.size();
+    Put32(&out, kZip64EndSig);
+    Put64(&out, 44);
+    Put16(&out, 45);
+    Put16(&out, 45);
+    Put32(&out, 0);
+    Put32(&out, 0);
+    Put64(&out, entries_.size());
+    Put64(&out, entries_.size());
+    Put64(&out, dir_size);
+    Put64(&out, dir_offset);
+    Put32(&out, kZip64LocatorSig);
+    Put32(&out, 0);
+    Put64(&out, record);
+    Put32(&out, 1);
   }
-  Put32(&out_, kEndSig);
-  Put16(&out_, 0);
-  Put16(&out_, 0);
+  Put32(&out, kEndSig);
+  Put16(&out, 0);
+  Put16(&out, 0);
   const uint16_t count16 = zip64 ? 0xFFFF : static_cast<uint16_t>(entries_.size());
-  Put16(&out_, count16);
-  Put16(&out_, count16);
-  Put32(&out_, zip64 ? k32Max : static_cast<uint32_t>(dir_size));
-  Put32(&out_, zip64 ? k32Max : static_cast<uint32_t>(dir_offset));
-  Put16(&out_, 0);
+  Put16(&out, count16);
+  Put16(&out, count16);
+  Put32(&out, zip64 ? k32Max : static_cast<uint32_t>(dir_size));
+  Put32(&out, zip64 ? k32Max : static_cast<uint32_t>(dir_offset));
+  Put16(&out, 0);
   entries_.clear();
-  return std::move(out_);
+  return out;
 }
 
 }  // namespace motionpipe

@@ -15,7 +15,8 @@ namespace motionpipe {
 Result<std::string> ReadFile(const std::string& path);
 
 // Atomically replaces `path` with `bytes` (temporary name + fsync + rename). Creates no directories.
-Status WriteFileAtomic(const std::string& path, std::string_view bytes);
+// `sync` = false skips the fsync for bulk outputs (the rename still hides partial files).
+Status WriteFileAtomic(const std::string& path, std::string_view bytes, bool sync = true);
 
 // Creates `path` and its parents when missing.
 Status MakeDirs(const std::string& path);

@@ -16,6 +16,7 @@
 //   seg_end       i4  (S,)        one past the last frame
 //   seg_text      <U  (S,)        the action's label
 //   seg_parts     b1  (S, 6)      body parts used, order [global, torso, left arm, right arm, left leg, right leg]
+//   seg_action    <U  (S,)        optional: canonical action name (procedural corpus ground truth)
 #pragma once
 
 #include <cstdint>
@@ -35,7 +36,8 @@ struct Segment {
   int32_t start_frame = 0;  // clip-relative, inclusive
   int32_t end_frame = 0;    // exclusive
   std::string text;
-  PartSet parts = 0;  // 0 = unknown
+  PartSet parts = 0;   // 0 = unknown
+  std::string action;  // canonical action name when known (procedural corpus), else empty
 };
 
 struct Clip {

@@ -11,6 +11,7 @@
 //   source_joints   f4 (F, 22, 3)  optional (MotionFix `joint_positions`)
 //   target_*                      the same for the target motions
 //   edit_start/end  i4 (N,)        ground-truth edited source frames [start, end); -1 when unknown
+//   edit_kind       <U (N,)        optional: the kind of edit (procedural corpus ground truth)
 #pragma once
 
 #include <string>
@@ -34,6 +35,7 @@ struct Triplet {
   std::vector<float> target_joints;
   int32_t edit_start = -1;
   int32_t edit_end = -1;
+  std::string edit_kind;  // empty when unknown
 };
 
 Npz TripletsToNpz(const std::vector<Triplet>& triplets);

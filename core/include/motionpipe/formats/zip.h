@@ -18,23 +18,26 @@ struct ZipMember {
 // Every member of an archive held in memory. DataLoss names `origin` and the damaged part.
 Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin);
 
-// Builds an archive in memory; `deflate` selects compression for the members added after it.
+// Builds an archive in memory. Members are compressed in Finish(), in parallel (OpenMP), each on its
+// own, so the bytes do not depend on the thread count.
 class ZipWriter {
  public:
-  void Add(const std::string& name, std::string_view data, bool deflate);
+  // `deflate` chooses compression for this member.
+  void Add(const std::string& name, std::string data, bool deflate);
   // The finished archive; the writer is empty afterwards.
   std::string Finish();
 
  private:
   struct Entry {
     std::string name;
+    std::string data;  // uncompressed until Finish(), then the stored payload
+    bool deflate = false;
     uint32_t crc = 0;
     uint64_t compressed_size = 0;
     uint64_t size = 0;
     uint64_t offset = 0;
     uint16_t method = 0;
   };
-  std::string out_;
   std::vector<Entry> entries_;
 };
 

@@ -1,0 +1,61 @@
+// The embedded default dataset: a procedural motion corpus written in the real formats, so the real
+// loaders read it and every stage can run without licensed data.
+//
+//   DIR/manifest.json                 what was generated, counts, options, sha256 of every file (written last)
+//   DIR/clips/clips-NNNNN.npz         our clip layout: motions, captions, labelled segments with ground-truth parts
+//   DIR/amass/<id>_poses.npz          AMASS-style npz per clip (poses [T,156], trans, mocap_framerate, betas)
+//   DIR/babel/{train,val,test}.json   BABEL-style annotations (seq_ann, frame_ann with proc_label, start_t, end_t)
+//   DIR/motionfix/triplets-NNNNN.npz  MotionFix-style editing triplets in our converted layout, with edit ranges
+//   DIR/motionfix/splits.json         triplet ids per split, as MotionFix ships them
+//   DIR/texts/labels.json             every label and caption with its ground-truth body parts (labeler evaluation)
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+#include "motionpipe/corpus/script.h"
+
+namespace motionpipe::corpus {
+
+// Thresholds every generated clip must pass; a clip that fails is resampled (counted as rejected).
+struct PlausibilityGate {
+  double max_skate_ratio = 0.08;
+  double max_penetration = 0.01;  // metres
+  double max_reach_error = 0.01;  // metres
+  double max_joint_step = 0.9;    // metres per frame
+  bool joint_limits = true;
+  int max_attempts = 12;
+};
+
+struct CorpusOptions {
+  std::string out_dir;
+  uint64_t seed = 1;
+  int64_t clips = 1000;
+  int64_t triplets = -1;  // -1: as many as clips
+  double fps = 30;
+  int shard_size = 500;
+  int threads = 0;          // OpenMP threads; 0 = the runtime's default
+  bool triplet_joints = true;  // store FK joint positions with the triplets (as MotionFix does)
+  bool write_amass = true;  // per-clip AMASS npz files (many small files)
+  ScriptOptions script;
+  PlausibilityGate gate;
+};
+
+struct CorpusSummary {
+  int64_t clips = 0, triplets = 0, frames = 0, triplet_frames = 0;
+  int64_t rejected = 0;  // scripts resampled because a clip failed the gate
+  double seconds = 0;
+  std::map<std::string, int64_t> split_clips;
+};
+
+// Generates the corpus into options.out_dir (created when missing). Deterministic: the same options
+// give byte-identical files, whatever the thread count.
+Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options);
+
+// The split of item `index` (clips and triplets hash separately): train 80%, val 10%, test 10%.
+std::string SplitOf(uint64_t seed, uint64_t stream, int64_t index);
+
+}  // namespace motionpipe::corpus

@@ -1,0 +1,348 @@
+#include "motionpipe/corpus/corpus.h"
+
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "motionpipe/base/file.h"
+#include "motionpipe/corpus/edits.h"
+#include "motionpipe/corpus/synthesizer.h"
+#include "motionpipe/formats/amass.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/formats/motionfix.h"
+#include "motionpipe/motion/plausibility.h"
+#include "motionpipe/text/english.h"
+
+namespace motionpipe::corpus {
+
+namespace {
+
+constexpr uint64_t kClipStream = 0xC11B;
+constexpr uint64_t kTripletStream = 0x7121;
+
+bool PassesGate(const Synthesis& synthesis, const PlausibilityGate& gate, const Skeleton& skeleton) {
+  if (synthesis.max_reach_error > gate.max_reach_error) return false;
+  const PlausibilityReport r = EvaluateMotionPlausibility(skeleton, synthesis.motion);
+  return r.foot_skate_ratio <= gate.max_skate_ratio && r.penetration_max <= gate.max_penetration &&
+         r.max_joint_step <= gate.max_joint_step && (!gate.joint_limits || r.joint_limit_violations == 0);
+}
+
+std::string StripSubject(const std::string& caption) {
+  for (const char* subject : {"a person ", "someone ", "the person ", "a human ", "the human "}) {
+    const std::string s(subject);
+    if (caption.compare(0, s.size(), s) == 0) return caption.substr(s.size());
+  }
+  return caption;
+}
+
+// A HumanML3D-style description of the whole clip: base actions in order, gestures attached with
+// "while" ("a person walks forward while waving right hand and then sits down").
+std::string ClipCaption(const ClipScript& s) {
+  std::string out;
+  for (size_t k = 0; k < s.base.size(); ++k) {
+    const ActionInstance& b = s.base[k];
+    std::string part = k == 0 ? b.caption : StripSubject(b.caption);
+    std::vector<std::string> during;
+    for (const ActionInstance& o : s.overlays) {
+      if (o.start >= b.start && o.start < b.end) during.push_back(text::GerundPhrase(VerbPhrase(o, Person::kThird)));
+    }
+    for (size_t j = 0; j < during.size(); ++j) part += (j == 0 ? " while " : " and ") + during[j];
+    if (b.id == ActionId::kStand && !during.empty() && s.base.size() == 1) {
+      part = "a person stands while " + during.front();
+      for (size_t j = 1; j < during.size(); ++j) part += " and " + during[j];
+    }
+    out += (k == 0 ? "" : (k + 1 == s.base.size() ? " and then " : ", then ")) + part;
+  }
+  return out;
+}
+
+std::string ActCat(ActionId id) {
+  switch (Def(id).kind) {
+    case ActionKind::kLocomotion: return id == ActionId::kStand ? "stand" : "locomotion";
+    case ActionKind::kWholeBody: return "body movement";
+    case ActionKind::kLeg: return "leg movement";
+    case ActionKind::kArm: return "arm movement";
+    case ActionKind::kTorso: return "torso movement";
+    case ActionKind::kHead: return "head movement";
+  }
+  return "action";
+}
+
+struct TextFact {
+  std::string text;
+  PartSet parts;
+  std::string action;
+};
+
+struct GeneratedClip {
+  Clip clip;
+  nlohmann::json babel;
+  std::string amass;
+  std::string split;
+  int64_t rejected = 0;
+  std::vector<TextFact> facts;
+};
+
+Synthesis SynthesizeGated(ClipScript* script, const CorpusOptions& options, uint64_t base_seed, const std::string& id,
+                          int64_t* rejected) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  Synthesis synthesis;
+  for (int attempt = 0; attempt < options.gate.max_attempts; ++attempt) {
+    Rng rng(MixSeed(base_seed, static_cast<uint64_t>(attempt)));
+    *script = SampleScript(rng, options.script, id);
+    synthesis = Synthesize(*script, skeleton);
+    if (PassesGate(synthesis, options.gate, skeleton)) return synthesis;
+    ++*rejected;
+  }
+  return synthesis;  // the last attempt, even if imperfect (never observed with the default gate)
+}
+
+GeneratedClip MakeClip(const CorpusOptions& options, int64_t index) {
+  GeneratedClip out;
+  char id[32];
+  std::snprintf(id, sizeof(id), "c%07lld", static_cast<long long>(index));
+  ClipScript script;
+  const Synthesis synthesis = SynthesizeGated(&script, options, MixSeed(MixSeed(options.seed, kClipStream), index), id,
+                                              &out.rejected);
+  out.split = SplitOf(options.seed, kClipStream, index);
+  Clip& clip = out.clip;
+  clip.id = id;
+  clip.source = "procedural:seed=" + std::to_string(options.seed);
+  clip.motion = synthesis.motion;
+  clip.joints = ComputeJoints(Skeleton::Smpl22(), clip.motion);
+  const std::string caption = ClipCaption(script);
+  clip.texts.push_back(caption);
+  clip.segments = synthesis.segments;
+  // Segments follow script order: annotated base instances, then annotated overlays.
+  std::vector<const ActionInstance*> annotated;
+  for (const ActionInstance& a : script.base) {
+    if (a.annotated) annotated.push_back(&a);
+  }
+  for (const ActionInstance& a : script.overlays) {
+    if (a.annotated) annotated.push_back(&a);
+  }
+  for (size_t k = 0; k < clip.segments.size(); ++k) {
+    clip.segments[k].action = Def(annotated[k]->id).name;
+    clip.texts.push_back(annotated[k]->label);
+    out.facts.push_back({annotated[k]->label, clip.segments[k].parts, clip.segments[k].action});
+    out.facts.push_back({annotated[k]->caption, clip.segments[k].parts, clip.segments[k].action});
+  }
+
+  // BABEL: sequence label = the caption; frame labels = the actions, plus transitions as BABEL has.
+  const std::string feat_p = "amass/" + clip.id + "_poses.npz";
+  nlohmann::json frame_labels = nlohmann::json::array();
+  int seg_id = 0;
+  for (size_t k = 0; k < annotated.size(); ++k) {
+    const ActionInstance& a = *annotated[k];
+    frame_labels.push_back({{"raw_label", a.label},
+                            {"proc_label", a.label},
+                            {"seg_id", clip.id + "_" + std::to_string(seg_id++)},
+                            {"act_cat", {ActCat(a.id)}},
+                            {"start_t", std::round(a.start * 1000) / 1000},
+                            {"end_t", std::round(a.end * 1000) / 1000}});
+  }
+  Rng transition_rng(MixSeed(MixSeed(options.seed, kClipStream ^ 0xBAB), index));
+  for (size_t k = 1; k < script.base.size(); ++k) {
+    if (!transition_rng.Bernoulli(0.3)) continue;
+    const double t = script.base[k].start;
+    frame_labels.push_back({{"raw_label", "transition"},
+                            {"proc_label", "transition"},
+                            {"seg_id", clip.id + "_" + std::to_string(seg_id++)},
+                            {"act_cat", {"transition"}},
+                            {"start_t", std::round(std::max(0.0, t - 0.3) * 1000) / 1000},
+                            {"end_t", std::round(std::min(script.duration, t + 0.3) * 1000) / 1000}});
+  }
+  out.babel = {{"babel_sid", index},
+               {"url", ""},
+               {"feat_p", feat_p},
+               {"dur", std::round(clip.motion.duration_seconds() * 1000) / 1000},
+               {"split", out.split},
+               {"seq_ann",
+                {{"mul_act", annotated.size() > 1},
+                 {"labels", {{{"raw_label", caption}, {"proc_label", caption}, {"seg_id", clip.id + "_seq"}, {"act_cat", {"action"}}}}}}},
+               {"frame_ann", {{"labels", frame_labels}}}};
+  PartSet caption_parts = 0;  // the caption describes every action of the clip
+  for (const ActionInstance& a : script.base) caption_parts = static_cast<PartSet>(caption_parts | PartsOf(a.id, a.side));
+  for (const ActionInstance& a : script.overlays) caption_parts = static_cast<PartSet>(caption_parts | PartsOf(a.id, a.side));
+  out.facts.push_back({caption, caption_parts, ""});
+  if (options.write_amass) out.amass = SerializeNpz(AmassNpzFromMotion(clip.motion), false);
+  return out;
+}
+
+struct GeneratedTriplet {
+  Triplet triplet;
+  int64_t rejected = 0;
+};
+
+GeneratedTriplet MakeTriplet(const CorpusOptions& options, int64_t index) {
+  GeneratedTriplet out;
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  char id[32];
+  std::snprintf(id, sizeof(id), "t%07lld", static_cast<long long>(index));
+  const uint64_t base_seed = MixSeed(MixSeed(options.seed, kTripletStream), index);
+  Triplet& t = out.triplet;
+  for (int attempt = 0; attempt < options.gate.max_attempts; ++attempt) {
+    Rng rng(MixSeed(base_seed, static_cast<uint64_t>(attempt)));
+    const ClipScript source = SampleScript(rng, options.script, id);
+    const Edit edit = SampleEdit(source, rng);
+    const Synthesis a = Synthesize(source, skeleton);
+    const Synthesis b = Synthesize(edit.target, skeleton);
+    t.source = a.motion;
+    t.target = b.motion;
+    t.text = edit.text;
+    t.edit_kind = EditKindName(edit.kind);
+    t.edit_start = static_cast<int32_t>(std::llround(edit.edit_start * options.fps));
+    t.edit_end = static_cast<int32_t>(std::min<int64_t>(std::llround(edit.edit_end * options.fps), a.motion.num_frames()));
+    if (PassesGate(a, options.gate, skeleton) && PassesGate(b, options.gate, skeleton)) break;
+    ++out.rejected;
+  }
+  t.id = id;
+  t.split = SplitOf(options.seed, kTripletStream, index);
+  if (options.triplet_joints) {
+    t.source_joints = ComputeJoints(skeleton, t.source);
+    t.target_joints = ComputeJoints(skeleton, t.target);
+  }
+  return out;
+}
+
+std::string ShardName(const std::string& prefix, int64_t shard) {
+  char name[64];
+  std::snprintf(name, sizeof(name), "%s-%05lld.npz", prefix.c_str(), static_cast<long long>(shard));
+  return name;
+}
+
+}  // namespace
+
+std::string SplitOf(uint64_t seed, uint64_t stream, int64_t index) {
+  const uint64_t h = MixSeed(MixSeed(seed, stream ^ 0x5B11), static_cast<uint64_t>(index)) % 100;
+  return h < 80 ? "train" : (h < 90 ? "val" : "test");
+}
+
+Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options) {
+  if (options.out_dir.empty()) return InvalidArgument("synth-corpus: no output directory");
+  if (options.clips < 1) return InvalidArgument("synth-corpus: --clips must be at least 1");
+  if (!(options.fps > 0)) return InvalidArgument("synth-corpus: --fps must be positive");
+  const auto started = std::chrono::steady_clock::now();
+  const std::string& dir = options.out_dir;
+  for (const char* sub : {"", "/clips", "/amass", "/babel", "/motionfix", "/texts"}) {
+    MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
+  }
+  if (options.threads > 0) omp_set_num_threads(options.threads);
+  CorpusOptions opts = options;
+  opts.script.fps = options.fps;
+  const int64_t triplets = options.triplets < 0 ? options.clips : options.triplets;
+  const int64_t shard_size = std::max(1, options.shard_size);
+
+  CorpusSummary summary;
+  nlohmann::json manifest_files = nlohmann::json::array();
+  const auto record = [&](const std::string& relative, const std::string& bytes) {
+    manifest_files.push_back({{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
+  };
+  std::map<std::string, nlohmann::json> babel;  // split -> sequences
+  std::map<std::string, std::vector<double>> fact_parts;  // text -> summed part indicators (6) + count
+  std::map<std::string, std::set<std::string>> fact_actions;
+
+  // Clips, one shard at a time (memory does not grow with the corpus).
+  for (int64_t shard_start = 0; shard_start < options.clips; shard_start += shard_size) {
+    const int64_t count = std::min(shard_size, options.clips - shard_start);
+    std::vector<GeneratedClip> generated(static_cast<size_t>(count));
+#pragma omp parallel for schedule(dynamic)
+    for (int64_t k = 0; k < count; ++k) generated[static_cast<size_t>(k)] = MakeClip(opts, shard_start + k);
+    std::vector<Clip> clips;
+    for (GeneratedClip& g : generated) {
+      summary.rejected += g.rejected;
+      summary.frames += g.clip.motion.num_frames();
+      summary.split_clips[g.split] += 1;
+      babel[g.split][std::to_string(g.babel["babel_sid"].get<int64_t>())] = g.babel;
+      for (const TextFact& fact : g.facts) {
+        auto& parts = fact_parts[fact.text];
+        if (parts.empty()) parts.assign(kNumBodyParts + 1, 0.0);
+        for (int p = 0; p < kNumBodyParts; ++p) parts[static_cast<size_t>(p)] += (fact.parts >> p) & 1;
+        parts[kNumBodyParts] += 1;
+        if (!fact.action.empty()) fact_actions[fact.text].insert(fact.action);
+      }
+      if (options.write_amass) {
+        const std::string relative = "amass/" + g.clip.id + "_poses.npz";
+        MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, g.amass, /*sync=*/false));
+        record(relative, g.amass);
+      }
+      clips.push_back(std::move(g.clip));
+    }
+    const std::string relative = "clips/" + ShardName("clips", shard_start / shard_size);
+    const std::string bytes = SerializeNpz(ClipsToNpz(clips), true);
+    MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
+    record(relative, bytes);
+    summary.clips += count;
+  }
+
+  // Editing triplets.
+  nlohmann::json splits = {{"train", nlohmann::json::array()}, {"val", nlohmann::json::array()}, {"test", nlohmann::json::array()}};
+  std::map<std::string, int64_t> edit_kinds;
+  for (int64_t shard_start = 0; shard_start < triplets; shard_start += shard_size) {
+    const int64_t count = std::min(shard_size, triplets - shard_start);
+    std::vector<GeneratedTriplet> generated(static_cast<size_t>(count));
+#pragma omp parallel for schedule(dynamic)
+    for (int64_t k = 0; k < count; ++k) generated[static_cast<size_t>(k)] = MakeTriplet(opts, shard_start + k);
+    std::vector<Triplet> shard;
+    for (GeneratedTriplet& g : generated) {
+      summary.rejected += g.rejected;
+      summary.triplet_frames += g.triplet.source.num_frames() + g.triplet.target.num_frames();
+      splits[g.triplet.split].push_back(g.triplet.id);
+      edit_kinds[g.triplet.edit_kind] += 1;
+      shard.push_back(std::move(g.triplet));
+    }
+    const std::string relative = "motionfix/" + ShardName("triplets", shard_start / shard_size);
+    const std::string bytes = SerializeNpz(TripletsToNpz(shard), true);
+    MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
+    record(relative, bytes);
+    summary.triplets += count;
+  }
+
+  const auto write_json = [&](const std::string& relative, const nlohmann::json& doc) -> Status {
+    const std::string bytes = doc.dump(1) + "\n";
+    MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
+    record(relative, bytes);
+    return Status::Ok();
+  };
+  for (const char* split : {"train", "val", "test"}) {
+    MP_RETURN_IF_ERROR(write_json(std::string("babel/") + split + ".json", babel.count(split) ? babel[split] : nlohmann::json::object()));
+  }
+  MP_RETURN_IF_ERROR(write_json("motionfix/splits.json", splits));
+  nlohmann::json labels = nlohmann::json::object();
+  for (const auto& [text, parts] : fact_parts) {
+    nlohmann::json fractions = nlohmann::json::array();
+    for (int p = 0; p < kNumBodyParts; ++p) {
+      fractions.push_back(std::round(parts[static_cast<size_t>(p)] / parts[kNumBodyParts] * 1000) / 1000);
+    }
+    labels[text] = {{"parts", fractions}, {"count", static_cast<int64_t>(parts[kNumBodyParts])}};
+    if (fact_actions.count(text)) labels[text]["actions"] = fact_actions[text];
+  }
+  MP_RETURN_IF_ERROR(write_json("texts/labels.json", {{"order", BodyPartNames()},
+                                                      {"about", "ground-truth body parts of every corpus text: the fraction of "
+                                                                "occurrences in which each part moves (1 always, 0 never, "
+                                                                "in between: the text does not say, e.g. 'wave' without a side)"},
+                                                      {"labels", labels}}));
+  nlohmann::json manifest = {{"format", "motionpipe.corpus/1"},
+                             {"seed", options.seed},
+                             {"fps", options.fps},
+                             {"clips", summary.clips},
+                             {"triplets", summary.triplets},
+                             {"frames", summary.frames},
+                             {"triplet_frames", summary.triplet_frames},
+                             {"rejected", summary.rejected},
+                             {"split_clips", summary.split_clips},
+                             {"edit_kinds", edit_kinds},
+                             {"shard_size", shard_size},
+                             {"vocabulary", Vocabulary().size()},
+                             {"files", manifest_files}};
+  MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/manifest.json", manifest.dump(1) + "\n"));
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return summary;
+}
+
+}  // namespace motionpipe::corpus
