@@ -12,5 +12,6 @@ constexpr int kExitFailure = 1;
 constexpr int kExitUsage = 2;
 
 void AddDataCommands(CLI::App& app, int* exit_code);
+void AddEngineCommands(CLI::App& app, int* exit_code);
 
 }  // namespace motionpipe::cli

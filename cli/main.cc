@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   app.add_option("--log", log_level, "Log level: debug, info, warn, error")->envname("MOTIONPIPE_LOG");
   int exit_code = motionpipe::cli::kExitOk;
   motionpipe::cli::AddDataCommands(app, &exit_code);
+  motionpipe::cli::AddEngineCommands(app, &exit_code);
   app.parse_complete_callback([&] {
     motionpipe::LogLevel level;
     if (!motionpipe::ParseLogLevel(log_level, &level)) throw CLI::ValidationError("--log", "unknown level " + log_level);

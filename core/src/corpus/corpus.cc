@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <set>
 
 #include "motionpipe/base/file.h"
@@ -223,90 +224,158 @@ std::string SplitOf(uint64_t seed, uint64_t stream, int64_t index) {
   return h < 80 ? "train" : (h < 90 ? "val" : "test");
 }
 
-Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options) {
+namespace {
+
+Status ValidateOptions(const CorpusOptions& options) {
   if (options.out_dir.empty()) return InvalidArgument("synth-corpus: no output directory");
-  if (options.clips < 1) return InvalidArgument("synth-corpus: --clips must be at least 1");
-  if (!(options.fps > 0)) return InvalidArgument("synth-corpus: --fps must be positive");
-  const auto started = std::chrono::steady_clock::now();
-  const std::string& dir = options.out_dir;
-  for (const char* sub : {"", "/clips", "/amass", "/babel", "/motionfix", "/texts"}) {
-    MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
-  }
+  if (options.clips < 1) return InvalidArgument("synth-corpus: clips must be at least 1");
+  if (options.triplets < -1) return InvalidArgument("synth-corpus: triplets must be >= 0");
+  if (!(options.fps > 0)) return InvalidArgument("synth-corpus: fps must be positive");
+  if (options.shard_size < 1) return InvalidArgument("synth-corpus: shard_size must be at least 1");
+  return Status::Ok();
+}
+
+int64_t TripletCount(const CorpusOptions& options) { return options.triplets < 0 ? options.clips : options.triplets; }
+
+// Writes bytes under dir and records the file for the shard's file list.
+Status WriteRecorded(const std::string& dir, const std::string& relative, const std::string& bytes, bool sync,
+                     nlohmann::json* files) {
+  MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes, sync));
+  files->push_back({{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
+  return Status::Ok();
+}
+
+}  // namespace
+
+int64_t ShardCount(const CorpusOptions& options) {
+  const int64_t size = std::max(1, options.shard_size);
+  return std::max<int64_t>(1, (std::max(options.clips, TripletCount(options)) + size - 1) / size);
+}
+
+Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const std::string& dir) {
+  MP_RETURN_IF_ERROR(ValidateOptions(options));
+  if (index < 0 || index >= ShardCount(options)) return InvalidArgument("corpus shard " + std::to_string(index) + " out of range");
+  for (const char* sub : {"", "/clips", "/amass", "/motionfix"}) MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
   if (options.threads > 0) omp_set_num_threads(options.threads);
   CorpusOptions opts = options;
   opts.script.fps = options.fps;
-  const int64_t triplets = options.triplets < 0 ? options.clips : options.triplets;
-  const int64_t shard_size = std::max(1, options.shard_size);
+  const int64_t size = options.shard_size;
+  nlohmann::json files = nlohmann::json::array();
+  nlohmann::json shard = {{"index", index}, {"rejected", 0}, {"frames", 0}, {"triplet_frames", 0}};
+  nlohmann::json babel = nlohmann::json::object();
+  nlohmann::json facts = nlohmann::json::array();
+  std::map<std::string, int64_t> split_clips, edit_kinds;
+  nlohmann::json triplet_splits = nlohmann::json::object();
+  int64_t rejected = 0, frames = 0, triplet_frames = 0;
 
-  CorpusSummary summary;
-  nlohmann::json manifest_files = nlohmann::json::array();
-  const auto record = [&](const std::string& relative, const std::string& bytes) {
-    manifest_files.push_back({{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
-  };
-  std::map<std::string, nlohmann::json> babel;  // split -> sequences
-  std::map<std::string, std::vector<double>> fact_parts;  // text -> summed part indicators (6) + count
-  std::map<std::string, std::set<std::string>> fact_actions;
-
-  // Clips, one shard at a time (memory does not grow with the corpus).
-  for (int64_t shard_start = 0; shard_start < options.clips; shard_start += shard_size) {
-    const int64_t count = std::min(shard_size, options.clips - shard_start);
-    std::vector<GeneratedClip> generated(static_cast<size_t>(count));
+  const int64_t clip_begin = index * size, clip_end = std::min(options.clips, clip_begin + size);
+  if (clip_begin < clip_end) {
+    std::vector<GeneratedClip> generated(static_cast<size_t>(clip_end - clip_begin));
 #pragma omp parallel for schedule(dynamic)
-    for (int64_t k = 0; k < count; ++k) generated[static_cast<size_t>(k)] = MakeClip(opts, shard_start + k);
+    for (int64_t k = 0; k < clip_end - clip_begin; ++k) generated[static_cast<size_t>(k)] = MakeClip(opts, clip_begin + k);
     std::vector<Clip> clips;
     for (GeneratedClip& g : generated) {
-      summary.rejected += g.rejected;
-      summary.frames += g.clip.motion.num_frames();
-      summary.split_clips[g.split] += 1;
+      rejected += g.rejected;
+      frames += g.clip.motion.num_frames();
+      split_clips[g.split] += 1;
       babel[g.split][std::to_string(g.babel["babel_sid"].get<int64_t>())] = g.babel;
-      for (const TextFact& fact : g.facts) {
-        auto& parts = fact_parts[fact.text];
-        if (parts.empty()) parts.assign(kNumBodyParts + 1, 0.0);
-        for (int p = 0; p < kNumBodyParts; ++p) parts[static_cast<size_t>(p)] += (fact.parts >> p) & 1;
-        parts[kNumBodyParts] += 1;
-        if (!fact.action.empty()) fact_actions[fact.text].insert(fact.action);
-      }
+      for (const TextFact& fact : g.facts) facts.push_back({fact.text, fact.parts, fact.action});
       if (options.write_amass) {
-        const std::string relative = "amass/" + g.clip.id + "_poses.npz";
-        MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, g.amass, /*sync=*/false));
-        record(relative, g.amass);
+        MP_RETURN_IF_ERROR(WriteRecorded(dir, "amass/" + g.clip.id + "_poses.npz", g.amass, false, &files));
       }
       clips.push_back(std::move(g.clip));
     }
-    const std::string relative = "clips/" + ShardName("clips", shard_start / shard_size);
-    const std::string bytes = SerializeNpz(ClipsToNpz(clips), true);
-    MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
-    record(relative, bytes);
-    summary.clips += count;
+    MP_RETURN_IF_ERROR(WriteRecorded(dir, "clips/" + ShardName("clips", index), SerializeNpz(ClipsToNpz(clips), true), true, &files));
   }
+  const int64_t triplet_begin = index * size, triplet_end = std::min(TripletCount(options), triplet_begin + size);
+  if (triplet_begin < triplet_end) {
+    std::vector<GeneratedTriplet> generated(static_cast<size_t>(triplet_end - triplet_begin));
+#pragma omp parallel for schedule(dynamic)
+    for (int64_t k = 0; k < triplet_end - triplet_begin; ++k) generated[static_cast<size_t>(k)] = MakeTriplet(opts, triplet_begin + k);
+    std::vector<Triplet> triplets;
+    for (GeneratedTriplet& g : generated) {
+      rejected += g.rejected;
+      triplet_frames += g.triplet.source.num_frames() + g.triplet.target.num_frames();
+      triplet_splits[g.triplet.split].push_back(g.triplet.id);
+      edit_kinds[g.triplet.edit_kind] += 1;
+      triplets.push_back(std::move(g.triplet));
+    }
+    MP_RETURN_IF_ERROR(
+        WriteRecorded(dir, "motionfix/" + ShardName("triplets", index), SerializeNpz(TripletsToNpz(triplets), true), true, &files));
+  }
+  shard["rejected"] = rejected;
+  shard["frames"] = frames;
+  shard["triplet_frames"] = triplet_frames;
+  shard["clips"] = std::max<int64_t>(0, clip_end - clip_begin);
+  shard["triplets"] = std::max<int64_t>(0, triplet_end - triplet_begin);
+  shard["split_clips"] = split_clips;
+  shard["edit_kinds"] = edit_kinds;
+  shard["babel"] = babel;
+  shard["triplet_splits"] = triplet_splits;
+  shard["facts"] = facts;
+  shard["files"] = files;
+  return WriteFileAtomic(dir + "/shard.json", shard.dump() + "\n");
+}
 
-  // Editing triplets.
+Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options, const std::vector<std::string>& shard_dirs) {
+  MP_RETURN_IF_ERROR(ValidateOptions(options));
+  const std::string& dir = options.out_dir;
+  for (const char* sub : {"", "/clips", "/amass", "/babel", "/motionfix", "/texts"}) MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
+  CorpusSummary summary;
+  nlohmann::json manifest_files = nlohmann::json::array();
+  std::map<std::string, nlohmann::json> babel;
+  std::map<std::string, std::vector<double>> fact_parts;  // text -> summed part indicators (6) + count
+  std::map<std::string, std::set<std::string>> fact_actions;
   nlohmann::json splits = {{"train", nlohmann::json::array()}, {"val", nlohmann::json::array()}, {"test", nlohmann::json::array()}};
   std::map<std::string, int64_t> edit_kinds;
-  for (int64_t shard_start = 0; shard_start < triplets; shard_start += shard_size) {
-    const int64_t count = std::min(shard_size, triplets - shard_start);
-    std::vector<GeneratedTriplet> generated(static_cast<size_t>(count));
-#pragma omp parallel for schedule(dynamic)
-    for (int64_t k = 0; k < count; ++k) generated[static_cast<size_t>(k)] = MakeTriplet(opts, shard_start + k);
-    std::vector<Triplet> shard;
-    for (GeneratedTriplet& g : generated) {
-      summary.rejected += g.rejected;
-      summary.triplet_frames += g.triplet.source.num_frames() + g.triplet.target.num_frames();
-      splits[g.triplet.split].push_back(g.triplet.id);
-      edit_kinds[g.triplet.edit_kind] += 1;
-      shard.push_back(std::move(g.triplet));
+  for (const std::string& shard_dir : shard_dirs) {
+    MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(shard_dir + "/shard.json"));
+    nlohmann::json shard;
+    try {
+      shard = nlohmann::json::parse(text);
+    } catch (const nlohmann::json::exception& error) {
+      return DataLoss(shard_dir + "/shard.json: " + error.what());
     }
-    const std::string relative = "motionfix/" + ShardName("triplets", shard_start / shard_size);
-    const std::string bytes = SerializeNpz(TripletsToNpz(shard), true);
-    MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
-    record(relative, bytes);
-    summary.triplets += count;
+    // The shard's files join the corpus as hard links (no copy); a copy where links are refused.
+    for (const auto& file : shard["files"]) {
+      const std::string relative = file["path"].get<std::string>();
+      const std::string from = shard_dir + "/" + relative, to = dir + "/" + relative;
+      std::error_code ec;
+      std::filesystem::remove(to, ec);
+      std::filesystem::create_hard_link(from, to, ec);
+      if (ec) {
+        std::filesystem::copy_file(from, to, std::filesystem::copy_options::overwrite_existing, ec);
+        if (ec) return IoError(to + ": cannot link or copy from " + from + ": " + ec.message());
+      }
+      manifest_files.push_back(file);
+    }
+    summary.clips += shard["clips"].get<int64_t>();
+    summary.triplets += shard["triplets"].get<int64_t>();
+    summary.frames += shard["frames"].get<int64_t>();
+    summary.triplet_frames += shard["triplet_frames"].get<int64_t>();
+    summary.rejected += shard["rejected"].get<int64_t>();
+    for (const auto& [split, count] : shard["split_clips"].items()) summary.split_clips[split] += count.get<int64_t>();
+    for (const auto& [kind, count] : shard["edit_kinds"].items()) edit_kinds[kind] += count.get<int64_t>();
+    for (const auto& [split, sequences] : shard["babel"].items()) {
+      for (const auto& [sid, seq] : sequences.items()) babel[split][sid] = seq;
+    }
+    for (const auto& [split, ids] : shard["triplet_splits"].items()) {
+      for (const auto& id : ids) splits[split].push_back(id);
+    }
+    for (const auto& fact : shard["facts"]) {
+      const std::string text_key = fact[0].get<std::string>();
+      const auto parts_bits = fact[1].get<int>();
+      auto& parts = fact_parts[text_key];
+      if (parts.empty()) parts.assign(kNumBodyParts + 1, 0.0);
+      for (int p = 0; p < kNumBodyParts; ++p) parts[static_cast<size_t>(p)] += (parts_bits >> p) & 1;
+      parts[kNumBodyParts] += 1;
+      if (!fact[2].get<std::string>().empty()) fact_actions[text_key].insert(fact[2].get<std::string>());
+    }
   }
-
   const auto write_json = [&](const std::string& relative, const nlohmann::json& doc) -> Status {
     const std::string bytes = doc.dump(1) + "\n";
     MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
-    record(relative, bytes);
+    manifest_files.push_back({{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
     return Status::Ok();
   };
   for (const char* split : {"train", "val", "test"}) {
@@ -314,13 +383,13 @@ Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options) {
   }
   MP_RETURN_IF_ERROR(write_json("motionfix/splits.json", splits));
   nlohmann::json labels = nlohmann::json::object();
-  for (const auto& [text, parts] : fact_parts) {
+  for (const auto& [text_key, parts] : fact_parts) {
     nlohmann::json fractions = nlohmann::json::array();
     for (int p = 0; p < kNumBodyParts; ++p) {
       fractions.push_back(std::round(parts[static_cast<size_t>(p)] / parts[kNumBodyParts] * 1000) / 1000);
     }
-    labels[text] = {{"parts", fractions}, {"count", static_cast<int64_t>(parts[kNumBodyParts])}};
-    if (fact_actions.count(text)) labels[text]["actions"] = fact_actions[text];
+    labels[text_key] = {{"parts", fractions}, {"count", static_cast<int64_t>(parts[kNumBodyParts])}};
+    if (fact_actions.count(text_key)) labels[text_key]["actions"] = fact_actions[text_key];
   }
   MP_RETURN_IF_ERROR(write_json("texts/labels.json", {{"order", BodyPartNames()},
                                                       {"about", "ground-truth body parts of every corpus text: the fraction of "
@@ -337,10 +406,25 @@ Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options) {
                              {"rejected", summary.rejected},
                              {"split_clips", summary.split_clips},
                              {"edit_kinds", edit_kinds},
-                             {"shard_size", shard_size},
+                             {"shard_size", options.shard_size},
                              {"vocabulary", Vocabulary().size()},
                              {"files", manifest_files}};
   MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/manifest.json", manifest.dump(1) + "\n"));
+  return summary;
+}
+
+Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options) {
+  MP_RETURN_IF_ERROR(ValidateOptions(options));
+  const auto started = std::chrono::steady_clock::now();
+  const std::string shards_root = options.out_dir + "/.shards";
+  std::vector<std::string> shard_dirs;
+  for (int64_t index = 0; index < ShardCount(options); ++index) {
+    shard_dirs.push_back(shards_root + "/" + std::to_string(index));
+    MP_RETURN_IF_ERROR(GenerateCorpusShard(options, index, shard_dirs.back()));
+  }
+  MP_ASSIGN_OR_RETURN(CorpusSummary summary, FinalizeCorpus(options, shard_dirs));
+  std::error_code ec;
+  std::filesystem::remove_all(shards_root, ec);  // the corpus holds the other links to the files
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return summary;
 }

@@ -16,6 +16,10 @@ bool ParseLogLevel(const std::string& text, LogLevel* level);
 void LogLine(LogLevel level, const std::string& component, const std::string& message);
 
 namespace internal {
+// Swallows the stream expression so that MP_LOG is a single expression (safe inside if/else).
+struct LogVoidify {
+  void operator&(std::ostream&) {}
+};
 class LogMessage {
  public:
   LogMessage(LogLevel level, const char* component) : level_(level), component_(component) {}
@@ -31,7 +35,8 @@ class LogMessage {
 
 }  // namespace motionpipe
 
-#define MP_LOG(level, component)                                      \
-  if (::motionpipe::LogLevel::level < ::motionpipe::GetLogLevel()) {  \
-  } else                                                              \
-    ::motionpipe::internal::LogMessage(::motionpipe::LogLevel::level, component).stream()
+#define MP_LOG(level, component)                                        \
+  !(::motionpipe::LogLevel::level >= ::motionpipe::GetLogLevel())       \
+      ? (void)0                                                         \
+      : ::motionpipe::internal::LogVoidify() &                          \
+            ::motionpipe::internal::LogMessage(::motionpipe::LogLevel::level, component).stream()

@@ -52,8 +52,18 @@ struct CorpusSummary {
 };
 
 // Generates the corpus into options.out_dir (created when missing). Deterministic: the same options
-// give byte-identical files, whatever the thread count.
+// give byte-identical files, whatever the thread count. Equivalent to every GenerateCorpusShard
+// followed by FinalizeCorpus.
 Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options);
+
+// The distributed form (the pipeline's `corpus` stage): shard `index` of ShardCount(options) writes
+// its clips (indices [index * shard_size, ...)), triplets, AMASS files and a shard.json of its
+// annotations into `dir`; FinalizeCorpus then links every shard's files into options.out_dir and
+// writes the merged BABEL/MotionFix/label files and the manifest. The result is byte-identical to
+// GenerateCorpus whichever worker generated which shard.
+int64_t ShardCount(const CorpusOptions& options);
+Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const std::string& dir);
+Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options, const std::vector<std::string>& shard_dirs);
 
 // The split of item `index` (clips and triplets hash separately): train 80%, val 10%, test 10%.
 std::string SplitOf(uint64_t seed, uint64_t stream, int64_t index);

@@ -1,0 +1,406 @@
+#include "pipeline.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <regex>
+#include <set>
+
+#include "cron.h"
+#include "motionpipe/base/file.h"
+
+namespace motionpipe::coordinator {
+
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+// YAML -> JSON with scalar types inferred as YAML 1.2's core schema does; quoted scalars stay strings.
+Json ToJson(const YAML::Node& node) {
+  switch (node.Type()) {
+    case YAML::NodeType::Null:
+    case YAML::NodeType::Undefined:
+      return nullptr;
+    case YAML::NodeType::Sequence: {
+      Json out = Json::array();
+      for (const auto& item : node) out.push_back(ToJson(item));
+      return out;
+    }
+    case YAML::NodeType::Map: {
+      Json out = Json::object();
+      for (const auto& item : node) out[item.first.as<std::string>()] = ToJson(item.second);
+      return out;
+    }
+    case YAML::NodeType::Scalar: {
+      const std::string text = node.Scalar();
+      if (node.Tag() == "!") return text;  // quoted
+      if (text == "null" || text == "~" || text.empty()) return nullptr;
+      if (text == "true" || text == "True") return true;
+      if (text == "false" || text == "False") return false;
+      static const std::regex kInt("[-+]?[0-9]+");
+      static const std::regex kFloat("[-+]?([0-9]*\\.[0-9]+|[0-9]+\\.?[0-9]*)([eE][-+]?[0-9]+)?");
+      if (std::regex_match(text, kInt)) {
+        try {
+          return std::stoll(text);
+        } catch (...) {
+          return text;
+        }
+      }
+      if (std::regex_match(text, kFloat)) return std::stod(text);
+      return text;
+    }
+  }
+  return nullptr;
+}
+
+std::string PathJoin(const std::string& path, const std::string& key) { return path.empty() ? key : path + "." + key; }
+
+// Applies "a.b.c=value" (value parsed as YAML) to the document.
+Status ApplyOverride(Json* doc, const std::string& override_text) {
+  const size_t eq = override_text.find('=');
+  if (eq == std::string::npos || eq == 0) {
+    return InvalidArgument("override '" + override_text + "': expected key.sub=value");
+  }
+  const std::string key = override_text.substr(0, eq);
+  Json value;
+  try {
+    value = ToJson(YAML::Load(override_text.substr(eq + 1)));
+  } catch (const YAML::Exception& error) {
+    return InvalidArgument("override '" + override_text + "': value is not YAML: " + error.what());
+  }
+  Json* node = doc;
+  size_t start = 0;
+  while (true) {
+    const size_t dot = key.find('.', start);
+    const std::string part = key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    if (part.empty()) return InvalidArgument("override '" + override_text + "': empty key component");
+    if (!node->is_object()) {
+      if (!node->is_null()) return InvalidArgument("override '" + override_text + "': '" + key.substr(0, start - 1) + "' is not a map");
+      *node = Json::object();
+    }
+    if (dot == std::string::npos) {
+      (*node)[part] = value;
+      return Status::Ok();
+    }
+    node = &(*node)[part];
+    start = dot + 1;
+  }
+}
+
+const Json* Lookup(const Json& doc, const std::string& dotted) {
+  const Json* node = &doc;
+  size_t start = 0;
+  while (start <= dotted.size()) {
+    const size_t dot = dotted.find('.', start);
+    const std::string part = dotted.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    if (!node->is_object() || !node->contains(part)) return nullptr;
+    node = &(*node)[part];
+    if (dot == std::string::npos) return node;
+    start = dot + 1;
+  }
+  return nullptr;
+}
+
+// ${a.b} references: a whole-string reference keeps the referenced value's type.
+void Interpolate(Json* node, const Json& doc, const std::string& path, std::vector<std::string>* errors, int depth = 0) {
+  if (depth > 64) return;
+  if (node->is_object()) {
+    for (auto& [key, value] : node->items()) Interpolate(&value, doc, PathJoin(path, key), errors, depth + 1);
+  } else if (node->is_array()) {
+    for (size_t k = 0; k < node->size(); ++k) Interpolate(&(*node)[k], doc, path + "[" + std::to_string(k) + "]", errors, depth + 1);
+  } else if (node->is_string()) {
+    std::string text = node->get<std::string>();
+    static const std::regex kRef("\\$\\{([A-Za-z0-9_.-]+)\\}");
+    std::smatch match;
+    if (std::regex_match(text, match, kRef)) {
+      const Json* value = Lookup(doc, match[1]);
+      if (!value) {
+        errors->push_back(path + ": unknown reference ${" + match[1].str() + "}");
+      } else {
+        *node = *value;
+      }
+      return;
+    }
+    std::string out;
+    auto begin = text.cbegin();
+    while (std::regex_search(begin, text.cend(), match, kRef)) {
+      out.append(begin, match[0].first);
+      const Json* value = Lookup(doc, match[1]);
+      if (!value) {
+        errors->push_back(path + ": unknown reference ${" + match[1].str() + "}");
+      } else {
+        out += value->is_string() ? value->get<std::string>() : value->dump();
+      }
+      begin = match[0].second;
+    }
+    out.append(begin, text.cend());
+    *node = out;
+  }
+}
+
+bool ValidName(const std::string& name) {
+  static const std::regex kName("[A-Za-z0-9_][A-Za-z0-9_.-]*");
+  return std::regex_match(name, kName);
+}
+
+void CheckKeys(const Json& map, const std::set<std::string>& allowed, const std::string& path, std::vector<std::string>* errors) {
+  for (const auto& [key, value] : map.items()) {
+    if (!allowed.count(key)) errors->push_back(PathJoin(path, key) + ": unknown key");
+  }
+}
+
+bool ReadInt(const Json& node, const std::string& path, int min, int* out, std::vector<std::string>* errors) {
+  if (!node.is_number_integer() || node.get<int64_t>() < min || node.get<int64_t>() > 1'000'000'000) {
+    errors->push_back(path + ": must be an integer >= " + std::to_string(min));
+    return false;
+  }
+  *out = static_cast<int>(node.get<int64_t>());
+  return true;
+}
+
+bool ReadDuration(const Json& node, const std::string& path, double* out, std::vector<std::string>* errors) {
+  if (node.is_number() && node.get<double>() >= 0) {
+    *out = node.get<double>();
+    return true;
+  }
+  if (node.is_string() && ParseDuration(node.get<std::string>(), out)) return true;
+  errors->push_back(path + ": must be a duration such as 30s, 15m or 2h");
+  return false;
+}
+
+void ReadStageSettings(const Json& map, const std::string& path, StageSpec* stage, std::vector<std::string>* errors) {
+  if (map.contains("max_attempts")) ReadInt(map["max_attempts"], PathJoin(path, "max_attempts"), 1, &stage->max_attempts, errors);
+  if (map.contains("retry_backoff")) ReadDuration(map["retry_backoff"], PathJoin(path, "retry_backoff"), &stage->retry_backoff_seconds, errors);
+  if (map.contains("timeout")) ReadDuration(map["timeout"], PathJoin(path, "timeout"), &stage->timeout_seconds, errors);
+  if (map.contains("poison_threshold")) ReadInt(map["poison_threshold"], PathJoin(path, "poison_threshold"), 1, &stage->poison_threshold, errors);
+  if (map.contains("threads")) ReadInt(map["threads"], PathJoin(path, "threads"), 0, &stage->threads, errors);
+}
+
+int IntParam(const nlohmann::json& params, const char* key, int fallback, int min, const std::string& path,
+             std::vector<std::string>* errors) {
+  if (!params.contains(key)) return fallback;
+  const auto& v = params[key];
+  if (!v.is_number_integer() || v.get<int64_t>() < min || v.get<int64_t>() > 100'000'000) {
+    errors->push_back(path + ".params." + key + ": must be an integer >= " + std::to_string(min));
+    return fallback;
+  }
+  return static_cast<int>(v.get<int64_t>());
+}
+
+}  // namespace
+
+bool ParseDuration(const std::string& text, double* seconds) {
+  static const std::regex kDuration("\\s*([0-9]*\\.?[0-9]+)\\s*(ms|s|m|h|d)?\\s*");
+  std::smatch match;
+  if (!std::regex_match(text, match, kDuration)) return false;
+  const double value = std::stod(match[1]);
+  const std::string unit = match[2];
+  const double scale = unit == "ms" ? 1e-3 : unit == "m" ? 60 : unit == "h" ? 3600 : unit == "d" ? 86400 : 1;
+  *seconds = value * scale;
+  return true;
+}
+
+KindRegistry KindRegistry::WithBuiltins() {
+  KindRegistry registry;
+  // Diagnostic kinds: `tasks` map tasks each.
+  const StagePlanner by_tasks = [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = IntParam(stage->params, "tasks", stage->shards, 1, path, errors);
+  };
+  for (const char* kind : {"noop", "sleep", "test.write", "test.fail", "test.crash"}) registry.Add(kind, by_tasks);
+  // The procedural corpus: shards of shard_size clips (and triplets), then a reduce task that merges
+  // them into one corpus directory with its annotations and manifest.
+  registry.Add("corpus", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    const int clips = IntParam(stage->params, "clips", 1000, 1, path, errors);
+    const int triplets = IntParam(stage->params, "triplets", clips, 0, path, errors);
+    const int shard_size = IntParam(stage->params, "shard_size", 500, 1, path, errors);
+    stage->shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
+    stage->reduce = true;
+  });
+  return registry;
+}
+
+void KindRegistry::Add(const std::string& kind, StagePlanner planner) { planners_[kind] = std::move(planner); }
+
+void KindRegistry::AddGeneric(const std::string& kind) {
+  if (planners_.count(kind)) return;
+  planners_[kind] = [](StageSpec*, const std::string&, std::vector<std::string>*) {};
+}
+
+const StagePlanner* KindRegistry::Find(const std::string& kind) const {
+  const auto it = planners_.find(kind);
+  return it == planners_.end() ? nullptr : &it->second;
+}
+
+std::vector<std::string> KindRegistry::Kinds() const {
+  std::vector<std::string> out;
+  for (const auto& [kind, planner] : planners_) out.push_back(kind);
+  return out;
+}
+
+Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vector<std::string>& overrides,
+                                   const std::string& origin, const KindRegistry& kinds) {
+  Json doc;
+  try {
+    doc = ToJson(YAML::Load(yaml_text));
+  } catch (const YAML::Exception& error) {
+    return InvalidArgument(origin + ":" + std::to_string(error.mark.line + 1) + ":" + std::to_string(error.mark.column + 1) +
+                           ": malformed YAML: " + error.msg);
+  }
+  if (!doc.is_object()) return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
+  for (const std::string& o : overrides) MP_RETURN_IF_ERROR(ApplyOverride(&doc, o).WithContext(origin));
+
+  std::vector<std::string> errors;
+  Interpolate(&doc, Json(doc), "", &errors);
+  CheckKeys(doc, {"name", "description", "output_root", "seed", "schedule", "vars", "defaults", "stages"}, "", &errors);
+
+  PipelineSpec spec;
+  if (!doc.contains("name") || !doc["name"].is_string() || !ValidName(doc["name"].get<std::string>())) {
+    errors.push_back("name: required; letters, digits, '_', '.', '-'");
+  } else {
+    spec.name = doc["name"].get<std::string>();
+  }
+  if (doc.contains("output_root")) {
+    if (doc["output_root"].is_string() && !doc["output_root"].get<std::string>().empty()) {
+      spec.output_root = doc["output_root"].get<std::string>();
+    } else {
+      errors.push_back("output_root: must be a non-empty string");
+    }
+  }
+  if (doc.contains("seed")) {
+    if (doc["seed"].is_number_integer() && doc["seed"].get<int64_t>() >= 0) {
+      spec.seed = doc["seed"].get<uint64_t>();
+    } else {
+      errors.push_back("seed: must be a non-negative integer");
+    }
+  }
+  if (doc.contains("schedule")) {
+    if (!doc["schedule"].is_string()) {
+      errors.push_back("schedule: must be a cron string such as \"0 3 * * *\"");
+    } else {
+      spec.schedule = doc["schedule"].get<std::string>();
+      auto cron = ParseCron(spec.schedule);
+      if (!cron.ok()) errors.push_back("schedule: " + cron.status().message());
+    }
+  }
+  StageSpec defaults;
+  if (doc.contains("defaults")) {
+    if (!doc["defaults"].is_object()) {
+      errors.push_back("defaults: must be a map");
+    } else {
+      CheckKeys(doc["defaults"], {"max_attempts", "retry_backoff", "timeout", "poison_threshold", "threads"}, "defaults", &errors);
+      ReadStageSettings(doc["defaults"], "defaults", &defaults, &errors);
+    }
+  }
+
+  std::map<std::string, size_t> index;
+  if (!doc.contains("stages") || !doc["stages"].is_object() || doc["stages"].empty()) {
+    errors.push_back("stages: required, a map of stage name -> stage");
+  } else {
+    for (const auto& [name, node] : doc["stages"].items()) {
+      const std::string path = "stages." + name;
+      StageSpec stage = defaults;
+      stage.name = name;
+      if (!ValidName(name)) errors.push_back(path + ": stage names use letters, digits, '_', '.', '-'");
+      if (!node.is_object()) {
+        errors.push_back(path + ": must be a map with at least 'kind'");
+        continue;
+      }
+      CheckKeys(node, {"kind", "inputs", "params", "shards", "reduce", "max_attempts", "retry_backoff", "timeout",
+                       "poison_threshold", "threads", "world_size", "description"},
+                path, &errors);
+      if (!node.contains("kind") || !node["kind"].is_string()) {
+        errors.push_back(path + ".kind: required");
+      } else {
+        stage.kind = node["kind"].get<std::string>();
+      }
+      if (node.contains("inputs")) {
+        const Json& inputs = node["inputs"];
+        if (inputs.is_string()) {
+          stage.inputs.push_back(inputs.get<std::string>());
+        } else if (inputs.is_array()) {
+          for (size_t k = 0; k < inputs.size(); ++k) {
+            if (!inputs[k].is_string()) {
+              errors.push_back(path + ".inputs[" + std::to_string(k) + "]: must be a stage name");
+            } else {
+              stage.inputs.push_back(inputs[k].get<std::string>());
+            }
+          }
+        } else {
+          errors.push_back(path + ".inputs: must be a list of stage names");
+        }
+      }
+      if (node.contains("params")) {
+        if (!node["params"].is_object() && !node["params"].is_null()) {
+          errors.push_back(path + ".params: must be a map");
+        } else if (node["params"].is_object()) {
+          stage.params = nlohmann::json::parse(node["params"].dump());
+        }
+      }
+      if (node.contains("shards")) ReadInt(node["shards"], path + ".shards", 1, &stage.shards, &errors);
+      if (node.contains("reduce")) {
+        if (!node["reduce"].is_boolean()) errors.push_back(path + ".reduce: must be true or false");
+        else stage.reduce = node["reduce"].get<bool>();
+      }
+      if (node.contains("world_size")) ReadInt(node["world_size"], path + ".world_size", 1, &stage.world_size, &errors);
+      ReadStageSettings(node, path, &stage, &errors);
+      if (!stage.kind.empty()) {
+        const StagePlanner* planner = kinds.Find(stage.kind);
+        if (!planner) {
+          std::string known;
+          for (const std::string& k : kinds.Kinds()) known += (known.empty() ? "" : ", ") + k;
+          errors.push_back(path + ".kind: unknown kind '" + stage.kind + "' (known: " + known + "; plugins add more)");
+        } else {
+          (*planner)(&stage, path, &errors);
+        }
+      }
+      index[name] = spec.stages.size();
+      spec.stages.push_back(std::move(stage));
+    }
+  }
+  // Inputs must name other stages; the stages must form a DAG.
+  for (const StageSpec& stage : spec.stages) {
+    for (size_t k = 0; k < stage.inputs.size(); ++k) {
+      const std::string& input = stage.inputs[k];
+      if (input == stage.name) errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) + "]: a stage cannot be its own input");
+      else if (!index.count(input)) errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) + "]: unknown stage '" + input + "'");
+    }
+  }
+  std::vector<StageSpec> ordered;
+  if (errors.empty()) {
+    std::vector<int> pending(spec.stages.size(), 0);
+    for (size_t s = 0; s < spec.stages.size(); ++s) pending[s] = static_cast<int>(spec.stages[s].inputs.size());
+    std::vector<bool> done(spec.stages.size(), false);
+    bool progress = true;
+    while (progress) {
+      progress = false;
+      for (size_t s = 0; s < spec.stages.size(); ++s) {
+        if (done[s] || pending[s] > 0) continue;
+        done[s] = true;
+        progress = true;
+        ordered.push_back(spec.stages[s]);
+        for (size_t t = 0; t < spec.stages.size(); ++t) {
+          for (const std::string& input : spec.stages[t].inputs) pending[t] -= input == spec.stages[s].name;
+        }
+      }
+    }
+    if (ordered.size() != spec.stages.size()) {
+      std::string cycle;
+      for (size_t s = 0; s < spec.stages.size(); ++s) {
+        if (!done[s]) cycle += (cycle.empty() ? "" : ", ") + spec.stages[s].name;
+      }
+      errors.push_back("stages: the inputs form a cycle among " + cycle);
+    }
+  }
+  if (!errors.empty()) {
+    std::string message = origin + ": invalid pipeline:";
+    for (const std::string& e : errors) message += "\n  " + origin + ": " + e;
+    return InvalidArgument(message);
+  }
+  spec.stages = std::move(ordered);
+  spec.resolved = doc.dump();
+  spec.fingerprint = Sha256Hex(spec.resolved);
+  return spec;
+}
+
+}  // namespace motionpipe::coordinator

@@ -1,0 +1,79 @@
+// Pipeline YAML: named stages with a kind, inputs, params, sharding, retries and resources; the stages
+// form a DAG by their inputs. Command-line overrides `key.sub=value` (the Hydra habit) and
+// `${vars.name}` interpolation are applied before validation; an invalid pipeline is rejected before
+// anything runs, with the YAML path of each error.
+//
+//   name: demo                      # required
+//   output_root: out                # job outputs go to <output_root>/<name>-<job id>/
+//   seed: 1
+//   schedule: "0 3 * * *"           # optional cron: the job recurs
+//   vars: {scale: small}            # free values for ${vars.scale}
+//   defaults: {max_attempts: 3, retry_backoff: 2s, timeout: 1h, poison_threshold: 3, threads: 1}
+//   stages:
+//     corpus:  {kind: corpus, params: {clips: 1500}}
+//     filter:  {kind: filter, inputs: [corpus], shards: 8, params: {...}}
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+
+namespace motionpipe::coordinator {
+
+struct StageSpec {
+  std::string name;
+  std::string kind;
+  std::vector<std::string> inputs;
+  nlohmann::json params = nlohmann::json::object();
+  int shards = 1;        // map tasks
+  bool reduce = false;   // plus one reduce task after all shards committed
+  int max_attempts = 3;  // task errors tolerated before the task fails
+  double retry_backoff_seconds = 1.0;  // doubled after each error
+  double timeout_seconds = 3600;       // lease of one attempt
+  int poison_threshold = 3;            // a task that loses this many workers is quarantined
+  int threads = 0;                     // per task; 0 = the worker's budget
+  int world_size = 1;                  // gang size (training)
+};
+
+struct PipelineSpec {
+  std::string name;
+  std::string output_root = "out";
+  uint64_t seed = 1;
+  std::string schedule;
+  std::vector<StageSpec> stages;  // topological order
+  std::string resolved;           // JSON after overrides and interpolation: what the journal keeps
+  std::string fingerprint;        // sha256 of `resolved`: the same pipeline, resumed or reused
+};
+
+// How a stage kind turns its params into tasks. Validates the params (appending errors prefixed by
+// the YAML path) and sets shards/reduce.
+using StagePlanner = std::function<void(StageSpec* stage, const std::string& path, std::vector<std::string>* errors)>;
+
+// Kinds the coordinator can plan: the built-in ones and those that plugins declare.
+class KindRegistry {
+ public:
+  static KindRegistry WithBuiltins();
+  void Add(const std::string& kind, StagePlanner planner);
+  // Kinds from a plugin: sharded by `shards:` (default 1) and `reduce:`.
+  void AddGeneric(const std::string& kind);
+  const StagePlanner* Find(const std::string& kind) const;
+  std::vector<std::string> Kinds() const;
+
+ private:
+  std::map<std::string, StagePlanner> planners_;
+};
+
+// Parses, overrides, interpolates, validates and plans. InvalidArgument lists every problem as
+// "origin: path: message" lines.
+Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vector<std::string>& overrides,
+                                   const std::string& origin, const KindRegistry& kinds);
+
+// "90", "90s", "15m", "2h", "1d" -> seconds; false on anything else.
+bool ParseDuration(const std::string& text, double* seconds);
+
+}  // namespace motionpipe::coordinator

@@ -1,0 +1,54 @@
+// C++ conveniences for plugin authors on top of the C ABI (motionpipe_plugin.h): parse the task
+// JSON, run a stage function with exceptions turned into task errors, and define the entry point.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <exception>
+#include <string>
+
+#include "motionpipe_plugin.h"
+
+namespace motionpipe::plugin {
+
+struct Task {
+  nlohmann::json spec;  // the whole TaskSpec
+  const mp_task_io* io;
+  const nlohmann::json& params() const { return spec["params"]; }
+  std::string output_dir() const { return spec["output_dir"].get<std::string>(); }
+  bool cancelled() const { return io->cancel && *io->cancel != 0; }
+  void Metric(const std::string& name, double value) const {
+    if (io->report_metric) io->report_metric(io->host, name.c_str(), value);
+  }
+  void Log(int level, const std::string& message) const {
+    if (io->log) io->log(io->host, level, message.c_str());
+  }
+};
+
+// Thrown by a stage function for input that can never succeed (the task fails at once).
+struct BadInput : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Runs `fn(const Task&)` and maps the outcome: exceptions (including LibTorch's) become task errors
+// with their message; BadInput becomes MP_TASK_BAD_INPUT.
+template <typename Fn>
+int RunStage(const mp_task_io* io, char* error, size_t error_size, Fn fn) {
+  try {
+    Task task{nlohmann::json::parse(io->task_json), io};
+    fn(task);
+    return MP_TASK_OK;
+  } catch (const BadInput& e) {
+    std::snprintf(error, error_size, "%s", e.what());
+    return MP_TASK_BAD_INPUT;
+  } catch (const std::exception& e) {
+    std::snprintf(error, error_size, "%s", e.what());
+    return MP_TASK_ERROR;
+  } catch (...) {
+    std::snprintf(error, error_size, "unknown exception");
+    return MP_TASK_ERROR;
+  }
+}
+
+}  // namespace motionpipe::plugin

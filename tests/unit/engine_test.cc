@@ -1,0 +1,600 @@
+// The distributed engine's logic, in-process: pipeline specs, cron, the journal, the scheduler's
+// failure classes under a fake clock, the wire protocol's guards and the plugin host.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "cron.h"
+#include "executor.h"
+#include "journal.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/net/protocol.h"
+#include "pipeline.h"
+#include "plugin_host.h"
+#include "scheduler.h"
+
+namespace motionpipe::coordinator {
+namespace {
+
+namespace fs = std::filesystem;
+
+const KindRegistry& Kinds() {
+  static const KindRegistry kinds = [] {
+    KindRegistry k = KindRegistry::WithBuiltins();
+    k.AddGeneric("sample.checksum");
+    return k;
+  }();
+  return kinds;
+}
+
+constexpr char kPipeline[] = R"(
+name: test
+output_root: OUT
+seed: 5
+vars: {n: 4}
+defaults: {max_attempts: 2, retry_backoff: 2s}
+stages:
+  write:
+    kind: test.write
+    params: {tasks: "${vars.n}"}
+  check:
+    kind: sample.checksum
+    inputs: [write]
+    timeout: 30s
+)";
+
+std::string PipelineIn(const std::string& root, const std::string& text = kPipeline) {
+  std::string yaml = text;
+  yaml.replace(yaml.find("OUT"), 3, root);
+  return yaml;
+}
+
+// ---- pipeline ------------------------------------------------------------------------------------
+
+TEST(Pipeline, ParsesPlansAndOrdersStages) {
+  auto spec = ParsePipeline(PipelineIn("out"), {}, "p.yaml", Kinds());
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  ASSERT_EQ(spec->stages.size(), 2u);
+  EXPECT_EQ(spec->stages[0].name, "write");
+  EXPECT_EQ(spec->stages[0].shards, 4);  // ${vars.n} kept its integer type
+  EXPECT_EQ(spec->stages[0].max_attempts, 2);
+  EXPECT_EQ(spec->stages[0].retry_backoff_seconds, 2.0);
+  EXPECT_EQ(spec->stages[1].timeout_seconds, 30.0);
+  EXPECT_EQ(spec->stages[1].inputs, std::vector<std::string>{"write"});
+  EXPECT_EQ(spec->seed, 5u);
+  EXPECT_EQ(spec->fingerprint.size(), 64u);
+  // Declared out of order: the DAG decides.
+  auto reordered = ParsePipeline("name: r\nstages:\n  b: {kind: noop, inputs: [a]}\n  a: {kind: noop}\n", {}, "r.yaml", Kinds());
+  ASSERT_TRUE(reordered.ok());
+  EXPECT_EQ(reordered->stages[0].name, "a");
+  // The corpus planner shards by clip count and adds a reduce task.
+  auto corpus = ParsePipeline("name: c\nstages:\n  corpus: {kind: corpus, params: {clips: 1200, triplets: 100, shard_size: 500}}\n", {},
+                              "c.yaml", Kinds());
+  ASSERT_TRUE(corpus.ok());
+  EXPECT_EQ(corpus->stages[0].shards, 3);
+  EXPECT_TRUE(corpus->stages[0].reduce);
+}
+
+TEST(Pipeline, OverridesAndInterpolation) {
+  auto spec = ParsePipeline(PipelineIn("out"), {"stages.write.params.tasks=9", "stages.check.timeout=5m", "seed=11", "vars.extra=[1, 2]"},
+                            "p.yaml", Kinds());
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  EXPECT_EQ(spec->stages[0].shards, 9);
+  EXPECT_EQ(spec->stages[1].timeout_seconds, 300.0);
+  EXPECT_EQ(spec->seed, 11u);
+  auto other = ParsePipeline(PipelineIn("out"), {"stages.write.params.tasks=3"}, "p.yaml", Kinds());
+  EXPECT_NE(spec->fingerprint, other->fingerprint);
+  auto partial = ParsePipeline("name: x\noutput_root: runs/${vars.scale}\nvars: {scale: small}\nstages: {a: {kind: noop}}\n", {},
+                               "x.yaml", Kinds());
+  ASSERT_TRUE(partial.ok());
+  EXPECT_EQ(partial->output_root, "runs/small");
+  EXPECT_FALSE(ParsePipeline(PipelineIn("out"), {"novalue"}, "p.yaml", Kinds()).ok());
+  EXPECT_FALSE(ParsePipeline(PipelineIn("out"), {"name.sub=1"}, "p.yaml", Kinds()).ok());
+}
+
+TEST(Pipeline, EveryProblemIsReportedWithItsYamlPath) {
+  const std::string bad = R"(
+name: bad
+colour: blue
+stages:
+  a: {kind: noop, retries: 3}
+  b: {kind: nosuchkind}
+  c: {kind: noop, inputs: [a, missing]}
+  d: {kind: noop, timeout: soon, params: {tasks: 0}}
+  e: {kind: noop, inputs: [f]}
+  f: {kind: noop, inputs: [e]}
+  g: {kind: noop, params: {tasks: "${vars.nope}"}}
+)";
+  auto spec = ParsePipeline(bad, {}, "bad.yaml", Kinds());
+  ASSERT_FALSE(spec.ok());
+  const std::string& m = spec.status().message();
+  for (const char* expected : {"bad.yaml: colour: unknown key", "stages.a.retries: unknown key",
+                               "stages.b.kind: unknown kind 'nosuchkind'", "stages.c.inputs[1]: unknown stage 'missing'",
+                               "stages.d.timeout: must be a duration", "stages.d.params.tasks: must be an integer >= 1",
+                               "stages.g.params.tasks: unknown reference ${vars.nope}"}) {
+    EXPECT_NE(m.find(expected), std::string::npos) << expected << "\n" << m;
+  }
+  auto cycle = ParsePipeline("name: c\nstages:\n  e: {kind: noop, inputs: [f]}\n  f: {kind: noop, inputs: [e]}\n", {}, "c.yaml", Kinds());
+  ASSERT_FALSE(cycle.ok());
+  EXPECT_NE(cycle.status().message().find("cycle among e, f"), std::string::npos);
+  auto yaml = ParsePipeline("name: [unclosed\n", {}, "y.yaml", Kinds());
+  ASSERT_FALSE(yaml.ok());
+  EXPECT_NE(yaml.status().message().find("y.yaml:"), std::string::npos);
+  auto cron = ParsePipeline("name: c\nschedule: '61 * * * *'\nstages: {a: {kind: noop}}\n", {}, "c.yaml", Kinds());
+  ASSERT_FALSE(cron.ok());
+  EXPECT_NE(cron.status().message().find("schedule: cron"), std::string::npos);
+}
+
+TEST(Pipeline, Durations) {
+  double s = 0;
+  EXPECT_TRUE(ParseDuration("90", &s));
+  EXPECT_EQ(s, 90);
+  EXPECT_TRUE(ParseDuration("500ms", &s));
+  EXPECT_EQ(s, 0.5);
+  EXPECT_TRUE(ParseDuration("2h", &s));
+  EXPECT_EQ(s, 7200);
+  EXPECT_FALSE(ParseDuration("two minutes", &s));
+}
+
+// ---- cron ----------------------------------------------------------------------------------------
+
+int64_t Unix(int year, int month, int day, int hour, int minute) {
+  std::tm tm{};
+  tm.tm_year = year - 1900;
+  tm.tm_mon = month - 1;
+  tm.tm_mday = day;
+  tm.tm_hour = hour;
+  tm.tm_min = minute;
+  return static_cast<int64_t>(timegm(&tm));
+}
+
+TEST(Cron, NextFireTimes) {
+  const int64_t t0 = Unix(2026, 11, 21, 10, 7);  // a Saturday
+  EXPECT_EQ(NextFireTime(*ParseCron("*/5 * * * *"), t0), Unix(2026, 11, 21, 10, 10));
+  EXPECT_EQ(NextFireTime(*ParseCron("0 3 * * *"), t0), Unix(2026, 11, 22, 3, 0));
+  EXPECT_EQ(NextFireTime(*ParseCron("@daily"), t0), Unix(2026, 11, 22, 0, 0));
+  EXPECT_EQ(NextFireTime(*ParseCron("30 9 * * 1-5"), t0), Unix(2026, 11, 23, 9, 30));  // next Monday
+  EXPECT_EQ(NextFireTime(*ParseCron("0 0 1 1 *"), t0), Unix(2027, 1, 1, 0, 0));
+  // Day-of-month and day-of-week both restricted: either matches (Vixie cron).
+  EXPECT_EQ(NextFireTime(*ParseCron("0 12 25 * 0"), t0), Unix(2026, 11, 22, 12, 0));  // Sunday comes first
+  EXPECT_EQ(NextFireTime(*ParseCron("0 0 * * 7"), t0), Unix(2026, 11, 22, 0, 0));     // 7 is Sunday too
+  EXPECT_EQ(NextFireTime(*ParseCron("0 0 31 2 *"), t0), -1);                          // never
+  EXPECT_EQ(NextFireTime(*ParseCron("7 10 21 11 *"), t0), Unix(2027, 11, 21, 10, 7)); // strictly after
+}
+
+TEST(Cron, RejectsMalformedSpecs) {
+  for (const char* bad : {"* * * *", "60 * * * *", "* 24 * * *", "* * 0 * *", "* * * 13 *", "*/0 * * * *", "a * * * *", "5-1 * * * *"}) {
+    EXPECT_FALSE(ParseCron(bad).ok()) << bad;
+  }
+}
+
+// ---- journal -------------------------------------------------------------------------------------
+
+TEST(Journal, JobsTasksOutputsAndSchedulesSurviveReopening) {
+  const std::string path = ::testing::TempDir() + "/journal_test.sqlite";
+  fs::remove(path);
+  {
+    auto journal = Journal::Open(path);
+    ASSERT_TRUE(journal.ok()) << journal.status().ToString();
+    StoredJob job;
+    job.name = "j";
+    job.pipeline = "{}";
+    job.fingerprint = "abc";
+    job.state = "running";
+    job.output_dir = "/tmp/x";
+    for (int t = 0; t < 3; ++t) {
+      StoredTask task;
+      task.stage = "s";
+      task.index = t;
+      job.tasks.push_back(task);
+    }
+    auto id = (*journal)->CreateJob(job);
+    ASSERT_TRUE(id.ok());
+    (*journal)->UpdateTask(*id, "s", 1, TaskState::kCommitted, 1, 2, "");
+    (*journal)->AddOutputs(*id, "s", 1, {{"out.txt", "deadbeef", 10}});
+    EXPECT_EQ((*journal)->buffered(), 2u);
+    ASSERT_TRUE((*journal)->Flush().ok());
+    (*journal)->UpdateTask(*id, "s", 2, TaskState::kCommitted, 0, 0, "");  // never flushed: lost with the process
+    ASSERT_TRUE((*journal)->AddSchedule({0, "nightly", "{}", "0 3 * * *", 12345}).ok());
+  }
+  auto journal = Journal::Open(path);
+  ASSERT_TRUE(journal.ok());
+  auto jobs = (*journal)->LoadUnfinished();
+  ASSERT_TRUE(jobs.ok());
+  ASSERT_EQ(jobs->size(), 1u);
+  const StoredJob& job = jobs->front();
+  EXPECT_EQ(job.fingerprint, "abc");
+  ASSERT_EQ(job.tasks.size(), 3u);
+  EXPECT_EQ(job.tasks[1].state, TaskState::kCommitted);
+  EXPECT_EQ(job.tasks[1].errors, 1);
+  EXPECT_EQ(job.tasks[1].lost, 2);
+  ASSERT_EQ(job.tasks[1].outputs.size(), 1u);
+  EXPECT_EQ(job.tasks[1].outputs[0].sha256, "deadbeef");
+  EXPECT_EQ(job.tasks[2].state, TaskState::kPending);
+  auto schedules = (*journal)->LoadSchedules();
+  ASSERT_EQ(schedules->size(), 1u);
+  EXPECT_EQ(schedules->front().next_fire, 12345);
+  (*journal)->UpdateJob(job.id, "succeeded", 1.0, "");
+  ASSERT_TRUE((*journal)->Flush().ok());
+  EXPECT_TRUE((*journal)->LoadUnfinished()->empty());
+  EXPECT_FALSE(Journal::Open("/proc/no/such/dir/journal.sqlite").ok());
+}
+
+// ---- scheduler -----------------------------------------------------------------------------------
+
+class SchedulerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = ::testing::TempDir() + "/sched_" + ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    journal_path_ = root_ + "/journal.sqlite";
+    Reopen();
+  }
+  void Reopen() {
+    scheduler_.reset();
+    journal_.reset();
+    journal_ = std::move(Journal::Open(journal_path_).value());
+    scheduler_ = std::make_unique<Scheduler>(journal_.get(), &clock_, Kinds(), SchedulerOptions{1.0, 3});
+  }
+  wire::Ready ReadyFor(const std::string& name, int credit, std::vector<std::string> kinds = {"test.write", "sample.checksum", "noop"}) {
+    wire::Ready ready;
+    ready.set_worker_id(name);
+    ready.set_credit(credit);
+    for (const auto& k : kinds) ready.add_kinds(k);
+    return ready;
+  }
+  std::vector<wire::Assign> Assigned(const std::string& identity) {
+    std::vector<wire::Assign> out;
+    for (auto& o : scheduler_->TakeOutgoing()) {
+      if (o.assign && o.identity == identity) out.push_back(*o.assign);
+    }
+    return out;
+  }
+  // A worker's OK result, with a real output file in the staging directory.
+  wire::TaskResult Ok(const wire::Assign& assign) {
+    fs::create_directories(assign.task().output_dir());
+    std::ofstream(assign.task().output_dir() + "/out.txt") << "task " << assign.task().index();
+    wire::TaskResult r;
+    r.set_attempt_id(assign.attempt_id());
+    r.set_outcome(wire::TaskResult::OK);
+    auto* out = r.add_outputs();
+    out->set_path("out.txt");
+    out->set_sha256("x");
+    out->set_bytes(6);
+    return r;
+  }
+  wire::TaskResult Outcome(const wire::Assign& assign, wire::TaskResult::Outcome outcome, const std::string& message) {
+    wire::TaskResult r;
+    r.set_attempt_id(assign.attempt_id());
+    r.set_outcome(outcome);
+    r.set_message(message);
+    return r;
+  }
+  wire::StageStatus StageOf(int64_t job, const std::string& stage) {
+    const std::vector<wire::JobStatus> jobs = scheduler_->JobStatuses(job);
+    for (const auto& s : jobs.at(0).stages()) {
+      if (s.name() == stage) return s;
+    }
+    return {};
+  }
+
+  FakeClock clock_{1.8e9};
+  std::string root_, journal_path_;
+  std::unique_ptr<Journal> journal_;
+  std::unique_ptr<Scheduler> scheduler_;
+};
+
+TEST_F(SchedulerTest, DispatchByCreditAndKindCommitAndFinish) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  ASSERT_TRUE(job.ok()) << job.status().ToString();
+  scheduler_->OnReady("w1", ReadyFor("w1", 3));
+  scheduler_->OnReady("noop-only", ReadyFor("noop-only", 5, {"noop"}));
+  scheduler_->Dispatch();
+  auto first = Assigned("w1");
+  ASSERT_EQ(first.size(), 3u);                   // credit 3
+  EXPECT_TRUE(Assigned("noop-only").empty());  // cannot run test.write
+  EXPECT_EQ(first[0].task().stage(), "write");
+  for (const auto& a : first) scheduler_->OnResult("w1", Ok(a));
+  scheduler_->Dispatch();
+  auto second = Assigned("w1");
+  ASSERT_EQ(second.size(), 1u);  // the 4th write; 'check' waits for its input stage
+  scheduler_->OnResult("w1", Ok(second[0]));
+  scheduler_->Dispatch();
+  auto check = Assigned("w1");
+  ASSERT_EQ(check.size(), 1u);
+  EXPECT_EQ(check[0].task().stage(), "check");
+  ASSERT_EQ(check[0].task().inputs_size(), 1);
+  EXPECT_EQ(check[0].task().inputs(0).dirs_size(), 4);
+  EXPECT_TRUE(fs::exists(check[0].task().inputs(0).dirs(2) + "/out.txt"));  // committed into place
+  scheduler_->OnResult("w1", Ok(check[0]));
+  EXPECT_EQ(scheduler_->JobState(*job), "succeeded");
+  EXPECT_EQ(scheduler_->counters().committed, 5);
+}
+
+TEST_F(SchedulerTest, LostWorkerRequeuesWithoutUsingTheRetryBudget) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  scheduler_->OnReady("w1", ReadyFor("w1", 1));
+  scheduler_->Dispatch();
+  ASSERT_EQ(Assigned("w1").size(), 1u);
+  clock_.Advance(3.5);  // > liveness * heartbeat without a word
+  scheduler_->Tick();
+  EXPECT_EQ(scheduler_->TakeLostWorkers(), std::vector<std::string>{"w1"});
+  EXPECT_EQ(scheduler_->live_workers(), 0u);
+  EXPECT_EQ(StageOf(*job, "write").failed(), 0);
+  scheduler_->OnReady("w2", ReadyFor("w2", 4));
+  scheduler_->Dispatch();
+  auto again = Assigned("w2");
+  ASSERT_EQ(again.size(), 4u);  // the lost task is among them, with no backoff
+  int retried = 0;
+  for (const auto& x : again) retried += x.task().attempt() == 1;  // one loss, no errors
+  EXPECT_EQ(retried, 1);
+  for (const auto& a : again) scheduler_->OnResult("w2", Ok(a));
+  EXPECT_EQ(StageOf(*job, "write").committed(), 4);
+  EXPECT_EQ(scheduler_->counters().errors, 0);
+  EXPECT_EQ(scheduler_->counters().lost, 1);
+}
+
+TEST_F(SchedulerTest, PoisonTaskIsQuarantinedAndReported) {
+  auto job = scheduler_->Submit("name: p\noutput_root: " + root_ + "\nstages: {w: {kind: test.write, poison_threshold: 3}}\n", {}, "p.yaml");
+  for (int k = 0; k < 3; ++k) {
+    const std::string w = "w" + std::to_string(k);
+    scheduler_->OnReady(w, ReadyFor(w, 1));
+    scheduler_->Dispatch();
+    ASSERT_EQ(Assigned(w).size(), 1u) << k;
+    scheduler_->OnDisconnect(w);  // the task took the worker down with it
+  }
+  EXPECT_EQ(scheduler_->JobState(*job), "failed");
+  const auto stage = StageOf(*job, "w");
+  EXPECT_EQ(stage.quarantined(), 1);
+  ASSERT_EQ(stage.failures_size(), 1);
+  EXPECT_NE(stage.failures(0).find("quarantined"), std::string::npos);
+  EXPECT_NE(stage.failures(0).find("3 workers died (poison)"), std::string::npos);
+}
+
+TEST_F(SchedulerTest, ErrorsBackOffThenFailAfterMaxAttempts) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {"stages.write.params.tasks=1"}, "p.yaml");  // max_attempts 2, backoff 2s
+  scheduler_->OnReady("w1", ReadyFor("w1", 5));
+  scheduler_->Dispatch();
+  auto a = Assigned("w1");
+  ASSERT_EQ(a.size(), 1u);
+  scheduler_->OnResult("w1", Outcome(a[0], wire::TaskResult::ERROR, "disk full"));
+  scheduler_->Dispatch();
+  EXPECT_TRUE(Assigned("w1").empty());  // backing off
+  clock_.Advance(1.0);
+  scheduler_->Tick();
+  EXPECT_TRUE(Assigned("w1").empty());
+  clock_.Advance(1.5);
+  scheduler_->OnSeen("w1");
+  scheduler_->Tick();
+  auto b = Assigned("w1");
+  ASSERT_EQ(b.size(), 1u);
+  EXPECT_EQ(b[0].task().attempt(), 1);
+  scheduler_->OnResult("w1", Outcome(b[0], wire::TaskResult::ERROR, "disk full again"));
+  EXPECT_EQ(scheduler_->JobState(*job), "failed");
+  EXPECT_NE(StageOf(*job, "write").failures(0).find("failed after 2 attempt(s): disk full again"), std::string::npos);
+}
+
+TEST_F(SchedulerTest, BadInputFailsAtOnce) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  scheduler_->OnReady("w1", ReadyFor("w1", 1));
+  scheduler_->Dispatch();
+  auto a = Assigned("w1");
+  scheduler_->OnResult("w1", Outcome(a[0], wire::TaskResult::BAD_INPUT, "clip 3 has NaN rotations"));
+  EXPECT_EQ(scheduler_->JobState(*job), "failed");
+  EXPECT_NE(StageOf(*job, "write").failures(0).find("rejected its input: clip 3 has NaN rotations"), std::string::npos);
+  EXPECT_EQ(scheduler_->counters().errors, 1);
+}
+
+TEST_F(SchedulerTest, SlowWorkerLeaseExpiresTheTaskMovesOnFirstCommitWins) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {"stages.write.params.tasks=1", "stages.write.timeout=10s"}, "p.yaml");
+  scheduler_->OnReady("slow", ReadyFor("slow", 1));
+  scheduler_->Dispatch();
+  auto slow = Assigned("slow");
+  ASSERT_EQ(slow.size(), 1u);
+  for (int k = 0; k < 11; ++k) {  // the slow worker heartbeats, but its task overstays the lease
+    clock_.Advance(1);
+    scheduler_->OnSeen("slow");
+    scheduler_->Tick();
+  }
+  auto cancels = scheduler_->TakeOutgoing();
+  ASSERT_EQ(cancels.size(), 1u);
+  ASSERT_TRUE(cancels[0].cancel.has_value());
+  clock_.Advance(2.0);  // backoff after the lease error
+  scheduler_->OnSeen("slow");
+  scheduler_->OnReady("fast", ReadyFor("fast", 1));
+  scheduler_->Tick();
+  auto fast = Assigned("fast");
+  ASSERT_EQ(fast.size(), 1u);
+  scheduler_->OnResult("fast", Ok(fast[0]));
+  EXPECT_EQ(StageOf(*job, "write").committed(), 1);
+  // The slow attempt finishes afterwards: a duplicate, discarded; one output stays.
+  scheduler_->OnResult("slow", Ok(slow[0]));
+  EXPECT_EQ(scheduler_->counters().duplicates, 1);
+  EXPECT_FALSE(fs::exists(slow[0].task().output_dir()));
+  EXPECT_TRUE(fs::exists(fs::path(slow[0].task().output_dir()).parent_path().parent_path() / "task-00000/out.txt"));
+  EXPECT_EQ(scheduler_->counters().lease_expired, 1);
+}
+
+TEST_F(SchedulerTest, HandedBackTasksReturnWithoutPenalty) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  scheduler_->OnReady("w1", ReadyFor("w1", 2));
+  scheduler_->Dispatch();
+  auto a = Assigned("w1");
+  scheduler_->OnDrain("w1");
+  for (const auto& x : a) scheduler_->OnResult("w1", Outcome(x, wire::TaskResult::HANDED_BACK, "preempted"));
+  scheduler_->Dispatch();
+  EXPECT_TRUE(Assigned("w1").empty());  // a draining worker gets nothing new
+  scheduler_->OnReady("w2", ReadyFor("w2", 4));
+  scheduler_->Dispatch();
+  auto b = Assigned("w2");
+  ASSERT_EQ(b.size(), 4u);
+  EXPECT_EQ(b[0].task().attempt(), 0);
+  EXPECT_EQ(scheduler_->counters().handed_back, 2);
+  (void)job;
+}
+
+TEST_F(SchedulerTest, ResumeAfterRestartNeverRerunsCommittedTasks) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  scheduler_->OnReady("w1", ReadyFor("w1", 2));
+  scheduler_->Dispatch();
+  auto a = Assigned("w1");
+  ASSERT_EQ(a.size(), 2u);
+  scheduler_->OnResult("w1", Ok(a[0]));
+  ASSERT_TRUE(scheduler_->FlushJournal().ok());
+  // The coordinator dies (a[1] was running); a new one reads the journal.
+  Reopen();
+  ASSERT_TRUE(scheduler_->Resume().ok());
+  scheduler_->OnReady("w2", ReadyFor("w2", 10));
+  scheduler_->Dispatch();
+  auto b = Assigned("w2");
+  ASSERT_EQ(b.size(), 3u);  // 4 writes, 1 committed before the crash
+  for (const auto& x : b) EXPECT_NE(x.task().index(), a[0].task().index());
+  // A late result for an attempt of the dead coordinator is ignored.
+  scheduler_->OnResult("w1", Ok(a[1]));
+  EXPECT_EQ(StageOf(*job, "write").committed(), 1);
+  for (const auto& x : b) scheduler_->OnResult("w2", Ok(x));
+  scheduler_->Dispatch();
+  auto c = Assigned("w2");
+  ASSERT_EQ(c.size(), 1u);
+  scheduler_->OnResult("w2", Ok(c[0]));
+  EXPECT_EQ(scheduler_->JobState(*job), "succeeded");
+}
+
+TEST_F(SchedulerTest, CancelStopsAttemptsAndDiscardsTheirResults) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  scheduler_->OnReady("w1", ReadyFor("w1", 2));
+  scheduler_->Dispatch();
+  auto a = Assigned("w1");
+  ASSERT_TRUE(scheduler_->Cancel(*job).ok());
+  int cancels = 0;
+  for (const auto& o : scheduler_->TakeOutgoing()) cancels += o.cancel.has_value();
+  EXPECT_EQ(cancels, 2);
+  scheduler_->OnResult("w1", Ok(a[0]));
+  EXPECT_EQ(scheduler_->JobState(*job), "cancelled");
+  EXPECT_EQ(StageOf(*job, "write").committed(), 0);
+  EXPECT_FALSE(scheduler_->Cancel(*job).ok());
+  EXPECT_FALSE(scheduler_->Cancel(999).ok());
+}
+
+TEST_F(SchedulerTest, ScheduledPipelinesFireOnTheClock) {
+  auto id = scheduler_->Submit("name: nightly\noutput_root: " + root_ + "\nschedule: '0 3 * * *'\nstages: {a: {kind: noop}}\n", {}, "n.yaml");
+  ASSERT_TRUE(id.ok());
+  EXPECT_EQ(*id, 0);  // registered, not run
+  EXPECT_TRUE(scheduler_->JobStatuses(0).empty());
+  // Registered at 1.8e9 (2027-01-15 08:00 UTC): the first run is 2027-01-16 03:00.
+  clock_ = FakeClock(static_cast<double>(Unix(2027, 1, 16, 2, 59)));
+  Reopen();  // schedules come back from the journal too
+  ASSERT_TRUE(scheduler_->Resume().ok());
+  scheduler_->Tick();
+  EXPECT_TRUE(scheduler_->JobStatuses(0).empty());
+  clock_.Advance(120);
+  scheduler_->Tick();
+  ASSERT_EQ(scheduler_->JobStatuses(0).size(), 1u);
+  EXPECT_EQ(scheduler_->JobStatuses(0)[0].name(), "nightly");
+  scheduler_->Tick();
+  EXPECT_EQ(scheduler_->JobStatuses(0).size(), 1u);  // once per fire time
+}
+
+// ---- protocol ------------------------------------------------------------------------------------
+
+std::vector<zmq::message_t> Frames(std::vector<std::string> parts) {
+  std::vector<zmq::message_t> frames;
+  for (const auto& p : parts) frames.emplace_back(p.data(), p.size());
+  return frames;
+}
+
+TEST(Protocol, HeaderGuardsEveryFrame) {
+  net::Envelope e;
+  wire::Heartbeat hb;
+  const std::string body = hb.SerializeAsString();
+  auto ok = Frames({"id", net::EncodeHeader(net::MessageType::kHeartbeat), body});
+  EXPECT_EQ(net::DecodeFrames(ok, true, &e), net::DropReason::kNone);
+  EXPECT_EQ(e.identity, "id");
+  auto missing = Frames({"id", net::EncodeHeader(net::MessageType::kHeartbeat)});
+  EXPECT_EQ(net::DecodeFrames(missing, true, &e), net::DropReason::kFrameCount);
+  auto garbage = Frames({"id", "hello", body});
+  EXPECT_EQ(net::DecodeFrames(garbage, true, &e), net::DropReason::kBadHeader);
+  auto version = Frames({"id", std::string{'M', 'P', 9, 2}, body});
+  EXPECT_EQ(net::DecodeFrames(version, true, &e), net::DropReason::kVersion);
+  auto type = Frames({"id", std::string{'M', 'P', 1, 77}, body});
+  EXPECT_EQ(net::DecodeFrames(type, true, &e), net::DropReason::kType);
+  auto big = Frames({net::EncodeHeader(net::MessageType::kReady), std::string(net::kMaxFrameBytes + 1, 'x')});
+  EXPECT_EQ(net::DecodeFrames(big, false, &e), net::DropReason::kOversized);
+  wire::Ready ready;
+  EXPECT_FALSE(net::ParseBody(std::string("\xff\xff\xff\xff\xff", 5), &ready));
+}
+
+}  // namespace
+}  // namespace motionpipe::coordinator
+
+namespace motionpipe::worker {
+namespace {
+
+TEST(PluginHost, LoadsTheSamplePluginAndRefusesBadOnes) {
+  PluginHost host;
+  ASSERT_TRUE(host.LoadFile(MOTIONPIPE_BUILD_DIR "/plugins/sample.so").ok());
+  ASSERT_EQ(host.plugins().size(), 1u);
+  EXPECT_EQ(host.plugins()[0].name, "sample");
+  EXPECT_EQ(host.plugins()[0].stage_kinds, (std::vector<std::string>{"sample.checksum", "sample.echo"}));
+  const auto expect_refused = [&](const std::string& file, const std::string& why) {
+    const Status s = host.LoadFile(file);
+    ASSERT_FALSE(s.ok()) << file;
+    EXPECT_NE(s.message().find(why), std::string::npos) << s.message();
+  };
+  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/bad_abi.so", "plugin ABI version 42, this host speaks version 1");
+  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/throws.so", "entry point threw: cannot find my model weights");
+  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/no_entry.so", "no 'motionpipe_plugin_v1' symbol");
+  const std::string not_a_library = ::testing::TempDir() + "/fake.so";
+  std::ofstream(not_a_library) << "not ELF";
+  expect_refused(not_a_library, "cannot load");
+  expect_refused(MOTIONPIPE_BUILD_DIR "/plugins/sample.so", "already loaded");
+  EXPECT_EQ(host.problems().size(), 5u);
+  EXPECT_EQ(host.plugins().size(), 1u);  // the host kept going
+
+  // The plugin's stage runs through the executor interface.
+  ExecutorRegistry registry;
+  host.RegisterExecutors(&registry);
+  StageExecutor* echo = registry.Find("sample.echo");
+  ASSERT_NE(echo, nullptr);
+  TaskContext ctx;
+  ctx.spec.set_output_dir(::testing::TempDir() + "/echo_out");
+  ctx.spec.set_params_json("{\"answer\": 42}");
+  const TaskReport report = RunTask(*echo, ctx);
+  EXPECT_EQ(report.outcome, Outcome::kOk) << report.message;
+  EXPECT_NE(ReadFile(ctx.spec.output_dir() + "/params.json")->find("42"), std::string::npos);
+  StageExecutor* checksum = registry.Find("sample.checksum");
+  TaskContext bad;
+  bad.spec.set_output_dir(::testing::TempDir() + "/checksum_out");
+  auto* input = bad.spec.add_inputs();
+  input->set_stage("x");
+  input->add_dirs("/no/such/dir");
+  const TaskReport refused = RunTask(*checksum, bad);
+  EXPECT_EQ(refused.outcome, Outcome::kBadInput);
+  EXPECT_NE(refused.message.find("/no/such/dir is missing"), std::string::npos);
+}
+
+TEST(Executors, BuiltinKindsAgreeWithTheCoordinatorsPlanners) {
+  ExecutorRegistry registry;
+  RegisterBuiltinExecutors(&registry);
+  const auto kinds = coordinator::KindRegistry::WithBuiltins().Kinds();
+  EXPECT_EQ(registry.Kinds(), kinds);
+}
+
+TEST(Executors, OutputsAreScannedWithChecksums) {
+  const std::string dir = ::testing::TempDir() + "/scan";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir + "/sub");
+  std::ofstream(dir + "/b.txt") << "abc";
+  std::ofstream(dir + "/sub/a.txt") << "";
+  const auto outputs = ScanOutputs(dir);
+  ASSERT_EQ(outputs.size(), 2u);
+  EXPECT_EQ(outputs[0].path(), "b.txt");
+  EXPECT_EQ(outputs[0].sha256(), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(outputs[1].path(), "sub/a.txt");
+  EXPECT_TRUE(ScanOutputs(dir + "/missing").empty());
+}
+
+}  // namespace
+}  // namespace motionpipe::worker

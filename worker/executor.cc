@@ -1,0 +1,102 @@
+#include "executor.h"
+
+#include <omp.h>
+
+#include <filesystem>
+
+#include "motionpipe/base/file.h"
+
+namespace motionpipe::worker {
+
+std::vector<std::string> TaskContext::InputDirs(const std::string& stage) const {
+  for (const auto& input : spec.inputs()) {
+    if (input.stage() == stage) return {input.dirs().begin(), input.dirs().end()};
+  }
+  return {};
+}
+
+std::string TaskContext::InputResult(const std::string& stage) const {
+  for (const auto& input : spec.inputs()) {
+    if (input.stage() == stage) return input.result_dir();
+  }
+  return "";
+}
+
+void ExecutorRegistry::Register(const std::string& kind, std::unique_ptr<StageExecutor> executor) {
+  executors_[kind] = std::move(executor);
+}
+
+StageExecutor* ExecutorRegistry::Find(const std::string& kind) const {
+  const auto it = executors_.find(kind);
+  return it == executors_.end() ? nullptr : it->second.get();
+}
+
+std::vector<std::string> ExecutorRegistry::Kinds() const {
+  std::vector<std::string> kinds;
+  for (const auto& [kind, executor] : executors_) kinds.push_back(kind);
+  return kinds;
+}
+
+TaskReport RunTask(StageExecutor& executor, TaskContext& ctx) {
+  omp_set_num_threads(std::max(1, ctx.threads));
+  try {
+    return executor.Run(ctx);
+  } catch (const std::exception& e) {
+    return TaskReport::Error(std::string("exception: ") + e.what());
+  } catch (...) {
+    return TaskReport::Error("unknown exception");
+  }
+}
+
+std::vector<wire::OutputFile> ScanOutputs(const std::string& dir) {
+  std::vector<wire::OutputFile> outputs;
+  std::error_code ec;
+  if (!std::filesystem::exists(dir, ec)) return outputs;
+  std::vector<std::filesystem::path> files;
+  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec); !ec && it != std::filesystem::recursive_directory_iterator();
+       it.increment(ec)) {
+    if (it->is_regular_file()) files.push_back(it->path());
+  }
+  std::sort(files.begin(), files.end());
+  for (const auto& path : files) {
+    auto bytes = ReadFile(path.string());
+    if (!bytes.ok()) continue;
+    wire::OutputFile out;
+    out.set_path(std::filesystem::relative(path, dir).string());
+    out.set_sha256(Sha256Hex(*bytes));
+    out.set_bytes(static_cast<int64_t>(bytes->size()));
+    outputs.push_back(std::move(out));
+  }
+  return outputs;
+}
+
+std::string TaskSpecToJson(const wire::TaskSpec& spec) {
+  nlohmann::json inputs = nlohmann::json::array();
+  for (const auto& input : spec.inputs()) {
+    inputs.push_back({{"stage", input.stage()},
+                      {"dirs", std::vector<std::string>(input.dirs().begin(), input.dirs().end())},
+                      {"result_dir", input.result_dir()}});
+  }
+  nlohmann::json params = nlohmann::json::object();
+  try {
+    params = nlohmann::json::parse(spec.params_json().empty() ? "{}" : spec.params_json());
+  } catch (...) {
+  }
+  return nlohmann::json{{"job_id", spec.job_id()},
+                        {"job_name", spec.job_name()},
+                        {"stage", spec.stage()},
+                        {"kind", spec.kind()},
+                        {"index", spec.index()},
+                        {"count", spec.count()},
+                        {"reduce", spec.reduce()},
+                        {"params", params},
+                        {"output_dir", spec.output_dir()},
+                        {"inputs", inputs},
+                        {"shard_dirs", std::vector<std::string>(spec.shard_dirs().begin(), spec.shard_dirs().end())},
+                        {"seed", spec.seed()},
+                        {"threads", spec.threads()},
+                        {"attempt", spec.attempt()}}
+      .dump();
+}
+
+}  // namespace motionpipe::worker

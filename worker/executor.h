@@ -1,0 +1,75 @@
+// Stage executors: what a worker runs for each stage kind. Built-in kinds register here; plugins add
+// theirs through the C ABI (plugin_host.h). A task writes its outputs into ctx.output_dir (the
+// attempt's staging directory); the worker checksums every file there and the coordinator renames
+// the directory into place on commit.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "motionpipe.pb.h"
+
+namespace motionpipe::worker {
+
+enum class Outcome { kOk, kError, kBadInput };
+
+struct TaskReport {
+  Outcome outcome = Outcome::kOk;
+  std::string message;
+  std::map<std::string, double> metrics;
+
+  static TaskReport Ok() { return {}; }
+  static TaskReport Error(std::string message) { return {Outcome::kError, std::move(message), {}}; }
+  static TaskReport BadInput(std::string message) { return {Outcome::kBadInput, std::move(message), {}}; }
+};
+
+struct TaskContext {
+  wire::TaskSpec spec;
+  nlohmann::json params;
+  const std::atomic<int>* cancel = nullptr;
+  int threads = 1;
+
+  const std::string& output_dir() const { return spec.output_dir(); }
+  bool cancelled() const { return cancel && cancel->load() != 0; }
+  // The committed directories of an input stage (empty when the stage is not an input).
+  std::vector<std::string> InputDirs(const std::string& stage) const;
+  // The reduce directory of an input stage, or "".
+  std::string InputResult(const std::string& stage) const;
+};
+
+class StageExecutor {
+ public:
+  virtual ~StageExecutor() = default;
+  virtual std::string Description() const = 0;
+  // Runs one task. Exceptions are caught by the caller and become task errors.
+  virtual TaskReport Run(TaskContext& ctx) = 0;
+};
+
+class ExecutorRegistry {
+ public:
+  void Register(const std::string& kind, std::unique_ptr<StageExecutor> executor);
+  StageExecutor* Find(const std::string& kind) const;
+  std::vector<std::string> Kinds() const;
+
+ private:
+  std::map<std::string, std::unique_ptr<StageExecutor>> executors_;
+};
+
+// noop, sleep, test.write, test.fail, test.crash, corpus.
+void RegisterBuiltinExecutors(ExecutorRegistry* registry);
+
+// Runs `executor` on the task with its thread budget, catching exceptions.
+TaskReport RunTask(StageExecutor& executor, TaskContext& ctx);
+
+// Every regular file under `dir` with its path relative to dir, sha256 and size.
+std::vector<wire::OutputFile> ScanOutputs(const std::string& dir);
+
+// The TaskSpec as the JSON handed to plugins (see plugins/api/motionpipe_plugin.h).
+std::string TaskSpecToJson(const wire::TaskSpec& spec);
+
+}  // namespace motionpipe::worker

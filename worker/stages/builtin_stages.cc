@@ -1,0 +1,153 @@
+// Built-in stage kinds: the diagnostic ones the engine's tests and benchmarks use, and `corpus`.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <thread>
+
+#include "../executor.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/corpus/corpus.h"
+
+namespace motionpipe::worker {
+
+namespace {
+
+// Does nothing: the dispatch benchmark's task.
+class NoopStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "does nothing (dispatch benchmarks)"; }
+  TaskReport Run(TaskContext&) override { return TaskReport::Ok(); }
+};
+
+// Sleeps `ms` milliseconds, stopping early when cancelled.
+class SleepStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "sleeps params.ms milliseconds"; }
+  TaskReport Run(TaskContext& ctx) override {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ctx.params.value("ms", 100));
+    while (std::chrono::steady_clock::now() < until) {
+      if (ctx.cancelled()) return TaskReport::Error("cancelled");
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return TaskReport::Ok();
+  }
+};
+
+// Appends "stage index pid" to params.log (O_APPEND: lines from many processes never interleave).
+void LogExecution(const TaskContext& ctx) {
+  if (!ctx.params.contains("log")) return;
+  const std::string line = ctx.spec.stage() + " " + std::to_string(ctx.spec.index()) + " " + std::to_string(::getpid()) + "\n";
+  const int fd = ::open(ctx.params["log"].get<std::string>().c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd >= 0) {
+    (void)!::write(fd, line.data(), line.size());
+    ::close(fd);
+  }
+}
+
+// Writes out.txt whose content depends only on (seed, stage, index): the same bytes however often
+// and wherever it runs, so chaos runs can be compared with an undisturbed one by checksum.
+class WriteStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "writes a deterministic file per task (tests)"; }
+  TaskReport Run(TaskContext& ctx) override {
+    LogExecution(ctx);
+    // `ms` delays every attempt, `first_attempt_ms` only the first (a slow worker whose lease expires).
+    int ms = ctx.params.value("ms", 0);
+    if (ctx.spec.attempt() == 0) ms += ctx.params.value("first_attempt_ms", 0);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < until) {
+      if (ctx.cancelled()) return TaskReport::Error("cancelled");
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    std::string content;
+    const std::string seed = std::to_string(ctx.spec.seed()) + ":" + ctx.spec.stage() + ":" + std::to_string(ctx.spec.index());
+    const int blocks = std::max(1, ctx.params.value("bytes", 64) / 64);
+    std::string digest = Sha256Hex(seed);
+    for (int b = 0; b < blocks; ++b) {
+      content += digest;
+      digest = Sha256Hex(digest);
+    }
+    std::filesystem::create_directories(ctx.output_dir());
+    if (const Status s = WriteFileAtomic(ctx.output_dir() + "/out.txt", content); !s.ok()) return TaskReport::Error(s.message());
+    return TaskReport::Ok();
+  }
+};
+
+// Fails its first params.fail_times attempts (ERROR), or always with BAD_INPUT when params.bad_input.
+class FailStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "fails on purpose (tests)"; }
+  TaskReport Run(TaskContext& ctx) override {
+    LogExecution(ctx);
+    if (ctx.params.value("bad_input", false)) return TaskReport::BadInput("params.bad_input is set: this input can never work");
+    const int fail_times = ctx.params.value("fail_times", 1 << 30);
+    if (ctx.spec.attempt() < fail_times) {
+      return TaskReport::Error("deliberate failure " + std::to_string(ctx.spec.attempt() + 1) + " of " + std::to_string(fail_times));
+    }
+    return TaskReport::Ok();
+  }
+};
+
+// Kills the whole worker process (SIGKILL on itself) when running task params.index (default: every
+// task): a poison task.
+class CrashStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "kills its worker (poison tests)"; }
+  TaskReport Run(TaskContext& ctx) override {
+    LogExecution(ctx);
+    const int index = ctx.params.value("index", -1);
+    if (index < 0 || index == ctx.spec.index()) ::kill(::getpid(), SIGKILL);
+    return TaskReport::Ok();
+  }
+};
+
+// The procedural corpus: each shard task generates its clips and triplets, the reduce task merges
+// them into one corpus directory (byte-identical to `motionpipe data synth-corpus`).
+class CorpusStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "generates the procedural motion corpus (sharded)"; }
+  TaskReport Run(TaskContext& ctx) override {
+    corpus::CorpusOptions options;
+    const auto& p = ctx.params;
+    options.seed = p.value("seed", ctx.spec.seed());
+    options.clips = p.value("clips", int64_t{1000});
+    options.triplets = p.value("triplets", options.clips);
+    options.shard_size = p.value("shard_size", 500);
+    options.fps = p.value("fps", 30.0);
+    options.write_amass = p.value("amass", true);
+    options.triplet_joints = p.value("triplet_joints", true);
+    options.script.min_seconds = p.value("min_seconds", options.script.min_seconds);
+    options.script.max_seconds = p.value("max_seconds", options.script.max_seconds);
+    options.threads = ctx.threads;
+    options.out_dir = ctx.output_dir();
+    if (ctx.spec.reduce()) {
+      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(), ctx.spec.shard_dirs().end());
+      auto summary = corpus::FinalizeCorpus(options, shards);
+      if (!summary.ok()) return TaskReport::Error(summary.status().message());
+      TaskReport report;
+      report.metrics["clips"] = static_cast<double>(summary->clips);
+      report.metrics["triplets"] = static_cast<double>(summary->triplets);
+      return report;
+    }
+    if (const Status s = corpus::GenerateCorpusShard(options, ctx.spec.index(), ctx.output_dir()); !s.ok()) {
+      return s.code() == StatusCode::kInvalidArgument ? TaskReport::BadInput(s.message()) : TaskReport::Error(s.message());
+    }
+    return TaskReport::Ok();
+  }
+};
+
+}  // namespace
+
+void RegisterBuiltinExecutors(ExecutorRegistry* registry) {
+  registry->Register("noop", std::make_unique<NoopStage>());
+  registry->Register("sleep", std::make_unique<SleepStage>());
+  registry->Register("test.write", std::make_unique<WriteStage>());
+  registry->Register("test.fail", std::make_unique<FailStage>());
+  registry->Register("test.crash", std::make_unique<CrashStage>());
+  registry->Register("corpus", std::make_unique<CorpusStage>());
+}
+
+}  // namespace motionpipe::worker
