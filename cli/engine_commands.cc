@@ -216,6 +216,10 @@ int Run(const RunOptions& o) {
       if (job.state() != "running" && job.state() != "pending") {
         final_state = job.state();
         if (!tty && !o.quiet) std::fputs(FormatStatus(*status, false, false).c_str(), stdout);
+        if (!o.quiet) {
+          std::printf("job %lld %s in %.1f s; outputs in %s\n", static_cast<long long>(job_id), final_state.c_str(),
+                      job.finished_unix() - job.created_unix(), job.output_dir().c_str());
+        }
         break;
       }
     }

@@ -290,6 +290,8 @@ void Scheduler::ReleaseAttempt(int64_t attempt_id) {
 }
 
 void Scheduler::OnReady(const std::string& identity, const wire::Ready& ready) {
+  // READY again from a known connection means a new session: whatever it held is lost.
+  if (workers_.count(identity)) DropWorker(identity, "re-registered");
   Worker& worker = workers_[identity];
   worker.identity = identity;
   worker.ready = ready;

@@ -71,6 +71,11 @@ class PluginStage : public StageExecutor {
 }  // namespace
 
 Status PluginHost::LoadFile(const std::string& path) {
+  std::error_code ec;
+  const std::string canonical = std::filesystem::weakly_canonical(path, ec).string();
+  for (const LoadedPlugin& loaded : plugins_) {
+    if (loaded.canonical_path == canonical) return Status::Ok();  // the same file found twice: already loaded
+  }
   const auto refuse = [&](const std::string& why) {
     problems_.push_back({path, why});
     MP_LOG(kWarn, "plugins") << path << ": " << why;
@@ -97,6 +102,7 @@ Status PluginHost::LoadFile(const std::string& path) {
   if (plugin->struct_size < sizeof(mp_plugin)) return refuse("plugin struct too small (built against an older header)");
   LoadedPlugin loaded;
   loaded.path = path;
+  loaded.canonical_path = canonical;
   loaded.name = plugin->name ? plugin->name : "?";
   loaded.version = plugin->version ? plugin->version : "?";
   loaded.plugin = plugin;

@@ -15,6 +15,7 @@ namespace motionpipe::worker {
 
 struct LoadedPlugin {
   std::string path;
+  std::string canonical_path;
   std::string name;
   std::string version;
   std::vector<std::string> stage_kinds;

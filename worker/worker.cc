@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <random>
 #include <thread>
 
 #include "executor.h"
@@ -113,6 +114,7 @@ class WorkerProcess {
   Channel channel_;
   std::string name_;
   int incarnation_ = 0;
+  std::string nonce_;
   Clock::time_point last_received_, last_sent_;
   double backoff_ = 1.0;
   bool draining_ = false;
@@ -190,7 +192,8 @@ void WorkerProcess::Connect() {
   dealer_->set(zmq::sockopt::rcvhwm, 100000);
   // A new identity per connection: the coordinator sees a fresh worker, and whatever it thought the
   // old connection held was already re-queued when it went silent.
-  dealer_->set(zmq::sockopt::routing_id, name_ + "#" + std::to_string(++incarnation_));
+  // name#pid.nonce.incarnation: unique even when a restarted process gets the same name (and pid).
+  dealer_->set(zmq::sockopt::routing_id, name_ + "#" + std::to_string(::getpid()) + "." + nonce_ + "." + std::to_string(++incarnation_));
   if (!keys_.secret_key.empty()) net::ConfigureCurveClient(*dealer_, keys_, server_key_);
   dealer_->connect(options_.coordinator);
   last_received_ = Clock::now();
@@ -303,6 +306,12 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
   char host[256] = {0};
   ::gethostname(host, sizeof(host) - 1);
   name_ = options_.name.empty() ? std::string(host) + ":" + std::to_string(::getpid()) : options_.name;
+  {
+    std::random_device rd;
+    char hex[17];
+    std::snprintf(hex, sizeof(hex), "%08x%08x", rd(), rd());
+    nonce_ = hex;
+  }
   if (!options_.curve_keys.empty()) {
     MP_ASSIGN_OR_RETURN(keys_, net::LoadKeyFile(options_.curve_keys));
     if (keys_.secret_key.empty()) return InvalidArgument(options_.curve_keys + ": no secret-key (a worker needs its own key pair)");

@@ -549,8 +549,8 @@ TEST(PluginHost, LoadsTheSamplePluginAndRefusesBadOnes) {
   const std::string not_a_library = ::testing::TempDir() + "/fake.so";
   std::ofstream(not_a_library) << "not ELF";
   expect_refused(not_a_library, "cannot load");
-  expect_refused(MOTIONPIPE_BUILD_DIR "/plugins/sample.so", "already loaded");
-  EXPECT_EQ(host.problems().size(), 5u);
+  EXPECT_TRUE(host.LoadFile(MOTIONPIPE_BUILD_DIR "/plugins/../plugins/sample.so").ok());  // same file again: no-op
+  EXPECT_EQ(host.problems().size(), 4u);
   EXPECT_EQ(host.plugins().size(), 1u);  // the host kept going
 
   // The plugin's stage runs through the executor interface.

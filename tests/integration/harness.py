@@ -1,0 +1,180 @@
+"""Helpers for the engine's multi-process tests: start coordinators and workers of the real
+`motionpipe` binary on loopback, talk to them with the CLI, and clean up whatever happens."""
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+import unittest
+import urllib.request
+
+MOTIONPIPE = os.environ.get("MOTIONPIPE_BIN", "motionpipe")
+GARBAGE = os.environ.get("MOTIONPIPE_GARBAGE", "motionpipe_garbage")
+
+
+def free_port(host="127.0.0.1"):
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+class Process:
+    """A child process with its output in a log file (shown when a test fails)."""
+
+    def __init__(self, args, log_path, env=None):
+        self.args = args
+        self.log_path = log_path
+        self.log = open(log_path, "ab")
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=subprocess.STDOUT, env=env)
+
+    def alive(self):
+        return self.proc.poll() is None
+
+    def send(self, sig):
+        if self.alive():
+            self.proc.send_signal(sig)
+
+    def wait(self, timeout):
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def stop(self, sig=signal.SIGTERM, timeout=10):
+        if self.alive():
+            self.proc.send_signal(sig)
+            if self.wait(timeout) is None:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+
+    def output(self):
+        self.log.flush()
+        with open(self.log_path, "rb") as f:
+            return f.read().decode(errors="replace")
+
+
+class EngineTest(unittest.TestCase):
+    """Base class: a temporary directory and a registry of processes torn down after each test."""
+
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(prefix="motionpipe_engine_")
+        self.processes = []
+
+    def tearDown(self):
+        failed = not getattr(self._outcome, "success", True)
+        for p in self.processes:
+            p.stop(signal.SIGKILL, timeout=2)
+        if failed:
+            for p in self.processes:
+                print(f"--- {' '.join(p.args[:3])} ---\n{p.output()[-3000:]}")
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def path(self, *parts):
+        return os.path.join(self.dir, *parts)
+
+    def spawn(self, args, name):
+        p = Process(args, self.path(f"{name}.log"))
+        self.processes.append(p)
+        return p
+
+    def coordinator(self, host="127.0.0.1", extra=(), journal=None, port=None, control_port=None, metrics_port=None):
+        self.worker_port = port or free_port(host)
+        self.control_port = control_port or free_port()
+        self.workers_endpoint = f"tcp://{host}:{self.worker_port}"
+        self.control = f"tcp://127.0.0.1:{self.control_port}"
+        args = [MOTIONPIPE, "coordinator", "--bind", self.workers_endpoint, "--control", self.control,
+                "--journal", journal or self.path("journal.sqlite"), "--heartbeat", "300ms"]
+        if metrics_port:
+            args += ["--metrics", f"127.0.0.1:{metrics_port}"]
+        proc = self.spawn(args + list(extra), f"coordinator-{len(self.processes)}")
+        self.wait_until(lambda: self.try_status() is not None, 10, "the coordinator to answer")
+        return proc
+
+    def worker(self, name, extra=(), endpoint=None, credit=2, heartbeat="300ms"):
+        args = [MOTIONPIPE, "worker", "--coordinator", endpoint or self.workers_endpoint, "--name", name,
+                "--credit", str(credit), "--heartbeat", heartbeat]
+        return self.spawn(args + list(extra), f"worker-{name}-{len(self.processes)}")
+
+    def cli(self, *args, check=True, timeout=120):
+        result = subprocess.run([MOTIONPIPE, *args], capture_output=True, text=True, timeout=timeout)
+        if check and result.returncode != 0:
+            raise AssertionError(f"motionpipe {' '.join(args)} exited {result.returncode}:\n{result.stdout}{result.stderr}")
+        return result
+
+    def write_pipeline(self, name, text):
+        path = self.path(name)
+        with open(path, "w") as f:
+            f.write(text.replace("OUT", self.path("out")))
+        return path
+
+    def submit(self, pipeline, *overrides):
+        return int(self.cli("submit", pipeline, *overrides, "--control", self.control).stdout.strip())
+
+    def try_status(self, job=None):
+        args = ["status", "--json", "--control", self.control] + ([str(job)] if job else [])
+        try:
+            result = subprocess.run([MOTIONPIPE, *args], capture_output=True, text=True, timeout=15)
+        except subprocess.TimeoutExpired:
+            return None
+        if result.returncode != 0:
+            return None
+        return json.loads(result.stdout)
+
+    def status(self, job=None):
+        status = self.try_status(job)
+        self.assertIsNotNone(status, "status failed")
+        return status
+
+    def job(self, job):
+        return self.status(job)["jobs"][0]
+
+    def wait_job(self, job, timeout=120):
+        result = self.cli("wait", str(job), "--control", self.control, "--timeout", f"{timeout}s", check=False, timeout=timeout + 30)
+        return result.returncode, result.stdout
+
+    def wait_until(self, predicate, timeout, what):
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            if predicate():
+                return
+            time.sleep(0.1)
+        raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+def http_get(url, timeout=5):
+    with urllib.request.urlopen(url, timeout=timeout) as response:
+        return response.read().decode()
+
+
+def metric(text, name, labels=None):
+    """Sum of the samples of a Prometheus metric (optionally with labels as 'key="value"' fragments)."""
+    total = 0.0
+    found = False
+    for line in text.splitlines():
+        if line.startswith("#") or not line.startswith(name):
+            continue
+        head, _, value = line.rpartition(" ")
+        if head.split("{")[0] != name:
+            continue
+        if labels and not all(fragment in head for fragment in labels):
+            continue
+        total += float(value)
+        found = True
+    return total if found else None
+
+
+def output_files(job_dir, stage):
+    """{task dir name: sha of out.txt} for a stage of test.write tasks."""
+    import hashlib
+    result = {}
+    stage_dir = os.path.join(job_dir, stage)
+    for name in sorted(os.listdir(stage_dir)):
+        if name.startswith("."):
+            continue
+        with open(os.path.join(stage_dir, name, "out.txt"), "rb") as f:
+            result[name] = hashlib.sha256(f.read()).hexdigest()
+    return result

@@ -1,0 +1,72 @@
+"""`motionpipe run`: a local coordinator and worker processes, a pipeline across a built-in stage
+kind and a plugin's, the journal, and resuming after an interruption."""
+import json
+import os
+import signal
+import subprocess
+import time
+import unittest
+
+from harness import MOTIONPIPE, EngineTest, output_files
+
+PIPELINE = """
+name: local
+output_root: OUT
+seed: 3
+stages:
+  write:
+    kind: test.write
+    params: {tasks: 300, bytes: 128}
+  check:
+    kind: sample.checksum
+    inputs: [write]
+"""
+
+
+class LocalRun(EngineTest):
+    def test_run_executes_the_pipeline_through_workers(self):
+        pipeline = self.write_pipeline("p.yaml", PIPELINE)
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2"], capture_output=True, text=True, timeout=120)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        self.assertIn("succeeded", result.stdout)
+        job_dir = self.path("out", "local-1")
+        self.assertEqual(len(output_files(job_dir, "write")), 300)
+        with open(os.path.join(job_dir, "check", "task-00000", "checksum.json")) as f:
+            checksum = json.load(f)
+        self.assertEqual(checksum["files"], 300)
+        self.assertEqual(checksum["bytes"], 300 * 128)
+        self.assertTrue(os.path.exists(self.path("out", ".motionpipe", "journal.sqlite")))
+
+    def test_overrides_and_invalid_pipelines(self):
+        pipeline = self.write_pipeline("p.yaml", PIPELINE)
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "-q", "stages.write.params.tasks=7"], capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        self.assertEqual(len(output_files(self.path("out", "local-1"), "write")), 7)
+        bad = self.write_pipeline("bad.yaml", PIPELINE.replace("inputs: [write]", "inputs: [wirte]"))
+        result = subprocess.run([MOTIONPIPE, "run", bad], capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 1)
+        self.assertIn("stages.check.inputs[0]: unknown stage 'wirte'", result.stderr)
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "0"], capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 2)  # usage error
+
+    def test_an_interrupted_run_resumes(self):
+        pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 20}"))
+        run = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        write_dir = self.path("out", "local-1", "write")
+        deadline = time.time() + 60
+        while time.time() < deadline and (not os.path.isdir(write_dir) or len([n for n in os.listdir(write_dir) if n.startswith("task")]) < 40):
+            time.sleep(0.05)
+        run.send_signal(signal.SIGINT)
+        out, _ = run.communicate(timeout=60)
+        self.assertEqual(run.returncode, 1)
+        self.assertIn("run the same command again to resume", out)
+        done_before = len([n for n in os.listdir(write_dir) if n.startswith("task")])
+        self.assertLess(done_before, 300)
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2"], capture_output=True, text=True, timeout=120)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        self.assertIn("resuming job 1", result.stdout)
+        self.assertEqual(len(output_files(self.path("out", "local-1"), "write")), 300)
+
+
+if __name__ == "__main__":
+    unittest.main()
