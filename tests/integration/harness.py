@@ -52,7 +52,8 @@ class Process:
         self.log.close()
 
     def output(self):
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
         with open(self.log_path, "rb") as f:
             return f.read().decode(errors="replace")
 
@@ -65,7 +66,10 @@ class EngineTest(unittest.TestCase):
         self.processes = []
 
     def tearDown(self):
-        failed = not getattr(self._outcome, "success", True)
+        # Python 3.11 keeps the outcome in _outcome.result; older versions had _outcome.success.
+        result = getattr(self._outcome, "result", None)
+        failed = not getattr(self._outcome, "success", True) or bool(
+            result is not None and (getattr(result, "failures", None) or getattr(result, "errors", None)))
         for p in self.processes:
             p.stop(signal.SIGKILL, timeout=2)
         if failed:

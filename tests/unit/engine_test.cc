@@ -10,6 +10,7 @@
 #include "journal.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/net/protocol.h"
+#include "motionpipe/net/security.h"
 #include "pipeline.h"
 #include "plugin_host.h"
 #include "scheduler.h"
@@ -531,6 +532,29 @@ TEST(Protocol, HeaderGuardsEveryFrame) {
 
 namespace motionpipe::worker {
 namespace {
+
+TEST(Security, AllowListKeysMayContainHash) {
+  // '#' is a Z85 digit: generated keys contain it about once in five, and must not be cut there.
+  const std::string with_hash = "rq:rM>}U?@Lns47E1%kR.o@n%FcmmsL/@{H8]yf#";
+  const std::string plain = "Yne@$w-vo<fVvi]a<NY6T1ed:M$fCG*[IaLV{hID";
+  const std::string path = ::testing::TempDir() + "/allow_hash.txt";
+  ASSERT_TRUE(WriteFileAtomic(path, "# workers\n" + with_hash + "\n  public-key: " + plain + "   # laptop\n\n").ok());
+  auto keys = net::LoadAllowList(path);
+  ASSERT_TRUE(keys.ok()) << keys.status().ToString();
+  EXPECT_EQ(*keys, (std::set<std::string>{with_hash, plain}));
+  ASSERT_TRUE(WriteFileAtomic(path, with_hash + " " + plain + "\n").ok());
+  auto two = net::LoadAllowList(path);
+  ASSERT_FALSE(two.ok());
+  EXPECT_NE(two.status().message().find("allow_hash.txt:1"), std::string::npos);
+  for (int k = 0; k < 20; ++k) {  // generated keys round-trip through an allow file
+    auto pair = net::GenerateCurveKeyPair();
+    ASSERT_TRUE(pair.ok());
+    ASSERT_TRUE(WriteFileAtomic(path, pair->public_key + "\n").ok());
+    auto loaded = net::LoadAllowList(path);
+    ASSERT_TRUE(loaded.ok()) << pair->public_key << ": " << loaded.status().ToString();
+    EXPECT_EQ(loaded->count(pair->public_key), 1u);
+  }
+}
 
 TEST(PluginHost, LoadsTheSamplePluginAndRefusesBadOnes) {
   PluginHost host;

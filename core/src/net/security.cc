@@ -61,10 +61,18 @@ Result<std::set<std::string>> LoadAllowList(const std::string& path) {
   int number = 0;
   while (std::getline(in, line)) {
     ++number;
-    if (const size_t hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+    // '#' is a Z85 digit, so a comment is a line that starts with '#' or text after whitespace.
     line = Trim(line);
-    if (line.empty()) continue;
+    if (line.empty() || line[0] == '#') continue;
     if (line.rfind("public-key:", 0) == 0) line = Trim(line.substr(11));
+    const size_t space = line.find_first_of(" \t");
+    if (space != std::string::npos) {
+      const std::string rest = Trim(line.substr(space));
+      if (!rest.empty() && rest[0] != '#') {
+        return DataLoss(path + ":" + std::to_string(number) + ": one key per line (comments start with '#')");
+      }
+      line.resize(space);
+    }
     if (!ValidZ85Key(line)) return DataLoss(path + ":" + std::to_string(number) + ": not a 40-character Z85 public key");
     keys.insert(line);
   }

@@ -24,7 +24,8 @@ Result<CurveKeyPair> GenerateCurveKeyPair();
 // with only the public line is a public key file.
 std::string FormatKeyFile(const CurveKeyPair& keys);
 Result<CurveKeyPair> LoadKeyFile(const std::string& path);
-// One Z85 public key per line ('#' comments, blank lines, and "public-key:" prefixes allowed).
+// One Z85 public key per line; blank lines, "public-key:" prefixes, comment lines starting with '#'
+// and comments after whitespace are allowed ('#' itself is a Z85 digit, so it may occur in keys).
 Result<std::set<std::string>> LoadAllowList(const std::string& path);
 
 // Runs the ZAP handler (inproc://zeromq.zap.01) on its own thread: CURVE clients whose key is in
