@@ -64,6 +64,9 @@ def main():
     parser.add_argument("pickle", help="motionfix.pth.tar (joblib)")
     parser.add_argument("--splits", help="splits.json with train/val/test id lists")
     parser.add_argument("--out", required=True, help="output .npz")
+    parser.add_argument("--compress", action="store_true",
+                        help="deflate the arrays (about half the size, but readers must inflate them: "
+                             "uncompressed files are used in place from a memory map)")
     args = parser.parse_args()
 
     try:
@@ -133,7 +136,7 @@ def main():
             arrays[f"{name}_joints"] = np.concatenate(joints_l).astype(np.float32)
 
     tmp = f"{args.out}.tmp.{os.getpid()}.npz"
-    np.savez_compressed(tmp, **arrays)
+    (np.savez_compressed if args.compress else np.savez)(tmp, **arrays)
     os.replace(tmp, args.out)
     counts = {s: split_names.count(s) for s in sorted(set(split_names))}
     print(f"motionfix_convert: {n} triplets {counts} -> {args.out}")

@@ -93,7 +93,9 @@ TEST(Zip, CorruptionAndTruncationAreDetected) {
   writer.Add("a.npy", "some payload that will be damaged", false);
   const std::string archive = writer.Finish();
   std::string flipped = archive;
-  flipped[40] ^= 0x55;  // inside the stored data
+  const size_t at = archive.find("payload");
+  ASSERT_NE(at, std::string::npos);
+  flipped[at] ^= 0x55;  // inside the stored data
   auto crc = ReadZip(flipped, "c.npz");
   ASSERT_FALSE(crc.ok());
   EXPECT_NE(crc.status().message().find("CRC mismatch"), std::string::npos);
@@ -102,6 +104,45 @@ TEST(Zip, CorruptionAndTruncationAreDetected) {
     EXPECT_FALSE(truncated.ok()) << cut;
     EXPECT_NE(truncated.status().message().find("t.npz"), std::string::npos);
   }
+}
+
+TEST(Zip, StoredMembersAreAlignedForInPlaceUse) {
+  ZipWriter writer;
+  writer.Add("odd-name.npy", "first", false);
+  writer.Add("b.npy", std::string(1000, 'y'), true);
+  writer.Add("third-member.npy", "third", false);
+  const std::string archive = writer.Finish();
+  auto entries = ListZip(archive, "a.npz");
+  ASSERT_TRUE(entries.ok()) << entries.status().ToString();
+  ASSERT_EQ(entries->size(), 3u);
+  for (const ZipEntry& entry : *entries) {
+    if (entry.method != 0) continue;
+    EXPECT_EQ(static_cast<size_t>(entry.payload.data() - archive.data()) % 64, 0u) << entry.name;
+  }
+  EXPECT_EQ((*entries)[2].payload, "third");
+  auto data = ExtractZipEntry((*entries)[1], "a.npz");
+  ASSERT_TRUE(data.ok());
+  EXPECT_EQ(*data, std::string(1000, 'y'));
+}
+
+TEST(Npz, ArraysOfStoredArchivesAreAlignedInTheFile) {
+  Npz npz;
+  npz.Add("format", NpyArray::ScalarString("x"));
+  npz.Add("poses", NpyArray::Float32({3, 22, 3}, std::vector<float>(198, 0.25f)));
+  const std::string bytes = SerializeNpz(npz, false);
+  auto entries = ListZip(bytes, "a.npz");
+  ASSERT_TRUE(entries.ok());
+  for (const ZipEntry& entry : *entries) {
+    auto view = ParseNpyView(entry.payload, entry.name);
+    ASSERT_TRUE(view.ok());
+    EXPECT_EQ(static_cast<size_t>(view->data.data() - bytes.data()) % 64, 0u) << entry.name;
+    EXPECT_TRUE(view->Native());
+  }
+  // Only the chosen arrays are extracted.
+  auto some = ParseNpz(bytes, "a.npz", {"poses"});
+  ASSERT_TRUE(some.ok());
+  EXPECT_EQ(some->arrays().size(), 1u);
+  EXPECT_NE(some->Find("poses"), nullptr);
 }
 
 TEST(Npz, RoundTripAndShapeChecks) {

@@ -300,8 +300,10 @@ Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const st
       edit_kinds[g.triplet.edit_kind] += 1;
       triplets.push_back(std::move(g.triplet));
     }
+    // Uncompressed (as np.savez): readers map the file and use the arrays in place; the filter and the
+    // trainers read the triplets far more often than they are written.
     MP_RETURN_IF_ERROR(
-        WriteRecorded(dir, "motionfix/" + ShardName("triplets", index), SerializeNpz(TripletsToNpz(triplets), true), true, &files));
+        WriteRecorded(dir, "motionfix/" + ShardName("triplets", index), SerializeNpz(TripletsToNpz(triplets), false), true, &files));
   }
   shard["rejected"] = rejected;
   shard["frames"] = frames;

@@ -358,7 +358,12 @@ Result<std::vector<std::string>> NpyArray::ToStrings(const std::string& origin) 
   return out;
 }
 
-Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) {
+namespace {
+
+// `owned`, when given, holds `bytes` and is consumed: the data move into the array without a copy.
+}  // namespace
+
+Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin) {
   static constexpr char kMagic[] = "\x93NUMPY";
   if (bytes.size() < 10 || bytes.substr(0, 6) != std::string_view(kMagic, 6)) {
     return DataLoss(origin + ": not a .npy file (bad magic)");
@@ -378,9 +383,8 @@ Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) {
   }
   if (header_len > bytes.size() - header_start) return DataLoss(origin + ": truncated .npy header");
   std::string descr;
-  bool fortran = false;
-  NpyArray array;
-  Status parsed = HeaderParser(bytes.substr(header_start, header_len)).Parse(&descr, &fortran, &array.shape);
+  NpyView array;
+  Status parsed = HeaderParser(bytes.substr(header_start, header_len)).Parse(&descr, &array.fortran, &array.shape);
   if (!parsed.ok()) return parsed.WithContext(origin);
 
   if (descr.size() < 2) return DataLoss(origin + ": bad dtype '" + descr + "'");
@@ -415,19 +419,49 @@ Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) {
   }
   if (!found) return DataLoss(origin + ": unsupported dtype '" + descr + "'");
 
+  auto shape_text = [&] {
+    NpyArray probe;
+    probe.shape = array.shape;
+    return probe.ShapeString();
+  };
   int64_t count = 1;
   for (int64_t d : array.shape) {
-    if (MulOverflows(count, d, &count)) return DataLoss(origin + ": shape " + array.ShapeString() + " overflows");
+    if (MulOverflows(count, d, &count)) return DataLoss(origin + ": shape " + shape_text() + " overflows");
   }
   int64_t total = 0;
   if (MulOverflows(count, array.item_size, &total)) return DataLoss(origin + ": array size overflows");
   const size_t data_start = header_start + header_len;
   if (static_cast<uint64_t>(total) > bytes.size() - data_start) {
-    return DataLoss(origin + ": truncated data: shape " + array.ShapeString() + " of " +
-                    DTypeName(array.dtype, array.item_size) + " needs " + std::to_string(total) + " bytes, found " +
-                    std::to_string(bytes.size() - data_start));
+    return DataLoss(origin + ": truncated data: shape " + shape_text() + " of " + DTypeName(array.dtype, array.item_size) +
+                    " needs " + std::to_string(total) + " bytes, found " + std::to_string(bytes.size() - data_start));
   }
-  array.bytes.assign(bytes.data() + data_start, static_cast<size_t>(total));
+  array.big_endian = order == '>';
+  array.data_offset = data_start;
+  array.data = bytes.substr(data_start, static_cast<size_t>(total));
+  array.count = count;
+  return array;
+}
+
+namespace {
+
+Result<NpyArray> ParseNpyImpl(std::string_view bytes, const std::string& origin, std::string* owned) {
+  MP_ASSIGN_OR_RETURN(const NpyView view, ParseNpyView(bytes, origin));
+  NpyArray array;
+  array.dtype = view.dtype;
+  array.item_size = view.item_size;
+  array.shape = view.shape;
+  const bool fortran = view.fortran;
+  const char order = view.big_endian ? '>' : '<';
+  const int64_t count = view.count;
+  const size_t data_start = view.data_offset;
+  const auto total = static_cast<int64_t>(view.data.size());
+  if (owned != nullptr) {
+    owned->erase(0, data_start);
+    owned->resize(static_cast<size_t>(total));
+    array.bytes = std::move(*owned);
+  } else {
+    array.bytes.assign(bytes.data() + data_start, static_cast<size_t>(total));
+  }
 
   // Big-endian numbers (and unicode) to little-endian.
   const int swap_unit = array.dtype == DType::kUnicode ? 4 : static_cast<int>(array.item_size);
@@ -457,6 +491,15 @@ Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) {
     array.bytes = std::move(c_order);
   }
   return array;
+}
+
+}  // namespace
+
+Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) { return ParseNpyImpl(bytes, origin, nullptr); }
+
+Result<NpyArray> ParseNpy(std::string&& bytes, const std::string& origin) {
+  const std::string_view view(bytes);
+  return ParseNpyImpl(view, origin, &bytes);
 }
 
 std::string SerializeNpy(const NpyArray& array) {

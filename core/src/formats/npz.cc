@@ -1,5 +1,7 @@
 #include "motionpipe/formats/npz.h"
 
+#include <algorithm>
+
 #include "motionpipe/base/file.h"
 #include "motionpipe/formats/zip.h"
 
@@ -29,13 +31,26 @@ Result<const NpyArray*> Npz::Get(const std::string& name, const std::string& ori
   return NotFound(origin + ": missing array '" + name + "' (present: " + (present.empty() ? "none" : present) + ")");
 }
 
-Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin) {
-  MP_ASSIGN_OR_RETURN(auto members, ReadZip(bytes, origin));
+std::optional<NpyArray> Npz::Take(const std::string& name) {
+  for (auto& [existing, value] : arrays_) {
+    if (existing == name) return std::move(value);
+  }
+  return std::nullopt;
+}
+
+Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin, const std::vector<std::string>& arrays) {
+  MemberFilter want;
+  if (!arrays.empty()) {
+    want = [&arrays](const std::string& member) {
+      return std::any_of(arrays.begin(), arrays.end(), [&](const std::string& a) { return member == a + ".npy" || member == a; });
+    };
+  }
+  MP_ASSIGN_OR_RETURN(auto members, ReadZip(bytes, origin, want));
   Npz npz;
   for (auto& member : members) {
     std::string name = member.name;
     if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0) name.resize(name.size() - 4);
-    MP_ASSIGN_OR_RETURN(NpyArray array, ParseNpy(member.data, origin + ": array '" + name + "'"));
+    MP_ASSIGN_OR_RETURN(NpyArray array, ParseNpy(std::move(member.data), origin + ": array '" + name + "'"));
     npz.Add(name, std::move(array));
   }
   return npz;
@@ -47,9 +62,9 @@ std::string SerializeNpz(const Npz& npz, bool compress) {
   return writer.Finish();
 }
 
-Result<Npz> ReadNpz(const std::string& path) {
-  MP_ASSIGN_OR_RETURN(const std::string bytes, ReadFile(path));
-  return ParseNpz(bytes, path);
+Result<Npz> ReadNpz(const std::string& path, const std::vector<std::string>& arrays) {
+  MP_ASSIGN_OR_RETURN(const MappedFile file, MappedFile::Open(path));
+  return ParseNpz(file.data(), path, arrays);
 }
 
 Status WriteNpz(const std::string& path, const Npz& npz, bool compress) {

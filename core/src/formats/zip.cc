@@ -102,7 +102,7 @@ std::string Deflate(std::string_view data) {
 
 }  // namespace
 
-Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin) {
+Result<std::vector<ZipEntry>> ListZip(std::string_view archive, const std::string& origin) {
   const size_t n = archive.size();
   if (n < 22) return DataLoss(origin + ": too short to be a zip/npz archive (" + std::to_string(n) + " bytes)");
   // The end-of-central-directory record sits in the last 22 + 65535 bytes.
@@ -130,7 +130,7 @@ Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::stri
   if (dir_offset > n || dir_size > n - dir_offset) return DataLoss(origin + ": zip directory lies outside the file (truncated?)");
   if (entries > dir_size / 46) return DataLoss(origin + ": zip directory claims more entries than it holds");
 
-  std::vector<ZipMember> members;
+  std::vector<ZipEntry> located;
   size_t at = static_cast<size_t>(dir_offset);
   const size_t dir_end = static_cast<size_t>(dir_offset + dir_size);
   for (uint64_t entry = 0; entry < entries; ++entry) {
@@ -149,9 +149,8 @@ Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::stri
     if (dir_end - at - 46 < name_len + extra_len + comment_len) {
       return DataLoss(origin + ": zip directory entry " + std::to_string(entry) + " is truncated");
     }
-    ZipMember member;
-    member.name = std::string(archive.substr(at + 46, name_len));
-    const std::string where = origin + ": member '" + member.name + "'";
+    std::string name(archive.substr(at + 46, name_len));
+    const std::string where = origin + ": member '" + name + "'";
     // ZIP64 extra field: 64-bit values for the 32-bit fields that are saturated.
     size_t extra = at + 46 + name_len;
     const size_t extra_end = extra + extra_len;
@@ -179,19 +178,59 @@ Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::stri
     }
     const uint64_t data_start = local + 30 + Get16(archive, local + 26) + Get16(archive, local + 28);
     if (data_start > n || csize > n - data_start) return DataLoss(where + ": data truncated");
-    const std::string_view compressed = archive.substr(static_cast<size_t>(data_start), static_cast<size_t>(csize));
     if (method == 0) {
       if (usize != csize) return DataLoss(where + ": stored member sizes disagree");
-      member.data = std::string(compressed);
     } else if (method == 8) {
       if (usize > csize * kMaxDeflateRatio + 1024) return DataLoss(where + ": implausible uncompressed size");
-      MP_RETURN_IF_ERROR(Inflate(compressed, usize, &member.data, where));
     } else {
       return DataLoss(where + ": unsupported compression method " + std::to_string(method));
     }
-    if (Crc32(member.data) != crc) return DataLoss(where + ": CRC mismatch (corrupt data)");
-    members.push_back(std::move(member));
+    located.push_back({std::move(name), method, crc, usize,
+                       archive.substr(static_cast<size_t>(data_start), static_cast<size_t>(csize))});
   }
+  return located;
+}
+
+Result<std::string> ExtractZipEntry(const ZipEntry& entry, const std::string& origin) {
+  const std::string where = origin + ": member '" + entry.name + "'";
+  std::string data;
+  if (entry.method == 0) {
+    data = std::string(entry.payload);
+  } else {
+    MP_RETURN_IF_ERROR(Inflate(entry.payload, entry.size, &data, where));
+  }
+  MP_RETURN_IF_ERROR(CheckZipCrc(entry, data, origin));
+  return data;
+}
+
+Status CheckZipCrc(const ZipEntry& entry, std::string_view data, const std::string& origin) {
+  if (Crc32(data) != entry.crc) return DataLoss(origin + ": member '" + entry.name + "': CRC mismatch (corrupt data)");
+  return Status::Ok();
+}
+
+Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin, const MemberFilter& want) {
+  MP_ASSIGN_OR_RETURN(std::vector<ZipEntry> all, ListZip(archive, origin));
+  std::vector<ZipEntry> located;
+  for (auto& entry : all) {
+    if (!want || want(entry.name)) located.push_back(std::move(entry));
+  }
+
+  std::vector<ZipMember> members(located.size());
+  std::vector<Status> errors(located.size());
+  const auto count = static_cast<int64_t>(located.size());
+#pragma omp parallel for schedule(dynamic) if (count > 1)
+  for (int64_t k = 0; k < count; ++k) {
+    const ZipEntry& entry = located[static_cast<size_t>(k)];
+    ZipMember& member = members[static_cast<size_t>(k)];
+    member.name = entry.name;
+    auto data = ExtractZipEntry(entry, origin);
+    if (data.ok()) {
+      member.data = std::move(*data);
+    } else {
+      errors[static_cast<size_t>(k)] = data.status();
+    }
+  }
+  for (const Status& error : errors) MP_RETURN_IF_ERROR(error);
   return members;
 }
 
@@ -221,6 +260,11 @@ std::string ZipWriter::Finish() {
   for (Entry& entry : entries_) {
     entry.offset = out.size();
     const bool zip64 = entry.size >= k32Max || entry.compressed_size >= k32Max;
+    // Stored members start on a 64-byte boundary (padding in an extra field, id 0xD935 as zipalign
+    // does), so that readers can use their arrays in place from a memory map.
+    const size_t header = 30 + entry.name.size() + (zip64 ? 20 : 0);
+    const uint16_t pad = entry.method == 0 ? static_cast<uint16_t>((64 - (entry.offset + header + 4) % 64) % 64) : 0;
+    const uint16_t align_len = entry.method == 0 ? static_cast<uint16_t>(4 + pad) : 0;
     Put32(&out, kLocalSig);
     Put16(&out, zip64 ? 45 : 20);
     Put16(&out, 0);  // flags
@@ -231,13 +275,18 @@ std::string ZipWriter::Finish() {
     Put32(&out, zip64 ? k32Max : static_cast<uint32_t>(entry.compressed_size));
     Put32(&out, zip64 ? k32Max : static_cast<uint32_t>(entry.size));
     Put16(&out, static_cast<uint16_t>(entry.name.size()));
-    Put16(&out, zip64 ? 20 : 0);
+    Put16(&out, static_cast<uint16_t>((zip64 ? 20 : 0) + align_len));
     out += entry.name;
     if (zip64) {
       Put16(&out, 0x0001);
       Put16(&out, 16);
       Put64(&out, entry.size);
       Put64(&out, entry.compressed_size);
+    }
+    if (align_len) {
+      Put16(&out, 0xD935);
+      Put16(&out, pad);
+      out.append(pad, '\0');
     }
     out += entry.data;
     std::string().swap(entry.data);

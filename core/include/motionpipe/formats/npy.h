@@ -45,8 +45,25 @@ struct NpyArray {
   Result<std::vector<std::string>> ToStrings(const std::string& origin) const;
 };
 
+// A parsed .npy header and where its data lie, without copying them.
+struct NpyView {
+  DType dtype = DType::kFloat32;
+  int64_t item_size = 4;
+  std::vector<int64_t> shape;
+  int64_t count = 0;          // elements
+  bool fortran = false;
+  bool big_endian = false;
+  size_t data_offset = 0;     // from the start of the .npy bytes
+  std::string_view data;      // count * item_size bytes, as stored
+  // True when the data can be read as a C-order little-endian array in place.
+  bool Native() const { return !big_endian && (!fortran || shape.size() < 2); }
+};
+Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin);
+
 // Parses a whole .npy file held in memory. DataLoss names `origin` and what is wrong.
 Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin);
+// The same, consuming `bytes`: the array takes over the buffer instead of copying it.
+Result<NpyArray> ParseNpy(std::string&& bytes, const std::string& origin);
 // Serialises as .npy version 1.0 (2.0 when the header needs it), 64-byte aligned like numpy.
 std::string SerializeNpy(const NpyArray& array);
 
