@@ -4,6 +4,8 @@
 #include <filesystem>
 #include <iostream>
 
+#include <omp.h>
+
 #include "commands.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/corpus/corpus.h"
@@ -14,6 +16,7 @@
 #include "motionpipe/formats/bvh.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/motion/compare.h"
+#include "motionpipe/similarity/filter.h"
 
 namespace motionpipe::cli {
 
@@ -187,6 +190,61 @@ void AddDataCommands(CLI::App& app, int* exit_code) {
       auto report = corpus::InspectCorpus(dir);
       if (!report.ok()) return void(*exit_code = Fail(report.status()));
       std::fputs(corpus::FormatCorpusReport(*report).c_str(), stdout);
+    });
+  }
+  {  // filter
+    auto* cmd = data->add_subcommand(
+        "filter", "Similarity curves, MotionSNR and classes of editing triplets (SimMotionEdit's filter), in this process");
+    static std::vector<std::string> inputs;
+    static std::string out_dir;
+    static std::string preset = "paper";
+    static std::vector<std::string> sets;
+    static int threads = 0;
+    cmd->add_option("inputs", inputs, "Triplets files (.npz) or directories (a corpus, converted MotionFix)")->required();
+    cmd->add_option("--out", out_dir, "Output directory: task-00000/ (curves) and the summary")->required();
+    cmd->add_option("--preset", preset, "paper (kappa 5) or reference (the authors' code: kappa 10)")->capture_default_str();
+    cmd->add_option("--set", sets, "Override a constant, key=value (window, smooth, w_rot, w_loc, kappa, snr_threshold, "
+                                   "min_frames, classes, locations)");
+    cmd->add_option("--threads", threads, "OpenMP threads (0 = all cores)")->capture_default_str();
+    cmd->callback([exit_code] {
+      nlohmann::json config = {{"preset", preset}};
+      for (const std::string& set : sets) {
+        const size_t eq = set.find('=');
+        if (eq == std::string::npos) return void(*exit_code = Fail(InvalidArgument("--set " + set + ": expected key=value")));
+        const std::string value = set.substr(eq + 1);
+        const nlohmann::json parsed = nlohmann::json::parse(value, nullptr, false);
+        config[set.substr(0, eq)] = parsed.is_discarded() ? nlohmann::json(value) : parsed;
+      }
+      auto options = similarity::OptionsFromJson(config, "--preset/--set");
+      if (!options.ok()) return void(*exit_code = Fail(options.status()));
+      auto files = similarity::ResolveTripletFiles(inputs);
+      if (!files.ok()) return void(*exit_code = Fail(files.status()));
+      const int n = threads > 0 ? threads : omp_get_max_threads();
+      const std::string shard_dir = out_dir + "/task-00000";
+      auto report = similarity::FilterShard(similarity::PlanShard(*files, 1, 0), *options, n, shard_dir);
+      if (!report.ok()) return void(*exit_code = Fail(report.status()));
+      auto summary = similarity::SummarizeFilter({shard_dir}, out_dir);
+      if (!summary.ok()) return void(*exit_code = Fail(summary.status()));
+      std::fputs(similarity::FormatFilterSummary(*summary).c_str(), stdout);
+      std::printf("%.2f s with %d threads (%.0f triplets/s); curves in %s/similarity.npz, summary in %s/summary.{json,png}\n",
+                  report->seconds, n, static_cast<double>(report->triplets) / std::max(report->seconds, 1e-9), shard_dir.c_str(),
+                  out_dir.c_str());
+    });
+  }
+  {  // filter-summary
+    auto* cmd = data->add_subcommand("filter-summary", "Print the summary of a filter result directory (summary.json)");
+    static std::string dir;
+    cmd->add_option("dir", dir, "The filter stage's result directory (or `data filter --out`)")->required();
+    cmd->callback([exit_code] {
+      auto text = ReadFile(dir + "/summary.json");
+      if (!text.ok()) return void(*exit_code = Fail(text.status()));
+      const nlohmann::json summary = nlohmann::json::parse(*text, nullptr, false);
+      if (summary.is_discarded()) return void(*exit_code = Fail(DataLoss(dir + "/summary.json: not JSON")));
+      try {
+        std::fputs(similarity::FormatFilterSummary(summary).c_str(), stdout);
+      } catch (const nlohmann::json::exception& e) {
+        return void(*exit_code = Fail(DataLoss(dir + "/summary.json: unexpected content (" + e.what() + ")")));
+      }
     });
   }
   {  // roundtrip

@@ -9,6 +9,7 @@
 
 #include "cron.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/similarity/similarity.h"
 
 namespace motionpipe::coordinator {
 
@@ -217,6 +218,26 @@ KindRegistry KindRegistry::WithBuiltins() {
     stage->shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
     stage->reduce = true;
   });
+  // SimMotionEdit's dataset filter: `shards` tasks (default 8) over the triplet files of the input
+  // stage or of params.triplets, then a summary. The similarity constants are checked here, before
+  // anything runs.
+  registry.Add("filter", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    if (!stage->shards_set) stage->shards = 8;
+    stage->reduce = true;
+    const auto& p = stage->params;
+    if (p.contains("triplets") && !p["triplets"].is_string() && !p["triplets"].is_array()) {
+      errors->push_back(path + ".params.triplets: must be a path or a list of paths");
+    }
+    if (!p.contains("triplets") && stage->inputs.empty()) {
+      errors->push_back(path + ": needs an input stage (inputs: [corpus]) or params.triplets (files or directories)");
+    }
+    if (p.contains("input") && (!p["input"].is_string() ||
+                                std::find(stage->inputs.begin(), stage->inputs.end(), p["input"].get<std::string>()) == stage->inputs.end())) {
+      errors->push_back(path + ".params.input: must name one of the stage's inputs");
+    }
+    auto options = similarity::OptionsFromJson(p, path + ".params", {"triplets", "input"});
+    if (!options.ok()) errors->push_back(options.status().message());
+  });
   return registry;
 }
 
@@ -337,7 +358,7 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
           stage.params = nlohmann::json::parse(node["params"].dump());
         }
       }
-      if (node.contains("shards")) ReadInt(node["shards"], path + ".shards", 1, &stage.shards, &errors);
+      if (node.contains("shards")) stage.shards_set = ReadInt(node["shards"], path + ".shards", 1, &stage.shards, &errors);
       if (node.contains("reduce")) {
         if (!node["reduce"].is_boolean()) errors.push_back(path + ".reduce: must be true or false");
         else stage.reduce = node["reduce"].get<bool>();

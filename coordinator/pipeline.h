@@ -31,6 +31,7 @@ struct StageSpec {
   std::vector<std::string> inputs;
   nlohmann::json params = nlohmann::json::object();
   int shards = 1;        // map tasks
+  bool shards_set = false;  // `shards:` given in the YAML (planners may pick their own default otherwise)
   bool reduce = false;   // plus one reduce task after all shards committed
   int max_attempts = 3;  // task errors tolerated before the task fails
   double retry_backoff_seconds = 1.0;  // doubled after each error

@@ -60,7 +60,7 @@ class ExecutorRegistry {
   std::map<std::string, std::unique_ptr<StageExecutor>> executors_;
 };
 
-// noop, sleep, test.write, test.fail, test.crash, corpus.
+// noop, sleep, test.write, test.fail, test.crash, corpus, filter.
 void RegisterBuiltinExecutors(ExecutorRegistry* registry);
 
 // Runs `executor` on the task with its thread budget, catching exceptions.

@@ -1,4 +1,4 @@
-// Built-in stage kinds: the diagnostic ones the engine's tests and benchmarks use, and `corpus`.
+// Built-in stage kinds: the diagnostic ones the engine's tests and benchmarks use, `corpus` and `filter`.
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -10,6 +10,7 @@
 #include "../executor.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/corpus/corpus.h"
+#include "motionpipe/similarity/filter.h"
 
 namespace motionpipe::worker {
 
@@ -139,6 +140,63 @@ class CorpusStage : public StageExecutor {
   }
 };
 
+// Deterministic input problems fail the task at once; anything else may be transient.
+TaskReport FromStatus(const Status& s) {
+  switch (s.code()) {
+    case StatusCode::kInvalidArgument:
+    case StatusCode::kNotFound:
+    case StatusCode::kDataLoss: return TaskReport::BadInput(s.message());
+    default: return TaskReport::Error(s.message());
+  }
+}
+
+// SimMotionEdit's dataset filter (similarity curves, MotionSNR, classes): shard tasks each filter
+// their part of the triplet files; the reduce task writes the summary and its plot.
+class FilterStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "similarity curves, MotionSNR and classes of editing triplets"; }
+  TaskReport Run(TaskContext& ctx) override {
+    const auto& p = ctx.params;
+    auto options = similarity::OptionsFromJson(p, "params", {"triplets", "input"});
+    if (!options.ok()) return TaskReport::BadInput(options.status().message());
+    if (ctx.spec.reduce()) {
+      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(), ctx.spec.shard_dirs().end());
+      auto summary = similarity::SummarizeFilter(shards, ctx.output_dir());
+      if (!summary.ok()) return FromStatus(summary.status());
+      TaskReport report;
+      report.metrics["triplets"] = (*summary)["triplets"].get<double>();
+      report.metrics["kept"] = (*summary)["kept"].get<double>();
+      report.message = similarity::FormatFilterSummary(*summary);
+      return report;
+    }
+    std::vector<std::string> inputs;
+    if (p.contains("triplets")) {
+      if (p["triplets"].is_string()) inputs.push_back(p["triplets"].get<std::string>());
+      else for (const auto& v : p["triplets"]) inputs.push_back(v.get<std::string>());
+    } else {
+      const std::string stage = p.value("input", ctx.spec.inputs_size() > 0 ? ctx.spec.inputs(0).stage() : std::string());
+      std::string dir = ctx.InputResult(stage);
+      if (dir.empty()) {
+        const auto dirs = ctx.InputDirs(stage);
+        inputs.insert(inputs.end(), dirs.begin(), dirs.end());
+      } else {
+        inputs.push_back(dir);
+      }
+      if (inputs.empty()) return TaskReport::BadInput("input stage '" + stage + "' has no outputs");
+    }
+    auto files = similarity::ResolveTripletFiles(inputs);
+    if (!files.ok()) return FromStatus(files.status());
+    const auto slices = similarity::PlanShard(*files, ctx.spec.count(), ctx.spec.index());
+    auto report = similarity::FilterShard(slices, *options, ctx.threads, ctx.output_dir());
+    if (!report.ok()) return FromStatus(report.status());
+    TaskReport out;
+    out.metrics["triplets"] = static_cast<double>(report->triplets);
+    out.metrics["kept"] = static_cast<double>(report->kept);
+    out.metrics["triplets_per_second"] = static_cast<double>(report->triplets) / std::max(report->seconds, 1e-9);
+    return out;
+  }
+};
+
 }  // namespace
 
 void RegisterBuiltinExecutors(ExecutorRegistry* registry) {
@@ -148,6 +206,7 @@ void RegisterBuiltinExecutors(ExecutorRegistry* registry) {
   registry->Register("test.fail", std::make_unique<FailStage>());
   registry->Register("test.crash", std::make_unique<CrashStage>());
   registry->Register("corpus", std::make_unique<CorpusStage>());
+  registry->Register("filter", std::make_unique<FilterStage>());
 }
 
 }  // namespace motionpipe::worker
