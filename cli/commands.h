@@ -13,5 +13,7 @@ constexpr int kExitUsage = 2;
 
 void AddDataCommands(CLI::App& app, int* exit_code);
 void AddEngineCommands(CLI::App& app, int* exit_code);
+void AddLabelsCommands(CLI::App& app, int* exit_code);
+void AddSincCommands(CLI::App& app, int* exit_code);
 
 }  // namespace motionpipe::cli

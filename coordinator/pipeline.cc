@@ -10,6 +10,7 @@
 #include "cron.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/similarity/similarity.h"
+#include "motionpipe/sinc/synth.h"
 
 namespace motionpipe::coordinator {
 
@@ -236,6 +237,28 @@ KindRegistry KindRegistry::WithBuiltins() {
       errors->push_back(path + ".params.input: must name one of the stage's inputs");
     }
     auto options = similarity::OptionsFromJson(p, path + ".params", {"triplets", "input"});
+    if (!options.ok()) errors->push_back(options.status().message());
+  });
+  // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
+  registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = 1;
+    stage->reduce = false;
+    const auto& p = stage->params;
+    if (!p.contains("babel") && stage->inputs.empty()) errors->push_back(path + ": needs an input stage (a corpus) or params.babel");
+    if (p.contains("labeler") && !p["labeler"].is_string()) errors->push_back(path + ".params.labeler: must be a labeler name");
+  });
+  registry.Add("synth", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    const auto& p = stage->params;
+    const int64_t pairs = p.contains("pairs") && p["pairs"].is_number_integer() ? p["pairs"].get<int64_t>() : 10000;
+    const int64_t shard = p.contains("shard_size") && p["shard_size"].is_number_integer() ? p["shard_size"].get<int64_t>() : 50000;
+    if (pairs < 1 || shard < 1) {
+      errors->push_back(path + ".params: pairs and shard_size must be positive integers");
+      return;
+    }
+    stage->shards = static_cast<int>((pairs + shard - 1) / shard);
+    stage->reduce = true;
+    if (!p.contains("spans") && stage->inputs.empty()) errors->push_back(path + ": needs an input `singles` stage or params.spans");
+    auto options = sinc::SynthOptionsFromJson(p, path + ".params");
     if (!options.ok()) errors->push_back(options.status().message());
   });
   return registry;

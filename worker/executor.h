@@ -60,8 +60,12 @@ class ExecutorRegistry {
   std::map<std::string, std::unique_ptr<StageExecutor>> executors_;
 };
 
-// noop, sleep, test.write, test.fail, test.crash, corpus, filter.
-void RegisterBuiltinExecutors(ExecutorRegistry* registry);
+class PluginHost;
+
+// noop, sleep, test.write, test.fail, test.crash, corpus, filter, singles, synth. `plugins` gives
+// the stages that use labelers access to plugin labelers (may be null).
+void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins = nullptr);
+void RegisterSincExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
 
 // Runs `executor` on the task with its thread budget, catching exceptions.
 TaskReport RunTask(StageExecutor& executor, TaskContext& ctx);

@@ -434,11 +434,11 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
 }  // namespace
 
 Status RunWorker(const WorkerOptions& options, std::atomic<bool>* stop, bool handle_signals) {
-  ExecutorRegistry registry;
-  RegisterBuiltinExecutors(&registry);
   PluginHost plugins;
   for (const std::string& dir : options.plugin_dirs) plugins.LoadDirectory(dir);
   for (const std::string& dir : DefaultPluginDirs()) plugins.LoadDirectory(dir);
+  ExecutorRegistry registry;
+  RegisterBuiltinExecutors(&registry, &plugins);
   plugins.RegisterExecutors(&registry);
   Metrics metrics;
   std::unique_ptr<prometheus::Exposer> exposer;

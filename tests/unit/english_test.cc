@@ -16,6 +16,14 @@ TEST(Gerund, EnglishSpellingRules) {
   for (const auto& [verb, gerund] : cases) EXPECT_EQ(Gerund(verb), gerund) << verb;
 }
 
+TEST(Gerund, VerbsEndingInIngAreNotGerundsYet) {
+  EXPECT_EQ(Gerund("swing"), "swinging");
+  EXPECT_EQ(Gerund("bring"), "bringing");
+  EXPECT_EQ(Gerund("sing"), "singing");
+  EXPECT_EQ(Gerund("walking"), "walking");
+  EXPECT_EQ(Gerund("lying"), "lying");
+}
+
 TEST(Gerund, AppliesToTheFirstWordOfAPhrase) {
   EXPECT_EQ(GerundPhrase("walk forward"), "walking forward");
   EXPECT_EQ(GerundPhrase("wave with the right hand"), "waving with the right hand");

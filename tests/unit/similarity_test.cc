@@ -13,7 +13,7 @@
 #include "motionpipe/motion/motion.h"
 #include "motionpipe/similarity/filter.h"
 #include "motionpipe/similarity/similarity.h"
-#include "similarity/kernels.h"
+#include "simd/kernels.h"
 
 namespace motionpipe::similarity {
 namespace {
@@ -73,7 +73,7 @@ TEST(Similarity, RawSimilarityMatchesTheDefinition) {
     }
     // Both builds of the kernel agree.
     std::vector<double> rot_g(rot.size()), loc_g(loc.size());
-    generic::RawSimilarityKernel(x.data(), tx, m.data(), tm, window, rot_g.data(), loc_g.data());
+    simd::generic::RawSimilarityKernel(x.data(), tx, m.data(), tm, window, rot_g.data(), loc_g.data());
     for (size_t i = 0; i < rot.size(); ++i) {
       EXPECT_NEAR(rot[i], rot_g[i], 1e-7);
       EXPECT_NEAR(loc[i], loc_g[i], 1e-7);
@@ -162,9 +162,9 @@ TEST(Similarity, RotationKernelMatchesRodrigues) {
   for (bool avx : {true, false}) {
     std::vector<float> planes(static_cast<size_t>(9 * n));
     if (avx && __builtin_cpu_supports("avx2")) {
-      avx2::AxisAngleToMatrices(x.data(), y.data(), z.data(), n, planes.data(), n);
+      simd::avx2::AxisAngleToMatrices(x.data(), y.data(), z.data(), n, planes.data(), n, 3);
     } else {
-      generic::AxisAngleToMatrices(x.data(), y.data(), z.data(), n, planes.data(), n);
+      simd::generic::AxisAngleToMatrices(x.data(), y.data(), z.data(), n, planes.data(), n, 3);
     }
     for (int64_t r = 0; r < n; ++r) {
       const Mat3 want = AxisAngleToMatrix({x[static_cast<size_t>(r)], y[static_cast<size_t>(r)], z[static_cast<size_t>(r)]});
@@ -179,8 +179,8 @@ TEST(Similarity, TransposeMatchesNaive) {
   for (const auto& [rows, cols] : std::vector<std::pair<int64_t, int64_t>>{{8, 8}, {21, 300}, {66, 13}, {5, 3}, {17, 9}}) {
     const auto src = RandomFloats(static_cast<size_t>(rows * (cols + 3)), 7);
     std::vector<float> got(static_cast<size_t>(cols * (rows + 5)), -1.f), generic_out = got;
-    avx2::Transpose(src.data(), cols + 3, rows, cols, got.data(), rows + 5);
-    generic::Transpose(src.data(), cols + 3, rows, cols, generic_out.data(), rows + 5);
+    simd::avx2::Transpose(src.data(), cols + 3, rows, cols, got.data(), rows + 5);
+    simd::generic::Transpose(src.data(), cols + 3, rows, cols, generic_out.data(), rows + 5);
     for (int64_t r = 0; r < rows; ++r) {
       for (int64_t c = 0; c < cols; ++c) {
         ASSERT_EQ(got[static_cast<size_t>(c * (rows + 5) + r)], src[static_cast<size_t>(r * (cols + 3) + c)]) << rows << "x" << cols;

@@ -122,6 +122,14 @@ TEST(Motion, ResampleByIndexFollowsNumpyArange) {
   EXPECT_EQ(odd.num_frames(), 30);  // len(np.arange(0, 100, 10/3))
 }
 
+TEST(Motion, RatesThatAgreeToRoundingKeepEveryFrame) {
+  // A BVH's "Frame Time: 0.03333333" is 30.0000003 fps: resampling to 30 must keep all 249 frames.
+  Motion m = Motion::Rest(249, 1.0 / 0.03333333, 0.9);
+  EXPECT_EQ(Resample(m, 30).num_frames(), 249);
+  m.fps = 120.0000012;
+  EXPECT_EQ(Resample(m, 30).num_frames(), 63);  // frames 0, 4, ..., 248
+}
+
 TEST(Motion, ResampleInterpolateIsSmoothAndExactAtSamples) {
   const Motion motion = testing::SmoothMotion(61, 5, 30);
   const Motion up = Resample(motion, 60, ResampleMethod::kInterpolate);

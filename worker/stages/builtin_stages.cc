@@ -199,7 +199,7 @@ class FilterStage : public StageExecutor {
 
 }  // namespace
 
-void RegisterBuiltinExecutors(ExecutorRegistry* registry) {
+void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins) {
   registry->Register("noop", std::make_unique<NoopStage>());
   registry->Register("sleep", std::make_unique<SleepStage>());
   registry->Register("test.write", std::make_unique<WriteStage>());
@@ -207,6 +207,7 @@ void RegisterBuiltinExecutors(ExecutorRegistry* registry) {
   registry->Register("test.crash", std::make_unique<CrashStage>());
   registry->Register("corpus", std::make_unique<CorpusStage>());
   registry->Register("filter", std::make_unique<FilterStage>());
+  RegisterSincExecutors(registry, plugins);
 }
 
 }  // namespace motionpipe::worker

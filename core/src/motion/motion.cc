@@ -115,14 +115,16 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end) {
 
 Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) {
   const int64_t frames = motion.num_frames();
-  if (frames == 0 || target_fps <= 0 || std::abs(target_fps - motion.fps) < 1e-9) {
+  // Rates that agree to 10 ppm are the same rate: a BVH stores 30 fps as "Frame Time: 0.03333333",
+  // i.e. 30.0000003 fps, which must not drop a frame.
+  if (frames == 0 || target_fps <= 0 || std::abs(target_fps - motion.fps) <= 1e-5 * target_fps) {
     Motion same = motion;
     if (target_fps > 0) same.fps = target_fps;
     return same;
   }
   const double step = motion.fps / target_fps;  // source frames per output frame
   // Output frames cover the same duration: the last output frame maps inside the source.
-  const int64_t out_frames = std::max<int64_t>(1, static_cast<int64_t>(std::floor((frames - 1) / step + 1e-9)) + 1);
+  const int64_t out_frames = std::max<int64_t>(1, static_cast<int64_t>(std::floor((frames - 1) / step + 1e-6)) + 1);
   Motion out;
   out.fps = target_fps;
   out.poses.resize(static_cast<size_t>(out_frames) * kNumJoints * 3);

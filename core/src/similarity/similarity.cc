@@ -4,66 +4,15 @@
 #include <cmath>
 #include <limits>
 
-#include "kernels.h"
+#include "../simd/simd.h"
 #include "motionpipe/skeleton/skeleton.h"
 
 namespace motionpipe::similarity {
 
+static_assert(kFrameStride == simd::kFrameStride && kLocOffset == simd::kLocOffset && kRotDims == simd::kRotDims &&
+              kLocDims == simd::kLocDims, "the kernels and the filter must agree on the frame layout");
+
 namespace {
-
-bool HasAvx2() {
-#if defined(__x86_64__) || defined(__i386__)
-  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  return has;
-#else
-  return false;
-#endif
-}
-
-void Matrices(const float* ax, const float* ay, const float* az, int64_t n, float* out, int64_t plane_stride) {
-  if (HasAvx2()) {
-    avx2::AxisAngleToMatrices(ax, ay, az, n, out, plane_stride);
-  } else {
-    generic::AxisAngleToMatrices(ax, ay, az, n, out, plane_stride);
-  }
-}
-
-void ForwardKinematics(const float* local, int64_t frames, const int* parents, const float* offsets, float* global,
-                       float* positions) {
-  if (HasAvx2()) {
-    avx2::ForwardKinematicsPlanes(local, frames, parents, offsets, global, positions);
-  } else {
-    generic::ForwardKinematicsPlanes(local, frames, parents, offsets, global, positions);
-  }
-}
-
-void TransposeBlock(const float* src, int64_t src_stride, int64_t rows, int64_t cols, float* dst, int64_t dst_stride) {
-  if (HasAvx2()) {
-    avx2::Transpose(src, src_stride, rows, cols, dst, dst_stride);
-  } else {
-    generic::Transpose(src, src_stride, rows, cols, dst, dst_stride);
-  }
-}
-
-// The template skeleton as the FK kernel wants it.
-struct SkeletonArrays {
-  int parents[kNumJoints];
-  float offsets[3 * kNumJoints];
-  SkeletonArrays() {
-    const Skeleton& skeleton = Skeleton::Smpl22();
-    for (int j = 0; j < kNumJoints; ++j) {
-      parents[j] = std::max(0, skeleton.parents()[static_cast<size_t>(j)]);
-      const Vec3& o = skeleton.rest_offsets()[static_cast<size_t>(j)];
-      offsets[3 * j] = static_cast<float>(o.x);
-      offsets[3 * j + 1] = static_cast<float>(o.y);
-      offsets[3 * j + 2] = static_cast<float>(o.z);
-    }
-  }
-};
-
-bool AllFinite(const float* values, int64_t n) {
-  return HasAvx2() ? avx2::AllFinite(values, n) : generic::AllFinite(values, n);
-}
 
 // Index of the first non-finite value (the slow path, once something is known to be wrong).
 int64_t FirstNonFinite(const float* values, int64_t n) {
@@ -97,7 +46,7 @@ bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions&
                          Array{m.trans, m.frames * 3, 3, " translation"},
                          Array{m.positions, m.positions ? m.frames * m.position_joints * 3 : 0, std::max(1, m.position_joints * 3),
                                " joint positions"}}) {
-    if (a.count == 0 || AllFinite(a.values, a.count)) continue;
+    if (a.count == 0 || simd::AllFinite(a.values, a.count)) continue;
     *reason = DropReason::kNonFinite;
     *detail = who + a.what + " hold NaN/Inf at frame " + std::to_string(FirstNonFinite(a.values, a.count) / a.per_frame);
     return false;
@@ -265,16 +214,16 @@ void BranchFeatures(const MotionView& motion, bool use_stored, std::vector<float
   float* local = axis + 3 * n;          // [k n + j T + f]
   float* global = local + 9 * n;
   float* positions = global + 9 * n;    // [(3 j + a) T + f]
-  TransposeBlock(motion.poses, motion.joints * 3, frames, 3 * kNumJoints, axis, frames);
+  simd::Transpose(motion.poses, motion.joints * 3, frames, 3 * kNumJoints, axis, frames);
   for (int j = 0; j < kNumJoints; ++j) {
     const float* a = axis + 3 * j * frames;
     // Nine output planes of this joint: the kernel writes element k at out + k * n.
-    Matrices(a, a + frames, a + 2 * frames, frames, local + j * frames, n);
+    simd::AxisAngleToMatrices(a, a + frames, a + 2 * frames, frames, local + j * frames, n);
   }
   // Rotation branch: 6D (first two rows) of joints 1..21, element-major within the frame (entry k of
   // joints 1..21 at [21 k, 21 k + 21)); the L1 distance does not depend on the order.
   for (int k = 0; k < 6; ++k) {
-    TransposeBlock(local + k * n + frames, frames, kNumJoints - 1, frames, features + k * (kNumJoints - 1), kFrameStride);
+    simd::Transpose(local + k * n + frames, frames, kNumJoints - 1, frames, features + k * (kNumJoints - 1), kFrameStride);
   }
   for (int64_t f = 0; f < frames; ++f) {
     float* row = features + f * kFrameStride;
@@ -293,18 +242,14 @@ void BranchFeatures(const MotionView& motion, bool use_stored, std::vector<float
     }
     return;
   }
-  static const SkeletonArrays skeleton;
-  ForwardKinematics(local, frames, skeleton.parents, skeleton.offsets, global, positions);
-  TransposeBlock(positions, frames, 3 * kNumJoints, frames, features + kLocOffset, kFrameStride);
+  const simd::SkeletonArrays& skeleton = simd::TemplateSkeleton();
+  simd::ForwardKinematics(local, frames, skeleton.parents, skeleton.offsets, global, positions);
+  simd::Transpose(positions, frames, 3 * kNumJoints, frames, features + kLocOffset, kFrameStride);
 }
 
 void RawSimilarity(const float* source, int64_t source_frames, const float* target, int64_t target_frames, int window,
                    double* raw_rot, double* raw_loc) {
-  if (HasAvx2()) {
-    avx2::RawSimilarityKernel(source, source_frames, target, target_frames, window, raw_rot, raw_loc);
-  } else {
-    generic::RawSimilarityKernel(source, source_frames, target, target_frames, window, raw_rot, raw_loc);
-  }
+  simd::RawSimilarity(source, source_frames, target, target_frames, window, raw_rot, raw_loc);
 }
 
 std::vector<double> MovingAverage(const std::vector<double>& x, int m) {

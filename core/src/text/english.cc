@@ -48,7 +48,11 @@ std::string Gerund(const std::string& verb) {
   if (verb.empty()) return verb;
   std::string lower;
   for (char c : verb) lower.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
-  if (lower.size() > 3 && lower.compare(lower.size() - 3, 3, "ing") == 0) return verb;  // already a gerund
+  // Already a gerund: "-ing" after a stem with a vowel ("walking"), unlike "swing", "bring", "sing".
+  if (lower.size() > 3 && lower.compare(lower.size() - 3, 3, "ing") == 0 &&
+      lower.find_first_of("aeiouy") < lower.size() - 3) {
+    return verb;
+  }
   if (const auto it = Irregular().find(lower); it != Irregular().end()) {
     std::string out(it->second);
     if (std::isupper(static_cast<unsigned char>(verb[0]))) out[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(out[0])));

@@ -18,6 +18,18 @@ constexpr double kTemosCanonicalHeading = -kPi / 2;
 
 FeatureMatrix EncodeTemos135(const Motion& motion, double canonical_heading = kTemosCanonicalHeading);
 
+// The same features in float32 through the SIMD kernels: the synth stage's path (about 20x faster).
+// poses [frames, 22, 3], trans [frames, 3]; writes out[frames * 135]. Agrees with EncodeTemos135 to
+// about 1e-6.
+void EncodeTemos135Fast(const float* poses, const float* trans, int64_t frames, float* out,
+                        double canonical_heading = kTemosCanonicalHeading);
+
+// The same, with every joint's rotations read from its own motion: joint j of frame f is at
+// joint_poses[j][f * 66 + 3 j .. + 3] (so a body-part composition is featurised without building the
+// composed motion first). `trans` [frames, 3] comes with the global orientation.
+void EncodeTemos135FastJoints(const float* const* joint_poses, const float* trans, int64_t frames, float* out,
+                              double canonical_heading = kTemosCanonicalHeading);
+
 // Exact inverse given the original anchor (heading and xy of the first frame; z comes from the
 // features). With a default anchor the motion starts at the origin facing `canonical_heading`.
 Motion DecodeTemos135(const FeatureMatrix& features, const MotionAnchor& anchor, double fps,
