@@ -239,6 +239,15 @@ KindRegistry KindRegistry::WithBuiltins() {
     auto options = similarity::OptionsFromJson(p, path + ".params", {"triplets", "input"});
     if (!options.ok()) errors->push_back(options.status().message());
   });
+  // Training: one task per rank; world_size > 1 makes a gang that starts together on distinct workers
+  // and restarts together from the last checkpoint when a rank fails.
+  registry.Add("train", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = std::max(1, stage->world_size);
+    stage->reduce = false;
+    const auto& p = stage->params;
+    if (!p.contains("model") || !p["model"].is_string()) errors->push_back(path + ".params.model: the model plugin's name is required (e.g. temos_sinc)");
+    if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;  // training runs long
+  });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
   registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
     stage->shards = 1;
@@ -396,6 +405,10 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
           errors.push_back(path + ".kind: unknown kind '" + stage.kind + "' (known: " + known + "; plugins add more)");
         } else {
           (*planner)(&stage, path, &errors);
+          if (stage.world_size > 1) {  // a gang: one task per rank, no reduce
+            stage.shards = stage.world_size;
+            stage.reduce = false;
+          }
         }
       }
       index[name] = spec.stages.size();

@@ -229,10 +229,12 @@ wire::TaskSpec Scheduler::MakeSpec(const Job& job, size_t stage_index, int task,
   }
   const Task& state = stage.tasks[static_cast<size_t>(task)];
   spec.set_attempt(state.errors + state.lost);
+  spec.set_world_size(stage.spec.world_size);
+  spec.set_state_dir(job.output_dir + "/" + stage.spec.name + "/state");
   return spec;
 }
 
-void Scheduler::Assign(Worker* worker, Job* job, size_t stage_index, int task_index) {
+void Scheduler::Assign(Worker* worker, Job* job, size_t stage_index, int task_index, const std::string& rendezvous) {
   Stage& stage = job->stages[stage_index];
   Task& task = stage.tasks[static_cast<size_t>(task_index)];
   const int64_t id = next_attempt_++;
@@ -247,11 +249,77 @@ void Scheduler::Assign(Worker* worker, Job* job, size_t stage_index, int task_in
   out.assign.emplace();
   out.assign->set_attempt_id(id);
   *out.assign->mutable_task() = MakeSpec(*job, stage_index, task_index, id);
+  out.assign->mutable_task()->set_rendezvous(rendezvous);
   out.assign->set_lease_ms(static_cast<int64_t>(stage.spec.timeout_seconds * 1000));
   outgoing_.push_back(std::move(out));
 }
 
+void Scheduler::DispatchGangs() {
+  const double now = clock_->Now();
+  for (auto& [id, job] : jobs_) {
+    if (job.state != "running") continue;
+    for (size_t s = 0; s < job.stages.size(); ++s) {
+      Stage& stage = job.stages[s];
+      if (!stage.gang() || !StageRunnable(job, s) || stage.running > 0) continue;
+      // Every rank must be pending, idle and past its backoff.
+      bool ready = stage.committed == 0;
+      for (const Task& task : stage.tasks) {
+        ready = ready && task.state == TaskState::kPending && task.live_attempts == 0 && task.not_before <= now;
+      }
+      if (!ready) continue;
+      std::vector<Worker*> free;
+      for (auto& [identity, worker] : workers_) {
+        const int credit = std::max(1, worker.ready.credit());
+        if (!worker.draining && worker.kinds.count(stage.spec.kind) && static_cast<int>(worker.attempts.size()) < credit) {
+          free.push_back(&worker);
+        }
+      }
+      if (static_cast<int>(free.size()) < stage.spec.world_size) continue;
+      // Idle workers first, so that ranks do not share a busy machine's threads.
+      std::stable_sort(free.begin(), free.end(), [](const Worker* a, const Worker* b) { return a->attempts.size() < b->attempts.size(); });
+      const std::string rendezvous = job.output_dir + "/" + stage.spec.name + "/.rendezvous/gang-" + std::to_string(next_attempt_);
+      std::error_code ec;
+      fs::create_directories(fs::path(rendezvous).parent_path(), ec);
+      for (int rank = 0; rank < stage.spec.world_size; ++rank) Assign(free[static_cast<size_t>(rank)], &job, s, rank, rendezvous);
+      MP_LOG(kInfo, "coordinator") << "job " << job.id << " stage '" << stage.spec.name << "': gang of " << stage.spec.world_size
+                                   << " ranks started";
+    }
+  }
+}
+
+void Scheduler::StopGang(Job* job, size_t stage_index, int failed_rank, const std::string& why) {
+  Stage& stage = job->stages[stage_index];
+  std::vector<int64_t> siblings;
+  for (const auto& [id, attempt] : attempts_) {
+    if (attempt.job == job->id && attempt.stage == stage_index && attempt.task != failed_rank && !attempt.expired) siblings.push_back(id);
+  }
+  for (const int64_t id : siblings) {
+    const Attempt attempt = attempts_[id];
+    Outgoing out;
+    out.identity = attempt.identity;
+    out.cancel.emplace();
+    out.cancel->set_attempt_id(id);
+    out.cancel->set_reason("gang stopped: " + why);
+    outgoing_.push_back(std::move(out));
+    ReleaseAttempt(id);
+    std::error_code ec;
+    fs::remove_all(StagingDir(*job, stage, attempt.task, id), ec);
+  }
+  if (stage.committed > 0 && job->state == "running") {
+    FinishJob(job, "failed", "stage '" + stage.spec.name + "': rank " + std::to_string(failed_rank) + " failed after other ranks finished: " + why);
+    return;
+  }
+  for (int rank = 0; rank < static_cast<int>(stage.tasks.size()); ++rank) {
+    if (rank != failed_rank) Enqueue(job, stage_index, rank);
+  }
+  if (!siblings.empty()) {
+    MP_LOG(kWarn, "coordinator") << "job " << job->id << " stage '" << stage.spec.name << "': gang stopped (" << why
+                                 << "); it restarts from its last checkpoint when " << stage.spec.world_size << " workers are free";
+  }
+}
+
 void Scheduler::Dispatch() {
+  DispatchGangs();
   for (auto& [identity, worker] : workers_) {
     const int credit = std::max(1, worker.ready.credit());
     while (!worker.draining && static_cast<int>(worker.attempts.size()) < credit) {
@@ -260,7 +328,7 @@ void Scheduler::Dispatch() {
         if (job.state != "running") continue;
         for (size_t s = 0; s < job.stages.size() && !assigned; ++s) {
           Stage& stage = job.stages[s];
-          if (stage.ready.empty() || !worker.kinds.count(stage.spec.kind) || !StageRunnable(job, s)) continue;
+          if (stage.gang() || stage.ready.empty() || !worker.kinds.count(stage.spec.kind) || !StageRunnable(job, s)) continue;
           if (const auto task = TakeReady(&job, s)) {
             Assign(&worker, &job, s, *task);
             assigned = true;
@@ -355,6 +423,7 @@ void Scheduler::TaskLost(Job* job, size_t stage_index, int task_index, const std
   }
   journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, message);
   Enqueue(job, stage_index, task_index);
+  if (stage.gang()) StopGang(job, stage_index, task_index, "rank " + std::to_string(task_index) + " lost: " + message);
 }
 
 void Scheduler::TaskError(Job* job, size_t stage_index, int task_index, const std::string& message, bool bad_input) {
@@ -379,6 +448,7 @@ void Scheduler::TaskError(Job* job, size_t stage_index, int task_index, const st
   task.not_before = clock_->Now() + stage.spec.retry_backoff_seconds * std::pow(2.0, task.errors - 1);
   journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, message);
   Enqueue(job, stage_index, task_index);
+  if (stage.gang()) StopGang(job, stage_index, task_index, "rank " + std::to_string(task_index) + ": " + message);
 }
 
 void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attempt& attempt, const wire::TaskResult& result) {

@@ -142,6 +142,7 @@ class Scheduler {
     std::deque<double> commit_times;  // recent commits, for throughput and ETA
     std::vector<std::string> failures;
     bool started = false;
+    bool gang() const { return spec.world_size > 1; }
   };
   struct Job {
     int64_t id;
@@ -168,7 +169,10 @@ class Scheduler {
   bool InputsDone(const Job& job, const Stage& stage) const;
   void Enqueue(Job* job, size_t stage, int task);
   std::optional<int> TakeReady(Job* job, size_t stage);
-  void Assign(Worker* worker, Job* job, size_t stage, int task);
+  void Assign(Worker* worker, Job* job, size_t stage, int task, const std::string& rendezvous = "");
+  // Gangs: all ranks start together on distinct workers; a failing rank stops its gang.
+  void DispatchGangs();
+  void StopGang(Job* job, size_t stage, int failed_rank, const std::string& why);
   void Commit(Job* job, size_t stage, int task, const Attempt& attempt, const wire::TaskResult& result);
   void TaskError(Job* job, size_t stage, int task, const std::string& message, bool bad_input);
   void TaskLost(Job* job, size_t stage, int task, const std::string& message);

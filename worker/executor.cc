@@ -95,7 +95,10 @@ std::string TaskSpecToJson(const wire::TaskSpec& spec) {
                         {"shard_dirs", std::vector<std::string>(spec.shard_dirs().begin(), spec.shard_dirs().end())},
                         {"seed", spec.seed()},
                         {"threads", spec.threads()},
-                        {"attempt", spec.attempt()}}
+                        {"attempt", spec.attempt()},
+                        {"world_size", std::max(1, spec.world_size())},
+                        {"rendezvous", spec.rendezvous()},
+                        {"state_dir", spec.state_dir()}}
       .dump();
 }
 

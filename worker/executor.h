@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include <atomic>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -33,6 +34,8 @@ struct TaskContext {
   nlohmann::json params;
   const std::atomic<int>* cancel = nullptr;
   int threads = 1;
+  // Set by the worker: live metric values (exposed on /metrics while the task runs).
+  std::function<void(const std::string&, double)> on_metric;
 
   const std::string& output_dir() const { return spec.output_dir(); }
   bool cancelled() const { return cancel && cancel->load() != 0; }

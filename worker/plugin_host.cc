@@ -19,7 +19,8 @@ namespace {
 // Adapts a plugin's C stage function to the executor interface.
 class PluginStage : public StageExecutor {
  public:
-  PluginStage(const mp_stage_kind* kind, std::string plugin) : kind_(kind), plugin_(std::move(plugin)) {}
+  PluginStage(const mp_stage_kind* kind, std::string plugin, const PluginHost* host)
+      : kind_(kind), plugin_(std::move(plugin)), plugins_(host) {}
   std::string Description() const override {
     return std::string(kind_->description ? kind_->description : "") + " (plugin " + plugin_ + ")";
   }
@@ -30,12 +31,22 @@ class PluginStage : public StageExecutor {
     struct Host {
       TaskReport* report;
       std::string plugin;
-    } host{&report, plugin_};
+      const PluginHost* plugins;
+      const TaskContext* ctx;
+    } host{&report, plugin_, plugins_, &ctx};
     mp_task_io io{json.c_str(), &cancel_flag, &host,
-                  [](void* h, const char* name, double value) { static_cast<Host*>(h)->report->metrics[name] = value; },
+                  [](void* h, const char* name, double value) {
+                    Host* self = static_cast<Host*>(h);
+                    self->report->metrics[name] = value;
+                    if (self->ctx->on_metric) self->ctx->on_metric(name, value);
+                  },
                   [](void* h, int level, const char* message) {
                     const LogLevel l = level <= 0 ? LogLevel::kDebug : level == 1 ? LogLevel::kInfo : level == 2 ? LogLevel::kWarn : LogLevel::kError;
                     LogLine(l, "plugin " + static_cast<Host*>(h)->plugin, message);
+                  },
+                  [](void* h, const char* kind, const char* name) -> const mp_object_factory* {
+                    const PluginHost* plugins = static_cast<Host*>(h)->plugins;
+                    return plugins ? plugins->FindFactory(kind ? kind : "", name ? name : "") : nullptr;
                   }};
     // The plugin reads a plain int; mirror the atomic cancel flag into it from a watcher.
     std::atomic<bool> done{false};
@@ -66,6 +77,7 @@ class PluginStage : public StageExecutor {
  private:
   const mp_stage_kind* kind_;
   std::string plugin_;
+  const PluginHost* plugins_;
 };
 
 }  // namespace
@@ -137,7 +149,7 @@ void PluginHost::LoadDirectory(const std::string& dir) {
 void PluginHost::RegisterExecutors(ExecutorRegistry* registry) const {
   for (const LoadedPlugin& loaded : plugins_) {
     for (uint32_t k = 0; k < loaded.plugin->num_stage_kinds; ++k) {
-      registry->Register(loaded.plugin->stage_kinds[k].kind, std::make_unique<PluginStage>(&loaded.plugin->stage_kinds[k], loaded.name));
+      registry->Register(loaded.plugin->stage_kinds[k].kind, std::make_unique<PluginStage>(&loaded.plugin->stage_kinds[k], loaded.name, this));
     }
   }
 }

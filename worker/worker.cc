@@ -69,6 +69,12 @@ struct Metrics {
                                                          .Name("motionpipe_worker_messages_dropped_total")
                                                          .Help("Malformed or unexpected messages dropped, by reason")
                                                          .Register(*registry);
+  // Live values a running task reports (training losses, learning rate, steps): one series per
+  // stage kind and metric name, both bounded sets.
+  prometheus::Family<prometheus::Gauge>& task_values = prometheus::BuildGauge()
+                                                           .Name("motionpipe_worker_task_value")
+                                                           .Help("The latest value of a metric the running task reports")
+                                                           .Register(*registry);
 };
 
 struct Job {
@@ -157,6 +163,9 @@ void WorkerProcess::ExecutorLoop() {
       }
       ctx.cancel = job.cancel.get();
       ctx.threads = job.spec.threads() > 0 ? job.spec.threads() : options_.threads;
+      ctx.on_metric = [this, kind = job.spec.kind()](const std::string& name, double value) {
+        metrics_->task_values.Add({{"kind", kind}, {"name", name}}).Set(value);
+      };
       TaskReport report = RunTask(*executor, ctx);
       result.set_outcome(report.outcome == Outcome::kOk       ? wire::TaskResult::OK
                          : report.outcome == Outcome::kBadInput ? wire::TaskResult::BAD_INPUT

@@ -24,6 +24,10 @@ struct Task {
   void Log(int level, const std::string& message) const {
     if (io->log) io->log(io->host, level, message.c_str());
   }
+  // An object factory of any loaded plugin (ABI 2), or nullptr.
+  const mp_object_factory* Factory(const std::string& kind, const std::string& name) const {
+    return io->find_factory ? io->find_factory(io->host, kind.c_str(), name.c_str()) : nullptr;
+  }
 };
 
 // Thrown by a stage function for input that can never succeed (the task fails at once).

@@ -1,0 +1,41 @@
+// The torch-free C++ interface of trained generators and editors (factories of kind "generator"),
+// so that the CLI (`motionpipe generate`, `motionpipe edit`) and evaluation code run models without
+// linking LibTorch. create() receives {"checkpoint": DIR, ...}: a directory written by the train
+// stage (model.pt, model.json and the model's extra files).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+#include "motionpipe/motion/motion.h"
+
+namespace motionpipe::plugin {
+
+struct GenerateRequest {
+  std::vector<std::string> texts;  // one text, or the actions of a composition (compositing baselines)
+  double seconds = 4;
+  double fps = 30;
+  uint64_t seed = 1;
+  const Motion* source = nullptr;  // editing models: the motion to edit
+  int steps = 0;                   // samplers with a step count (0 = the model's default)
+  std::string sampler;             // e.g. "ddpm", "ddim" ("" = default)
+};
+
+class Generator {
+ public:
+  virtual ~Generator() = default;
+  virtual std::string Name() const = 0;
+  virtual Result<Motion> Generate(const GenerateRequest& request) = 0;
+  // Embeddings in the model's latent space (evaluators): of motions and of texts.
+  virtual Result<std::vector<std::vector<float>>> EncodeMotions(const std::vector<Motion>& motions) {
+    (void)motions;
+    return Unimplemented(Name() + " does not encode motions");
+  }
+  virtual Result<std::vector<std::vector<float>>> EncodeTexts(const std::vector<std::string>& texts) {
+    (void)texts;
+    return Unimplemented(Name() + " does not encode texts");
+  }
+};
+
+}  // namespace motionpipe::plugin

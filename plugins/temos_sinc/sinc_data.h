@@ -1,0 +1,65 @@
+// SINC's training data (paper sec. 3.2-3.3): real singles, real pairs and synthetic pairs composed on
+// the fly, from the spans table of the `singles` stage. Each example's randomness (whether a single is
+// composed, its partner, the text pattern) comes from the batch seed and the example index, so ranks
+// and resumed runs see the same examples.
+//
+// params.data: {spans: PATH (default: an input stage's spans.npz), split: train, singles: true,
+// real_pairs: true, synthetic_p: 0.5 (probability that a real single is composed with a partner),
+// parts: labels | random, crop: first | centre, max_frames: 200, augment_texts: true}
+#pragma once
+
+#include <torch/torch.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "../api/model.hpp"
+#include "motionpipe/sinc/spans.h"
+#include "motionpipe/sinc/synth.h"
+
+namespace motionpipe::temos {
+
+struct SincDataOptions {
+  std::string spans;
+  std::string split = "train";
+  bool singles = true;
+  bool real_pairs = true;
+  double synthetic_p = 0.5;
+  sinc::PartSource parts = sinc::PartSource::kLabels;
+  sinc::CropMode crop = sinc::CropMode::kFirst;
+  int64_t max_frames = 200;
+  bool augment_texts = true;
+  static SincDataOptions FromContext(const plugin::DataContext& context);
+};
+
+// One example before batching.
+struct Example {
+  std::vector<float> features;       // [frames, 135], not normalised
+  int64_t frames = 0;
+  std::vector<std::string> actions;  // the action texts (1 or 2)
+  std::string text;                  // the augmented text of the whole example
+};
+
+class SincDataset : public plugin::Dataset {
+ public:
+  SincDataset(std::shared_ptr<const sinc::SpanTable> table, const SincDataOptions& options);
+  int64_t size() const override { return static_cast<int64_t>(items_.size()); }
+  Example Make(int64_t index, uint64_t seed) const;
+  // Features [T, N, 135] normalised with mean/std, padding [N, T], texts.
+  plugin::Batch Get(const std::vector<int64_t>& indices, uint64_t seed) override;
+  void SetStats(torch::Tensor mean, torch::Tensor std) { mean_ = std::move(mean), std_ = std::move(std); }
+  // Per-feature mean and std over the items' real motions (computed once, before training).
+  std::pair<torch::Tensor, torch::Tensor> ComputeStats() const;
+  // Every text an example can carry (for the tokenizer).
+  std::vector<std::string> AllTexts() const;
+
+ private:
+  std::shared_ptr<const sinc::SpanTable> table_;
+  SincDataOptions options_;
+  std::vector<int32_t> items_;
+  std::unique_ptr<sinc::PairSampler> sampler_;
+  torch::Tensor mean_, std_;
+};
+
+}  // namespace motionpipe::temos

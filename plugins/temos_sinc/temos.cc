@@ -1,0 +1,199 @@
+#include "temos.h"
+
+#include <cctype>
+#include <cmath>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace motionpipe::temos {
+
+namespace {
+
+using torch::indexing::Slice;
+
+torch::nn::TransformerEncoderLayerOptions EncoderLayer(const TemosOptions& o) {
+  return torch::nn::TransformerEncoderLayerOptions(o.latent, o.heads).dim_feedforward(o.ff).dropout(o.dropout).activation(torch::kGELU);
+}
+
+// Lexical near-duplicates: cosine of bag-of-words counts above `threshold` (TMR masks negatives whose
+// texts mean the same; without a sentence encoder offline, word overlap stands in).
+torch::Tensor NearDuplicates(const std::vector<std::vector<std::string>>& texts, double threshold) {
+  const auto n = static_cast<int64_t>(texts.size());
+  std::vector<std::map<std::string, double>> bags(static_cast<size_t>(n));
+  std::vector<double> norms(static_cast<size_t>(n), 0);
+  for (int64_t i = 0; i < n; ++i) {
+    std::string joined;
+    for (const auto& t : texts[static_cast<size_t>(i)]) joined += t + " ";
+    std::string word;
+    for (char c : joined + " ") {
+      if (std::isalnum(static_cast<unsigned char>(c))) {
+        word.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
+      } else if (!word.empty()) {
+        bags[static_cast<size_t>(i)][word] += 1;
+        word.clear();
+      }
+    }
+    for (const auto& [w, c] : bags[static_cast<size_t>(i)]) norms[static_cast<size_t>(i)] += c * c;
+    norms[static_cast<size_t>(i)] = std::sqrt(norms[static_cast<size_t>(i)]);
+  }
+  auto out = torch::zeros({n, n}, torch::kBool);
+  auto acc = out.accessor<bool, 2>();
+  for (int64_t i = 0; i < n; ++i) {
+    for (int64_t j = i + 1; j < n; ++j) {
+      double dot = 0;
+      for (const auto& [w, c] : bags[static_cast<size_t>(i)]) {
+        const auto it = bags[static_cast<size_t>(j)].find(w);
+        if (it != bags[static_cast<size_t>(j)].end()) dot += c * it->second;
+      }
+      const double denom = norms[static_cast<size_t>(i)] * norms[static_cast<size_t>(j)];
+      if (denom > 0 && dot / denom > threshold) acc[i][j] = acc[j][i] = true;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
+  TemosOptions o;
+  o.latent = j.value("latent", o.latent);
+  o.layers = j.value("layers", o.layers);
+  o.heads = j.value("heads", o.heads);
+  o.ff = j.value("ff", o.ff);
+  o.dropout = j.value("dropout", o.dropout);
+  o.kl_weight = j.value("kl_weight", o.kl_weight);
+  o.latent_weight = j.value("latent_weight", o.latent_weight);
+  o.contrastive = j.value("contrastive", o.contrastive);
+  o.temperature = j.value("temperature", o.temperature);
+  o.duplicate_threshold = j.value("duplicate_threshold", o.duplicate_threshold);
+  o.separate_texts = j.value("separate_texts", o.separate_texts);
+  nlohmann::json text = j.value("text_encoder", nlohmann::json::object());
+  if (!text.contains("dim")) text["dim"] = o.latent;
+  o.text = nn::TextEncoderOptions::FromJson(text);
+  if (o.latent % o.heads != 0) {
+    throw std::invalid_argument("latent (" + std::to_string(o.latent) + ") must be divisible by heads (" + std::to_string(o.heads) + ")");
+  }
+  return o;
+}
+
+nlohmann::json TemosOptions::ToJson() const {
+  return {{"latent", latent},       {"layers", layers},
+          {"heads", heads},         {"ff", ff},
+          {"dropout", dropout},     {"kl_weight", kl_weight},
+          {"latent_weight", latent_weight}, {"contrastive", contrastive},
+          {"temperature", temperature}, {"duplicate_threshold", duplicate_threshold},
+          {"separate_texts", separate_texts}, {"text_encoder", text.ToJson()}};
+}
+
+VaeEncoderImpl::VaeEncoderImpl(int64_t input_dim, const TemosOptions& o) : latent_(o.latent) {
+  project_ = register_module("project", torch::nn::Linear(input_dim, o.latent));
+  mu_token_ = register_parameter("mu_token", torch::randn({o.latent}) * 0.02);
+  logvar_token_ = register_parameter("logvar_token", torch::randn({o.latent}) * 0.02);
+  encoder_ = register_module("encoder", torch::nn::TransformerEncoder(torch::nn::TransformerEncoderOptions(EncoderLayer(o), o.layers)));
+}
+
+std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
+  const int64_t n = x.size(1), length = x.size(0);
+  auto h = project_->forward(x);
+  auto tokens = torch::stack({mu_token_, logvar_token_}).unsqueeze(1).expand({2, n, latent_});
+  h = torch::cat({tokens, h}, 0) + nn::PositionalEncoding(length + 2, latent_);
+  const auto mask = torch::cat({torch::zeros({n, 2}, torch::kBool), padding}, 1);
+  const auto out = encoder_->forward(h, {}, mask);
+  return {out[0], out[1]};
+}
+
+DecoderImpl::DecoderImpl(const TemosOptions& o) : latent_(o.latent) {
+  decoder_ = register_module(
+      "decoder", torch::nn::TransformerDecoder(torch::nn::TransformerDecoderOptions(
+                     torch::nn::TransformerDecoderLayerOptions(o.latent, o.heads).dim_feedforward(o.ff).dropout(o.dropout).activation(torch::kGELU),
+                     o.layers)));
+  out_ = register_module("out", torch::nn::Linear(o.latent, kFeatureDim));
+}
+
+torch::Tensor DecoderImpl::forward(const torch::Tensor& z, const torch::Tensor& padding) {
+  const int64_t n = z.size(0), length = padding.size(1);
+  const auto queries = nn::PositionalEncoding(length, latent_).expand({length, n, latent_});
+  const auto h = decoder_->forward(queries, z.unsqueeze(0), {}, {}, padding);
+  auto y = out_->forward(h);
+  return y.masked_fill(padding.transpose(0, 1).unsqueeze(2), 0.0);
+}
+
+TemosImpl::TemosImpl(const TemosOptions& o) : options_(o) {
+  text_encoder_ = register_module("text_encoder", nn::TextEncoder(o.text));
+  text_vae_ = register_module("text_vae", VaeEncoder(o.text.dim, o));
+  motion_vae_ = register_module("motion_vae", VaeEncoder(kFeatureDim, o));
+  decoder_ = register_module("decoder", Decoder(o));
+}
+
+Distribution TemosImpl::EncodeText(const std::vector<std::vector<std::string>>& texts, bool sample) {
+  nn::TextFeatures features;
+  if (options_.separate_texts) {
+    features = text_encoder_->ForwardJoined(texts);
+  } else {
+    std::vector<std::string> flat;
+    for (const auto& group : texts) {
+      std::string joined;
+      for (size_t k = 0; k < group.size(); ++k) joined += (k ? " while " : "") + group[k];
+      flat.push_back(joined);
+    }
+    features = text_encoder_->forward(flat);
+  }
+  auto [mu, logvar] = text_vae_->forward(features.tokens, features.padding);
+  auto z = sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu;
+  return {mu, logvar, z};
+}
+
+Distribution TemosImpl::EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding, bool sample) {
+  auto [mu, logvar] = motion_vae_->forward(features, padding);
+  auto z = sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu;
+  return {mu, logvar, z};
+}
+
+std::map<std::string, torch::Tensor> TemosImpl::Losses(const std::vector<std::vector<std::string>>& texts, const torch::Tensor& features,
+                                                       const torch::Tensor& padding) {
+  const Distribution t = EncodeText(texts, true);
+  const Distribution m = EncodeMotion(features, padding, true);
+  std::map<std::string, torch::Tensor> out;
+  out["recon_text"] = MaskedSmoothL1(Decode(t.z, padding), features, padding);
+  out["recon_motion"] = MaskedSmoothL1(Decode(m.z, padding), features, padding);
+  const auto zeros = torch::zeros_like(m.mu);
+  out["kl_text_motion"] = KlDivergence(t.mu, t.logvar, m.mu, m.logvar);
+  out["kl_motion_text"] = KlDivergence(m.mu, m.logvar, t.mu, t.logvar);
+  out["kl_text"] = KlDivergence(t.mu, t.logvar, zeros, zeros);
+  out["kl_motion"] = KlDivergence(m.mu, m.logvar, zeros, zeros);
+  out["latent"] = torch::smooth_l1_loss(t.z, m.z);
+  auto loss = out["recon_text"] + out["recon_motion"] +
+              options_.kl_weight * (out["kl_text_motion"] + out["kl_motion_text"] + out["kl_text"] + out["kl_motion"]) +
+              options_.latent_weight * out["latent"];
+  if (options_.contrastive > 0) {
+    out["contrastive"] = InfoNce(t.mu, m.mu, options_.temperature, NearDuplicates(texts, options_.duplicate_threshold));
+    loss = loss + options_.contrastive * out["contrastive"];
+  }
+  out["loss"] = loss;
+  return out;
+}
+
+torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding) {
+  const auto keep = padding.logical_not().transpose(0, 1).unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
+  const auto loss = torch::smooth_l1_loss(prediction, target, torch::Reduction::None) * keep;
+  return loss.sum() / (keep.sum() * prediction.size(2)).clamp_min(1.0);
+}
+
+torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p) {
+  // 0.5 * sum(logvar_p - logvar_q + (exp(logvar_q) + (mu_q - mu_p)^2) / exp(logvar_p) - 1)
+  const auto kl = 0.5 * (logvar_p - logvar_q + (torch::exp(logvar_q) + (mu_q - mu_p).pow(2)) / torch::exp(logvar_p) - 1.0);
+  return kl.sum(1).mean();
+}
+
+torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature, const torch::Tensor& duplicate) {
+  const auto an = torch::nn::functional::normalize(a, torch::nn::functional::NormalizeFuncOptions().dim(1));
+  const auto bn = torch::nn::functional::normalize(b, torch::nn::functional::NormalizeFuncOptions().dim(1));
+  auto logits = torch::mm(an, bn.t()) / temperature;
+  // Near-duplicates are not negatives (the diagonal is never masked).
+  logits = logits.masked_fill(duplicate, -1e9);
+  const auto target = torch::arange(a.size(0), torch::kInt64);
+  return 0.5 * (torch::nn::functional::cross_entropy(logits, target) + torch::nn::functional::cross_entropy(logits.t(), target));
+}
+
+}  // namespace motionpipe::temos

@@ -1,0 +1,378 @@
+// The `train` stage: trains any model plugin (factory kind "model") data-parallel over a gang of
+// ranks with torch's own c10d Gloo process group (rendezvous: a FileStore the coordinator names),
+// with AdamW, a warm-up + cosine schedule, gradient clipping, atomic checkpoints every K steps that a
+// restarted gang resumes from, and the loss curve in CSV and on the worker's /metrics.
+//
+// params: model (plugin model name), config (the model's config), data (the model's data config),
+//   steps, batch_size (global: split across ranks), lr, weight_decay, betas [b1, b2], warmup,
+//   schedule (cosine | constant), min_lr, clip_grad, checkpoint_every, keep_checkpoints, log_every,
+//   seed, gloo_host (the address other ranks reach this one on; default 127.0.0.1)
+//
+// Rank r of W takes every W-th example of each global batch, and the gradients are averaged over
+// the ranks (all-reduce of one flattened buffer), so W ranks take the same step as one rank on the
+// whole batch. Rank 0 writes the checkpoints (state_dir/ckpt-NNNNNNNN, then state_dir/latest) and, at
+// the end, the trained model into its output: model/ (model.pt, model.json, extras),
+// state_dict.pt (loadable by Python's torch.load) and losses.csv.
+#include <torch/csrc/distributed/c10d/FileStore.hpp>
+#include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
+#include <torch/torch.h>
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numeric>
+#include <random>
+#include <sstream>
+
+#include "../api/model.hpp"
+#include "../api/plugin.hpp"
+#include "../common/threads.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/base/random.h"
+
+namespace motionpipe::train {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using plugin::Task;
+
+struct Options {
+  std::string model;
+  json config, data;
+  int64_t steps = 1000, batch_size = 32, warmup = 100, checkpoint_every = 200, keep_checkpoints = 2, log_every = 10;
+  double lr = 3e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.999, min_lr = 0, clip_grad = 1.0;
+  std::string schedule = "cosine";
+  uint64_t seed = 1;
+  std::string gloo_host = "127.0.0.1";
+  static Options FromTask(const Task& task) {
+    const json& p = task.params();
+    Options o;
+    o.model = p.at("model").get<std::string>();
+    o.config = p.value("config", json::object());
+    o.data = p.value("data", json::object());
+    o.steps = p.value("steps", o.steps);
+    o.batch_size = p.value("batch_size", o.batch_size);
+    o.warmup = p.value("warmup", o.warmup);
+    o.checkpoint_every = p.value("checkpoint_every", o.checkpoint_every);
+    o.keep_checkpoints = p.value("keep_checkpoints", o.keep_checkpoints);
+    o.log_every = p.value("log_every", o.log_every);
+    o.lr = p.value("lr", o.lr);
+    o.weight_decay = p.value("weight_decay", o.weight_decay);
+    if (p.contains("betas")) {
+      o.beta1 = p["betas"].at(0).get<double>();
+      o.beta2 = p["betas"].at(1).get<double>();
+    }
+    o.min_lr = p.value("min_lr", o.min_lr);
+    o.clip_grad = p.value("clip_grad", o.clip_grad);
+    o.schedule = p.value("schedule", o.schedule);
+    o.seed = p.value("seed", task.spec.value("seed", uint64_t{1}));
+    o.gloo_host = p.value("gloo_host", o.gloo_host);
+    if (o.steps < 1 || o.batch_size < 1) throw plugin::BadInput("params.steps and params.batch_size must be positive");
+    if (o.schedule != "cosine" && o.schedule != "constant") throw plugin::BadInput("params.schedule must be cosine or constant");
+    return o;
+  }
+  json ToJson() const {
+    return {{"model", model}, {"steps", steps}, {"batch_size", batch_size}, {"warmup", warmup}, {"lr", lr},
+            {"weight_decay", weight_decay}, {"betas", {beta1, beta2}}, {"schedule", schedule}, {"min_lr", min_lr},
+            {"clip_grad", clip_grad}, {"checkpoint_every", checkpoint_every}, {"seed", seed}};
+  }
+};
+
+double LearningRate(const Options& o, int64_t step) {
+  if (o.warmup > 0 && step < o.warmup) return o.lr * static_cast<double>(step + 1) / static_cast<double>(o.warmup);
+  if (o.schedule == "constant") return o.lr;
+  const double progress = static_cast<double>(step - o.warmup) / static_cast<double>(std::max<int64_t>(1, o.steps - o.warmup));
+  return o.min_lr + 0.5 * (o.lr - o.min_lr) * (1 + std::cos(3.14159265358979323846 * std::min(1.0, progress)));
+}
+
+// The model through its plugin's factory (and its destructor through the same factory).
+struct ModelHandle {
+  const mp_object_factory* factory = nullptr;
+  plugin::Model* model = nullptr;
+  ~ModelHandle() {
+    if (model) factory->destroy(model);
+  }
+};
+
+void SaveModule(torch::nn::Module& module, const std::string& path) {
+  torch::serialize::OutputArchive archive;
+  module.save(archive);
+  archive.save_to(path + ".tmp");
+  fs::rename(path + ".tmp", path);
+}
+
+void LoadModule(torch::nn::Module& module, const std::string& path) {
+  torch::serialize::InputArchive archive;
+  archive.load_from(path);
+  module.load(archive);
+}
+
+// A state dict (parameters and buffers by name) that Python's torch.load reads.
+void ExportStateDict(torch::nn::Module& module, const std::string& path) {
+  c10::Dict<std::string, at::Tensor> dict;
+  for (const auto& item : module.named_parameters()) dict.insert(item.key(), item.value().detach().clone());
+  for (const auto& item : module.named_buffers()) dict.insert(item.key(), item.value().detach().clone());
+  const std::vector<char> bytes = torch::pickle_save(c10::IValue(dict));
+  const Status s = WriteFileAtomic(path, std::string(bytes.begin(), bytes.end()));
+  if (!s.ok()) throw std::runtime_error(s.message());
+}
+
+// Writes the model as a checkpoint directory others can run (generator factories read it).
+void WriteModelDir(plugin::Model& model, const Options& options, int64_t step, const std::string& dir) {
+  fs::create_directories(dir);
+  SaveModule(model.Module(), dir + "/model.pt");
+  model.SaveExtras(dir);
+  const json meta = {{"name", model.Name()}, {"config", model.Config()}, {"step", step}, {"trainer", options.ToJson()}};
+  const Status s = WriteFileAtomic(dir + "/model.json", meta.dump(1) + "\n");
+  if (!s.ok()) throw std::runtime_error(s.message());
+}
+
+struct Checkpoint {
+  int64_t step = 0;
+  std::string dir;
+};
+
+std::optional<Checkpoint> LatestCheckpoint(const std::string& state_dir) {
+  auto text = ReadFile(state_dir + "/latest");
+  if (!text.ok()) return std::nullopt;
+  std::string name = *text;
+  while (!name.empty() && (name.back() == '\n' || name.back() == ' ')) name.pop_back();
+  const std::string dir = state_dir + "/" + name;
+  auto meta = ReadFile(dir + "/trainer.json");
+  if (!meta.ok()) return std::nullopt;
+  return Checkpoint{json::parse(*meta).value("step", int64_t{0}), dir};
+}
+
+// The losses CSV keeps exactly the rows of steps before `step` (a resumed run continues the curve).
+void TruncateCsv(const std::string& path, int64_t step) {
+  std::ifstream in(path);
+  if (!in) return;
+  std::string header, line, kept;
+  std::getline(in, header);
+  kept = header + "\n";
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    if (std::stoll(line.substr(0, line.find(','))) < step) kept += line + "\n";
+  }
+  const Status s = WriteFileAtomic(path, kept, false);
+  if (!s.ok()) throw std::runtime_error(s.message());
+}
+
+void Train(const Task& task) {
+  const Options options = Options::FromTask(task);
+  const int rank = task.spec.value("index", 0);
+  const int world = std::max(1, task.spec.value("world_size", 1));
+  const std::string state_dir = task.spec.value("state_dir", std::string());
+  const std::string out_dir = task.output_dir();
+  if (state_dir.empty()) throw plugin::BadInput("the train stage needs a state_dir (a coordinator that knows gangs)");
+  fs::create_directories(state_dir);
+  fs::create_directories(out_dir);
+  nn::SetTorchThreads(omp_get_max_threads());
+  torch::manual_seed(options.seed);
+
+  ModelHandle handle;
+  handle.factory = task.Factory("model", options.model);
+  if (!handle.factory) throw plugin::BadInput("no model plugin '" + options.model + "' is loaded on this worker");
+  char error[2048] = {0};
+  handle.model = static_cast<plugin::Model*>(handle.factory->create(options.config.dump().c_str(), error, sizeof error));
+  if (!handle.model) throw plugin::BadInput(std::string("model '") + options.model + "': " + error);
+  plugin::Model& model = *handle.model;
+
+  plugin::DataContext data;
+  data.config = options.data;
+  for (const auto& input : task.spec["inputs"]) {
+    if (!input.value("result_dir", std::string()).empty()) data.input_dirs.push_back(input["result_dir"].get<std::string>());
+    for (const auto& dir : input["dirs"]) data.input_dirs.push_back(dir.get<std::string>());
+  }
+  data.state_dir = state_dir;
+  data.rank = rank;
+  data.world_size = world;
+  data.seed = options.seed;
+  std::unique_ptr<plugin::Dataset> dataset;
+  try {
+    dataset = model.MakeDataset(data);
+  } catch (const std::invalid_argument& e) {
+    throw plugin::BadInput(e.what());
+  }
+  if (options.batch_size % world != 0) {
+    throw plugin::BadInput("batch_size " + std::to_string(options.batch_size) + " must be divisible by world_size " + std::to_string(world));
+  }
+
+  std::vector<torch::Tensor> params;
+  for (auto& p : model.Module().parameters()) {
+    if (p.requires_grad()) params.push_back(p);
+  }
+  torch::optim::AdamW optimizer(params, torch::optim::AdamWOptions(options.lr)
+                                            .betas({options.beta1, options.beta2})
+                                            .weight_decay(options.weight_decay));
+
+  // Resume from the newest checkpoint of an earlier attempt of this gang.
+  int64_t start = 0;
+  const std::string csv = state_dir + "/losses.csv";
+  if (const auto latest = LatestCheckpoint(state_dir)) {
+    LoadModule(model.Module(), latest->dir + "/model.pt");
+    torch::load(optimizer, latest->dir + "/optimizer.pt");
+    start = latest->step;
+    task.Log(MP_LOG_INFO, "rank " + std::to_string(rank) + " resumes from step " + std::to_string(start));
+    if (rank == 0) TruncateCsv(csv, start);
+  } else if (rank == 0 && fs::exists(csv)) {
+    fs::remove(csv);
+  }
+
+  c10::intrusive_ptr<c10d::ProcessGroupGloo> group;
+  if (world > 1) {
+    const std::string rendezvous = task.spec.value("rendezvous", std::string());
+    if (rendezvous.empty()) throw plugin::BadInput("world_size > 1 but no rendezvous: run this stage through a coordinator");
+    auto store = c10::make_intrusive<c10d::FileStore>(rendezvous, world);
+    auto gloo = c10d::ProcessGroupGloo::Options::create();
+    gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(options.gloo_host));
+    gloo->timeout = std::chrono::seconds(task.params().value("collective_timeout", 120));
+    group = c10::make_intrusive<c10d::ProcessGroupGloo>(store, rank, world, gloo);
+    // Every rank starts from rank 0's parameters.
+    for (auto& p : model.Module().parameters()) {
+      std::vector<at::Tensor> t = {p.data()};
+      group->broadcast(t)->wait();
+    }
+  }
+
+  const int64_t n = dataset->size();
+  const int64_t per_epoch = std::max<int64_t>(1, n / options.batch_size);
+  const int64_t local = options.batch_size / world;
+  std::vector<int64_t> order;
+  int64_t order_epoch = -1;
+  std::ofstream log;
+  std::vector<std::string> columns;
+  const auto started = std::chrono::steady_clock::now();
+  double last_loss = 0;
+  model.Module().train();
+  for (int64_t step = start; step < options.steps; ++step) {
+    if (task.cancelled()) throw std::runtime_error("cancelled at step " + std::to_string(step));
+    const int64_t epoch = step / per_epoch;
+    if (epoch != order_epoch) {
+      order.resize(static_cast<size_t>(n));
+      std::iota(order.begin(), order.end(), 0);
+      std::mt19937_64 rng(MixSeed(options.seed, static_cast<uint64_t>(epoch)));
+      std::shuffle(order.begin(), order.end(), rng);
+      order_epoch = epoch;
+    }
+    // This rank's part of the global batch: every world-th example.
+    std::vector<int64_t> indices;
+    const int64_t base = (step % per_epoch) * options.batch_size;
+    for (int64_t k = rank; k < options.batch_size; k += world) indices.push_back(order[static_cast<size_t>((base + k) % n)]);
+    const plugin::Batch batch = dataset->Get(indices, MixSeed(options.seed, static_cast<uint64_t>(step)));
+    torch::manual_seed(MixSeed(options.seed, static_cast<uint64_t>(step * world + rank)));
+    auto losses = model.Losses(batch, step);
+    const auto loss = losses.at("loss");
+    if (!std::isfinite(loss.item<double>())) throw std::runtime_error("loss is not finite at step " + std::to_string(step));
+    optimizer.zero_grad();
+    loss.backward();
+
+    // Average gradients and the logged losses over the ranks in one all-reduce.
+    std::vector<torch::Tensor> flat;
+    for (auto& p : params) flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
+    std::vector<std::string> names;
+    std::vector<float> values;
+    for (const auto& [name, value] : losses) {
+      names.push_back(name);
+      values.push_back(value.detach().item<float>());
+    }
+    flat.push_back(torch::tensor(values));
+    auto buffer = torch::cat(flat);
+    if (group) {
+      std::vector<at::Tensor> t = {buffer};
+      group->allreduce(t)->wait();
+      buffer.div_(static_cast<double>(world));
+    }
+    int64_t offset = 0;
+    for (auto& p : params) {
+      if (p.grad().defined()) p.mutable_grad().copy_(buffer.narrow(0, offset, p.numel()).view_as(p));
+      offset += p.numel();
+    }
+    const auto averaged = buffer.narrow(0, offset, static_cast<int64_t>(values.size()));
+    if (options.clip_grad > 0) torch::nn::utils::clip_grad_norm_(params, options.clip_grad);
+    const double lr = LearningRate(options, step);
+    for (auto& group_options : optimizer.param_groups()) static_cast<torch::optim::AdamWOptions&>(group_options.options()).lr(lr);
+    optimizer.step();
+
+    last_loss = averaged[static_cast<int64_t>(std::find(names.begin(), names.end(), "loss") - names.begin())].item<double>();
+    if (rank == 0) {
+      if (!log.is_open()) {
+        const bool fresh = !fs::exists(csv);
+        log.open(csv, std::ios::app);
+        columns = names;
+        if (fresh) {
+          log << "step,epoch,lr";
+          for (const auto& c : columns) log << "," << c;
+          log << "\n";
+        }
+      }
+      log << step << "," << epoch << "," << lr;
+      for (int64_t k = 0; k < static_cast<int64_t>(names.size()); ++k) log << "," << averaged[k].item<float>();
+      log << "\n";
+      if ((step + 1) % options.log_every == 0 || step + 1 == options.steps) {
+        log.flush();
+        task.Metric("loss", last_loss);
+        task.Metric("step", static_cast<double>(step + 1));
+        task.Metric("lr", lr);
+      }
+      if ((step + 1) % options.checkpoint_every == 0 && step + 1 < options.steps) {
+        log.flush();
+        const std::string name = "ckpt-" + std::to_string(100000000 + step + 1).substr(1);
+        const std::string tmp = state_dir + "/" + name + ".tmp";
+        fs::remove_all(tmp);
+        fs::create_directories(tmp);
+        SaveModule(model.Module(), tmp + "/model.pt");
+        torch::save(optimizer, tmp + "/optimizer.pt");
+        const Status s = WriteFileAtomic(tmp + "/trainer.json", json({{"step", step + 1}, {"epoch", epoch}, {"world_size", world}}).dump() + "\n");
+        if (!s.ok()) throw std::runtime_error(s.message());
+        fs::remove_all(state_dir + "/" + name);
+        fs::rename(tmp, state_dir + "/" + name);
+        const Status latest = WriteFileAtomic(state_dir + "/latest", name + "\n");
+        if (!latest.ok()) throw std::runtime_error(latest.message());
+        // Older checkpoints beyond keep_checkpoints go.
+        std::vector<std::string> all;
+        for (const auto& entry : fs::directory_iterator(state_dir)) {
+          const std::string file = entry.path().filename().string();
+          if (file.rfind("ckpt-", 0) == 0 && file.find(".tmp") == std::string::npos) all.push_back(file);
+        }
+        std::sort(all.begin(), all.end());
+        for (size_t k = 0; k + static_cast<size_t>(options.keep_checkpoints) < all.size(); ++k) fs::remove_all(state_dir + "/" + all[k]);
+      }
+    }
+  }
+  if (log.is_open()) log.close();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  if (rank == 0) {
+    model.Module().eval();
+    WriteModelDir(model, options, options.steps, out_dir + "/model");
+    ExportStateDict(model.Module(), out_dir + "/state_dict.pt");
+    if (fs::exists(csv)) fs::copy_file(csv, out_dir + "/losses.csv", fs::copy_options::overwrite_existing);
+  }
+  const int64_t trained = options.steps - start;
+  const json summary = {{"rank", rank}, {"world_size", world}, {"resumed_from", start}, {"steps", trained},
+                        {"seconds", seconds}, {"samples_per_second", static_cast<double>(trained * local) / std::max(seconds, 1e-9)},
+                        {"final_loss", last_loss}};
+  const Status s = WriteFileAtomic(out_dir + "/rank-" + std::to_string(rank) + ".json", summary.dump(1) + "\n");
+  if (!s.ok()) throw std::runtime_error(s.message());
+  task.Metric("final_loss", last_loss);
+  task.Metric("samples_per_second", static_cast<double>(trained * local) / std::max(seconds, 1e-9));
+}
+
+const mp_stage_kind kKinds[] = {
+    {"train", "data-parallel training of a model plugin (c10d Gloo), with checkpoints and resume",
+     [](const mp_task_io* io, char* error, size_t size) { return plugin::RunStage(io, error, size, Train); }},
+};
+
+const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION, sizeof(mp_plugin), "train", "1.0.0", 1, kKinds, 0, nullptr};
+
+}  // namespace
+
+}  // namespace motionpipe::train
+
+extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) { return &motionpipe::train::kPlugin; }
