@@ -15,5 +15,6 @@ void AddDataCommands(CLI::App& app, int* exit_code);
 void AddEngineCommands(CLI::App& app, int* exit_code);
 void AddLabelsCommands(CLI::App& app, int* exit_code);
 void AddSincCommands(CLI::App& app, int* exit_code);
+void AddModelCommands(CLI::App& app, int* exit_code);
 
 }  // namespace motionpipe::cli

@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   motionpipe::cli::AddEngineCommands(app, &exit_code);
   motionpipe::cli::AddLabelsCommands(app, &exit_code);
   motionpipe::cli::AddSincCommands(app, &exit_code);
+  motionpipe::cli::AddModelCommands(app, &exit_code);
   app.parse_complete_callback([&] {
     motionpipe::LogLevel level;
     if (!motionpipe::ParseLogLevel(log_level, &level)) throw CLI::ValidationError("--log", "unknown level " + log_level);

@@ -183,13 +183,7 @@ TextEncoderImpl::TextEncoderImpl(const TextEncoderOptions& options) : options_(o
   if (options_.kind == "learned") {
     embed_ = register_module("embed", torch::nn::Embedding(torch::nn::EmbeddingOptions(options_.vocab + 2, options_.dim).padding_idx(0)));
   }
-  encoder_ = register_module(
-      "encoder", torch::nn::TransformerEncoder(torch::nn::TransformerEncoderOptions(
-                                                   torch::nn::TransformerEncoderLayerOptions(options_.dim, options_.heads)
-                                                       .dim_feedforward(options_.ff)
-                                                       .dropout(options_.dropout)
-                                                       .activation(torch::kGELU),
-                                                   options_.layers)));
+  encoder_ = register_module("encoder", Encoder(TransformerOptions{options_.dim, options_.heads, options_.ff, options_.layers, options_.dropout}));
   separator_ = register_parameter("separator", torch::randn({options_.dim}) * 0.02);
 }
 
@@ -220,18 +214,8 @@ void TextEncoderImpl::Fit(const std::vector<std::string>& texts) {
 
 bool TextEncoderImpl::fitted() const { return options_.kind == "learned" ? tokenizer_.vocab_size() > 0 : !table_.empty(); }
 
-TextFeatures TextEncoderImpl::forward(const std::vector<std::string>& texts) {
+torch::Tensor TextEncoderImpl::TokenIds(const std::vector<std::string>& texts) const {
   const auto n = static_cast<int64_t>(texts.size());
-  if (options_.kind == "precomputed") {
-    std::vector<float> flat;
-    for (const auto& t : texts) {
-      const auto it = table_.find(t);
-      if (it == table_.end()) throw std::invalid_argument("precomputed text encoder: no embedding for '" + t + "' in " + options_.table);
-      flat.insert(flat.end(), it->second.begin(), it->second.end());
-    }
-    auto x = project_->forward(torch::tensor(flat).view({n, table_dim_})).unsqueeze(0);  // [1, N, dim]
-    return {encoder_->forward(x), torch::zeros({n, 1}, torch::kBool)};
-  }
   std::vector<std::vector<int64_t>> ids;
   int64_t longest = 1;
   for (const auto& t : texts) {
@@ -243,10 +227,27 @@ TextFeatures TextEncoderImpl::forward(const std::vector<std::string>& texts) {
   for (int64_t i = 0; i < n; ++i) {
     for (size_t k = 0; k < ids[static_cast<size_t>(i)].size(); ++k) acc[i][static_cast<int64_t>(k)] = ids[static_cast<size_t>(i)][k];
   }
+  return tokens;
+}
+
+TextFeatures TextEncoderImpl::forward(const std::vector<std::string>& texts) {
+  const auto n = static_cast<int64_t>(texts.size());
+  if (options_.kind == "precomputed") {
+    std::vector<float> flat;
+    for (const auto& t : texts) {
+      const auto it = table_.find(t);
+      if (it == table_.end()) throw std::invalid_argument("precomputed text encoder: no embedding for '" + t + "' in " + options_.table);
+      flat.insert(flat.end(), it->second.begin(), it->second.end());
+    }
+    auto x = project_->forward(torch::tensor(flat).view({n, table_dim_})).unsqueeze(0);  // [1, N, dim]
+    return {encoder_->forward(x, {}), torch::zeros({n, 1}, torch::kBool)};
+  }
+  const auto tokens = TokenIds(texts);
+  const int64_t longest = tokens.size(1);
   const auto padding = tokens.eq(0);
   auto x = embed_->forward(tokens).transpose(0, 1) * std::sqrt(static_cast<double>(options_.dim));  // [L, N, dim]
   x = x + PositionalEncoding(longest, options_.dim);
-  return {encoder_->forward(x, {}, padding), padding};
+  return {encoder_->forward(x, padding), padding};
 }
 
 TextFeatures TextEncoderImpl::ForwardJoined(const std::vector<std::vector<std::string>>& texts) {

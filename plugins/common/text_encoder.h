@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "transformer.h"
+
 namespace motionpipe::nn {
 
 // A byte-pair-encoding subword tokenizer, trained from texts or loaded from its JSON form.
@@ -64,6 +66,8 @@ class TextEncoderImpl : public torch::nn::Module {
   void Fit(const std::vector<std::string>& texts);
   bool fitted() const;
   TextFeatures forward(const std::vector<std::string>& texts);
+  // Learned: the subword ids [N, L] (0 = padding) that forward() embeds.
+  torch::Tensor TokenIds(const std::vector<std::string>& texts) const;
   // Token features of several texts per example joined with a learned separator (SINC-STE).
   TextFeatures ForwardJoined(const std::vector<std::vector<std::string>>& texts);
   // Tokenizer or table files in a checkpoint directory.
@@ -78,7 +82,7 @@ class TextEncoderImpl : public torch::nn::Module {
   int64_t table_dim_ = 0;
   torch::nn::Embedding embed_{nullptr};
   torch::nn::Linear project_{nullptr};      // precomputed embeddings -> dim
-  torch::nn::TransformerEncoder encoder_{nullptr};
+  Encoder encoder_{nullptr};
   torch::Tensor separator_;
 };
 TORCH_MODULE(TextEncoder);

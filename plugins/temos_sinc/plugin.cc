@@ -70,6 +70,8 @@ class SincModel : public plugin::Model {
     auto shared = std::make_shared<sinc::SpanTable>(std::move(*table));
     auto dataset = std::make_unique<SincDataset>(shared, options);
     if (context.split == "train") {
+      const std::string from = config_.value("text_encoder_from", std::string());
+      if (!from.empty()) LoadPretrainedTextEncoder(from, context);
       if (!net_->text_encoder()->fitted()) FitTextEncoder(*dataset, context);
       if (!stats_ready_) {
         auto [mean, stddev] = dataset->ComputeStats();
@@ -89,7 +91,9 @@ class SincModel : public plugin::Model {
     } else {
       for (const auto& t : batch.texts) texts.push_back({t});
     }
-    return net_->Losses(texts, batch.tensors.at("features"), batch.tensors.at("padding"));
+    const auto seeds = batch.tensors.find("example_seed");
+    return net_->Losses(texts, batch.tensors.at("features"), batch.tensors.at("padding"),
+                        seeds == batch.tensors.end() ? torch::Tensor() : seeds->second);
   }
 
   void SaveExtras(const std::string& dir) const override { net_->text_encoder()->SaveExtras(dir); }
@@ -104,6 +108,46 @@ class SincModel : public plugin::Model {
   torch::Tensor stddev() const { return std_; }
 
  private:
+  // The text encoder (tokenizer + transformer) of a pre-trained checkpoint, TMR-style contrastive
+  // (REFERENCE 5), frozen unless freeze_text_encoder is false: the role DistilBERT/CLIP play in
+  // the papers. `from` is a checkpoint directory, or "input" for the stage input that is one.
+  void LoadPretrainedTextEncoder(const std::string& from, const plugin::DataContext& context) {
+    std::string dir;
+    if (from == "input") {
+      for (const std::string& input : context.input_dirs) {
+        for (const std::string& candidate : {input, input + "/model"}) {
+          if (dir.empty() && fs::exists(candidate + "/model.json")) dir = candidate;
+        }
+      }
+      if (dir.empty()) throw std::invalid_argument("text_encoder_from: input, but no stage input holds a checkpoint (model/model.json)");
+    } else {
+      dir = fs::exists(from + "/model/model.json") ? from + "/model" : from;
+    }
+    auto text = ReadFile(dir + "/model.json");
+    if (!text.ok()) throw std::invalid_argument("text_encoder_from: " + text.status().message());
+    SincModel pretrained(nlohmann::json::parse(*text).at("config"));
+    const nlohmann::json theirs = pretrained.net()->text_encoder()->options().ToJson();
+    const nlohmann::json ours = net_->text_encoder()->options().ToJson();
+    if (theirs != ours) {
+      throw std::invalid_argument("text_encoder_from " + dir + ": its text encoder is " + theirs.dump() + ", this model's is " + ours.dump() +
+                                  " (use the same text_encoder settings)");
+    }
+    pretrained.LoadExtras(dir);
+    torch::serialize::InputArchive archive;
+    archive.load_from(dir + "/model.pt");
+    pretrained.Module().load(archive);
+    torch::NoGradGuard no_grad;
+    auto source = pretrained.net()->text_encoder()->named_parameters();
+    for (auto& item : net_->text_encoder()->named_parameters()) item.value().copy_(source[item.key()]);
+    auto source_buffers = pretrained.net()->text_encoder()->named_buffers();
+    for (auto& item : net_->text_encoder()->named_buffers()) item.value().copy_(source_buffers[item.key()]);
+    net_->text_encoder()->LoadExtras(dir);
+    // SINC-STE's separator token is this model's own: it stays trainable.
+    const bool freeze = config_.value("freeze_text_encoder", true);
+    for (auto& item : net_->text_encoder()->named_parameters()) item.value().set_requires_grad(!freeze || item.key() == "separator");
+    if (context.rank == 0) std::fprintf(stderr, "temos_sinc: text encoder from %s (%s)\n", dir.c_str(), freeze ? "frozen" : "fine-tuned");
+  }
+
   // The tokenizer is made once per training run: rank 0 trains it into state_dir, the other ranks
   // (and a resumed run) load that file, so every rank has the same vocabulary.
   void FitTextEncoder(const SincDataset& dataset, const plugin::DataContext& context) {
@@ -142,7 +186,8 @@ class SincModel : public plugin::Model {
 // Runs a trained checkpoint (torch-free interface for the CLI and evaluators).
 class SincGenerator : public plugin::Generator {
  public:
-  explicit SincGenerator(const std::string& dir) {
+  // options: {"compositing": true} runs a single-action checkpoint as the GPT-compositing baseline.
+  SincGenerator(const std::string& dir, const nlohmann::json& options) {
     auto text = ReadFile(dir + "/model.json");
     if (!text.ok()) throw std::invalid_argument(text.status().message());
     const nlohmann::json meta = nlohmann::json::parse(*text);
@@ -152,8 +197,12 @@ class SincGenerator : public plugin::Generator {
     archive.load_from(dir + "/model.pt");
     model_->Module().load(archive);
     model_->Module().eval();
+    compositing_ = model_->variant() == "compositing" || options.value("compositing", false);
+    if (compositing_ && model_->variant() != "single" && model_->variant() != "compositing") {
+      throw std::invalid_argument("compositing runs single-action models, this one is '" + model_->variant() + "'");
+    }
   }
-  std::string Name() const override { return "temos_sinc/" + model_->variant(); }
+  std::string Name() const override { return "temos_sinc/" + std::string(compositing_ ? "compositing" : model_->variant()); }
 
   Result<Motion> Generate(const plugin::GenerateRequest& request) override {
     if (request.texts.empty()) return InvalidArgument("generate: give at least one text");
@@ -162,7 +211,7 @@ class SincGenerator : public plugin::Generator {
     try {
       torch::NoGradGuard no_grad;
       torch::manual_seed(request.seed);
-      if (model_->variant() == "compositing" && request.texts.size() > 1) return Compose(request, frames);
+      if (compositing_ && request.texts.size() > 1) return Compose(request, frames);
       std::vector<std::vector<std::string>> texts;
       if (model_->net()->options().separate_texts) {
         texts = {request.texts};
@@ -225,6 +274,7 @@ class SincGenerator : public plugin::Generator {
   }
 
   std::unique_ptr<SincModel> model_;
+  bool compositing_ = false;
 };
 
 template <typename T>
@@ -248,7 +298,7 @@ const mp_object_factory kFactories[] = {
     {"generator", "temos_sinc",
      [](const char* config, char* error, size_t size) {
        return CreateObject(config, error, size, [](const nlohmann::json& c) -> void* {
-         return static_cast<plugin::Generator*>(new SincGenerator(c.at("checkpoint").get<std::string>()));
+         return static_cast<plugin::Generator*>(new SincGenerator(c.at("checkpoint").get<std::string>(), c));
        });
      },
      [](void* object) { delete static_cast<plugin::Generator*>(object); }},

@@ -12,9 +12,7 @@ namespace {
 
 using torch::indexing::Slice;
 
-torch::nn::TransformerEncoderLayerOptions EncoderLayer(const TemosOptions& o) {
-  return torch::nn::TransformerEncoderLayerOptions(o.latent, o.heads).dim_feedforward(o.ff).dropout(o.dropout).activation(torch::kGELU);
-}
+nn::TransformerOptions Layers(const TemosOptions& o) { return {o.latent, o.heads, o.ff, o.layers, o.dropout}; }
 
 // Lexical near-duplicates: cosine of bag-of-words counts above `threshold` (TMR masks negatives whose
 // texts mean the same; without a sentence encoder offline, word overlap stands in).
@@ -70,6 +68,7 @@ TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
   o.separate_texts = j.value("separate_texts", o.separate_texts);
   nlohmann::json text = j.value("text_encoder", nlohmann::json::object());
   if (!text.contains("dim")) text["dim"] = o.latent;
+  if (!text.contains("dropout")) text["dropout"] = o.dropout;
   o.text = nn::TextEncoderOptions::FromJson(text);
   if (o.latent % o.heads != 0) {
     throw std::invalid_argument("latent (" + std::to_string(o.latent) + ") must be divisible by heads (" + std::to_string(o.heads) + ")");
@@ -90,7 +89,7 @@ VaeEncoderImpl::VaeEncoderImpl(int64_t input_dim, const TemosOptions& o) : laten
   project_ = register_module("project", torch::nn::Linear(input_dim, o.latent));
   mu_token_ = register_parameter("mu_token", torch::randn({o.latent}) * 0.02);
   logvar_token_ = register_parameter("logvar_token", torch::randn({o.latent}) * 0.02);
-  encoder_ = register_module("encoder", torch::nn::TransformerEncoder(torch::nn::TransformerEncoderOptions(EncoderLayer(o), o.layers)));
+  encoder_ = register_module("encoder", nn::Encoder(Layers(o)));
 }
 
 std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
@@ -99,22 +98,19 @@ std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Ten
   auto tokens = torch::stack({mu_token_, logvar_token_}).unsqueeze(1).expand({2, n, latent_});
   h = torch::cat({tokens, h}, 0) + nn::PositionalEncoding(length + 2, latent_);
   const auto mask = torch::cat({torch::zeros({n, 2}, torch::kBool), padding}, 1);
-  const auto out = encoder_->forward(h, {}, mask);
+  const auto out = encoder_->forward(h, mask);
   return {out[0], out[1]};
 }
 
 DecoderImpl::DecoderImpl(const TemosOptions& o) : latent_(o.latent) {
-  decoder_ = register_module(
-      "decoder", torch::nn::TransformerDecoder(torch::nn::TransformerDecoderOptions(
-                     torch::nn::TransformerDecoderLayerOptions(o.latent, o.heads).dim_feedforward(o.ff).dropout(o.dropout).activation(torch::kGELU),
-                     o.layers)));
+  decoder_ = register_module("decoder", nn::OneTokenDecoder(Layers(o)));
   out_ = register_module("out", torch::nn::Linear(o.latent, kFeatureDim));
 }
 
 torch::Tensor DecoderImpl::forward(const torch::Tensor& z, const torch::Tensor& padding) {
   const int64_t n = z.size(0), length = padding.size(1);
   const auto queries = nn::PositionalEncoding(length, latent_).expand({length, n, latent_});
-  const auto h = decoder_->forward(queries, z.unsqueeze(0), {}, {}, padding);
+  const auto h = decoder_->forward(queries, z, padding);
   auto y = out_->forward(h);
   return y.masked_fill(padding.transpose(0, 1).unsqueeze(2), 0.0);
 }
@@ -140,23 +136,39 @@ Distribution TemosImpl::EncodeText(const std::vector<std::vector<std::string>>& 
     features = text_encoder_->forward(flat);
   }
   auto [mu, logvar] = text_vae_->forward(features.tokens, features.padding);
-  auto z = sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu;
-  return {mu, logvar, z};
+  return {mu, logvar, sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu};
 }
 
 Distribution TemosImpl::EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding, bool sample) {
   auto [mu, logvar] = motion_vae_->forward(features, padding);
-  auto z = sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu;
-  return {mu, logvar, z};
+  return {mu, logvar, sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu};
+}
+
+torch::Tensor ExampleNoise(const torch::Tensor& seeds, int64_t rows, int64_t latent) {
+  const auto s = seeds.to(torch::kInt64).contiguous();
+  std::vector<torch::Tensor> noise;
+  for (int64_t i = 0; i < s.size(0); ++i) {
+    auto generator = at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(s.data_ptr<int64_t>()[i]));
+    noise.push_back(torch::randn({rows, latent}, generator));
+  }
+  return torch::stack(noise, 1);  // [rows, N, latent]
 }
 
 std::map<std::string, torch::Tensor> TemosImpl::Losses(const std::vector<std::vector<std::string>>& texts, const torch::Tensor& features,
-                                                       const torch::Tensor& padding) {
-  const Distribution t = EncodeText(texts, true);
-  const Distribution m = EncodeMotion(features, padding, true);
+                                                       const torch::Tensor& padding, const torch::Tensor& example_seeds) {
+  Distribution t = EncodeText(texts, false);
+  Distribution m = EncodeMotion(features, padding, false);
+  // Reparameterisation: z = mu + sigma * eps, eps per example from its seed when the trainer gives
+  // seeds (the same eps whichever rank the example lands on), else from torch's generator.
+  const auto eps = example_seeds.defined() ? ExampleNoise(example_seeds, 2, t.mu.size(1)) : torch::randn({2, t.mu.size(0), t.mu.size(1)});
+  t.z = t.mu + torch::exp(0.5 * t.logvar) * eps[0];
+  m.z = m.mu + torch::exp(0.5 * m.logvar) * eps[1];
   std::map<std::string, torch::Tensor> out;
-  out["recon_text"] = MaskedSmoothL1(Decode(t.z, padding), features, padding);
-  out["recon_motion"] = MaskedSmoothL1(Decode(m.z, padding), features, padding);
+  // Both branches decode in one batch [text; motion] (the same layers; bigger matrix products).
+  const int64_t n = features.size(1);
+  const auto decoded = Decode(torch::cat({t.z, m.z}), padding.repeat({2, 1}));
+  out["recon_text"] = MaskedSmoothL1(decoded.narrow(1, 0, n), features, padding);
+  out["recon_motion"] = MaskedSmoothL1(decoded.narrow(1, n, n), features, padding);
   const auto zeros = torch::zeros_like(m.mu);
   out["kl_text_motion"] = KlDivergence(t.mu, t.logvar, m.mu, m.logvar);
   out["kl_motion_text"] = KlDivergence(m.mu, m.logvar, t.mu, t.logvar);
@@ -177,7 +189,11 @@ std::map<std::string, torch::Tensor> TemosImpl::Losses(const std::vector<std::ve
 torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding) {
   const auto keep = padding.logical_not().transpose(0, 1).unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
   const auto loss = torch::smooth_l1_loss(prediction, target, torch::Reduction::None) * keep;
-  return loss.sum() / (keep.sum() * prediction.size(2)).clamp_min(1.0);
+  // Each motion's mean over its own frames and features, then the mean over motions: a batch's loss
+  // is the mean of its examples' losses, so ranks that split a batch reproduce it exactly.
+  const std::vector<int64_t> frames_features = {0, 2};
+  const auto per_example = loss.sum(frames_features) / (keep.sum(frames_features) * prediction.size(2)).clamp_min(1.0);
+  return per_example.mean();
 }
 
 torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p) {

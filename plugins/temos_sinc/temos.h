@@ -46,7 +46,7 @@ class VaeEncoderImpl : public torch::nn::Module {
   int64_t latent_;
   torch::nn::Linear project_{nullptr};
   torch::Tensor mu_token_, logvar_token_;
-  torch::nn::TransformerEncoder encoder_{nullptr};
+  nn::Encoder encoder_{nullptr};
 };
 TORCH_MODULE(VaeEncoder);
 
@@ -58,7 +58,7 @@ class DecoderImpl : public torch::nn::Module {
 
  private:
   int64_t latent_;
-  torch::nn::TransformerDecoder decoder_{nullptr};
+  nn::OneTokenDecoder decoder_{nullptr};
   torch::nn::Linear out_{nullptr};
 };
 TORCH_MODULE(Decoder);
@@ -75,8 +75,9 @@ class TemosImpl : public torch::nn::Module {
   Distribution EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding, bool sample);
   torch::Tensor Decode(const torch::Tensor& z, const torch::Tensor& padding) { return decoder_->forward(z, padding); }
   // features [T, N, 135] (normalised), padding [N, T]: every loss term and "loss".
+  // example_seeds [N] (optional): the seed of each example's reparameterisation noise.
   std::map<std::string, torch::Tensor> Losses(const std::vector<std::vector<std::string>>& texts, const torch::Tensor& features,
-                                              const torch::Tensor& padding);
+                                              const torch::Tensor& padding, const torch::Tensor& example_seeds = {});
   nn::TextEncoder text_encoder() const { return text_encoder_; }
   const TemosOptions& options() const { return options_; }
 
@@ -88,7 +89,9 @@ class TemosImpl : public torch::nn::Module {
 };
 TORCH_MODULE(Temos);
 
-// Mean of a smooth-L1 over unpadded frames. prediction/target [T, N, D], padding [N, T].
+// Per-example noise [rows, N, latent] from each example's seed.
+torch::Tensor ExampleNoise(const torch::Tensor& seeds, int64_t rows, int64_t latent);
+// Smooth-L1 averaged over each example's unpadded frames, then over the examples. prediction/target [T, N, D], padding [N, T].
 torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding);
 // KL(q || p) of diagonal Gaussians, mean over the batch.
 torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p);

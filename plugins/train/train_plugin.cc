@@ -1,12 +1,14 @@
 // The `train` stage: trains any model plugin (factory kind "model") data-parallel over a gang of
-// ranks with torch's own c10d Gloo process group (rendezvous: a FileStore the coordinator names),
+// ranks with torch's own c10d Gloo process group (rendezvous: a c10d TCPStore served by rank 0, whose
+// address rank 0 publishes in the gang's rendezvous file the coordinator names; or a FileStore there),
 // with AdamW, a warm-up + cosine schedule, gradient clipping, atomic checkpoints every K steps that a
 // restarted gang resumes from, and the loss curve in CSV and on the worker's /metrics.
 //
 // params: model (plugin model name), config (the model's config), data (the model's data config),
 //   steps, batch_size (global: split across ranks), lr, weight_decay, betas [b1, b2], warmup,
 //   schedule (cosine | constant), min_lr, clip_grad, checkpoint_every, keep_checkpoints, log_every,
-//   seed, gloo_host (the address other ranks reach this one on; default 127.0.0.1)
+//   seed, gloo_host (the address other ranks reach this one on; default 127.0.0.1),
+//   store (tcp | file; default tcp), collective_timeout (seconds, default 120)
 //
 // Rank r of W takes every W-th example of each global batch, and the gradients are averaged over
 // the ranks (all-reduce of one flattened buffer), so W ranks take the same step as one rank on the
@@ -15,6 +17,7 @@
 // state_dict.pt (loadable by Python's torch.load) and losses.csv.
 #include <torch/csrc/distributed/c10d/FileStore.hpp>
 #include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
+#include <torch/csrc/distributed/c10d/TCPStore.hpp>
 #include <torch/torch.h>
 
 #include <omp.h>
@@ -27,6 +30,7 @@
 #include <numeric>
 #include <random>
 #include <sstream>
+#include <thread>
 
 #include "../api/model.hpp"
 #include "../api/plugin.hpp"
@@ -50,6 +54,8 @@ struct Options {
   std::string schedule = "cosine";
   uint64_t seed = 1;
   std::string gloo_host = "127.0.0.1";
+  std::string store = "tcp";
+  int collective_timeout = 120;
   static Options FromTask(const Task& task) {
     const json& p = task.params();
     Options o;
@@ -73,6 +79,9 @@ struct Options {
     o.schedule = p.value("schedule", o.schedule);
     o.seed = p.value("seed", task.spec.value("seed", uint64_t{1}));
     o.gloo_host = p.value("gloo_host", o.gloo_host);
+    o.store = p.value("store", o.store);
+    o.collective_timeout = p.value("collective_timeout", o.collective_timeout);
+    if (o.store != "tcp" && o.store != "file") throw plugin::BadInput("params.store must be tcp or file");
     if (o.steps < 1 || o.batch_size < 1) throw plugin::BadInput("params.steps and params.batch_size must be positive");
     if (o.schedule != "cosine" && o.schedule != "constant") throw plugin::BadInput("params.schedule must be cosine or constant");
     return o;
@@ -164,6 +173,42 @@ void TruncateCsv(const std::string& path, int64_t step) {
   if (!s.ok()) throw std::runtime_error(s.message());
 }
 
+// The gang's key-value store. tcp: rank 0 serves a TCPStore on an ephemeral port of gloo_host and
+// publishes "host port" in the rendezvous file (fresh for every gang dispatch); the other ranks wait
+// for it and connect. file: a FileStore at the rendezvous path (needs a shared file system).
+c10::intrusive_ptr<c10d::Store> OpenStore(const Options& options, const std::string& rendezvous, int rank, int world, const Task& task) {
+  const auto timeout = std::chrono::seconds(options.collective_timeout);
+  if (options.store == "file") return c10::make_intrusive<c10d::FileStore>(rendezvous, world);
+  c10d::TCPStoreOptions tcp;
+  tcp.numWorkers = static_cast<size_t>(world);
+  tcp.timeout = timeout;
+  const std::string address = rendezvous + ".tcp";
+  if (rank == 0) {
+    tcp.isServer = true;
+    tcp.port = 0;
+    tcp.waitWorkers = false;
+    auto store = c10::make_intrusive<c10d::TCPStore>(options.gloo_host, tcp);
+    const Status s = WriteFileAtomic(address, options.gloo_host + " " + std::to_string(store->getPort()) + "\n");
+    if (!s.ok()) throw std::runtime_error(s.message());
+    return store;
+  }
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (true) {
+    if (auto text = ReadFile(address); text.ok()) {
+      std::istringstream in(*text);
+      std::string host;
+      int port = 0;
+      if (in >> host >> port && port > 0) {
+        tcp.port = static_cast<uint16_t>(port);
+        return c10::make_intrusive<c10d::TCPStore>(host, tcp);
+      }
+    }
+    if (task.cancelled()) throw std::runtime_error("cancelled while waiting for rank 0's store address in " + address);
+    if (std::chrono::steady_clock::now() > deadline) throw std::runtime_error("rank 0 did not publish its store address in " + address);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
 void Train(const Task& task) {
   const Options options = Options::FromTask(task);
   const int rank = task.spec.value("index", 0);
@@ -229,10 +274,10 @@ void Train(const Task& task) {
   if (world > 1) {
     const std::string rendezvous = task.spec.value("rendezvous", std::string());
     if (rendezvous.empty()) throw plugin::BadInput("world_size > 1 but no rendezvous: run this stage through a coordinator");
-    auto store = c10::make_intrusive<c10d::FileStore>(rendezvous, world);
+    auto store = OpenStore(options, rendezvous, rank, world, task);
     auto gloo = c10d::ProcessGroupGloo::Options::create();
     gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(options.gloo_host));
-    gloo->timeout = std::chrono::seconds(task.params().value("collective_timeout", 120));
+    gloo->timeout = std::chrono::seconds(options.collective_timeout);
     group = c10::make_intrusive<c10d::ProcessGroupGloo>(store, rank, world, gloo);
     // Every rank starts from rank 0's parameters.
     for (auto& p : model.Module().parameters()) {
@@ -265,7 +310,14 @@ void Train(const Task& task) {
     std::vector<int64_t> indices;
     const int64_t base = (step % per_epoch) * options.batch_size;
     for (int64_t k = rank; k < options.batch_size; k += world) indices.push_back(order[static_cast<size_t>((base + k) % n)]);
-    const plugin::Batch batch = dataset->Get(indices, MixSeed(options.seed, static_cast<uint64_t>(step)));
+    plugin::Batch batch = dataset->Get(indices, MixSeed(options.seed, static_cast<uint64_t>(step)));
+    // Each example's own random seed (its place in the global batch), for models whose sampling
+    // must not depend on how the batch was split over ranks.
+    std::vector<int64_t> example_seeds;
+    for (int64_t k = rank; k < options.batch_size; k += world) {
+      example_seeds.push_back(static_cast<int64_t>(MixSeed(MixSeed(options.seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >> 1));
+    }
+    batch.tensors["example_seed"] = torch::tensor(example_seeds, torch::kInt64);
     torch::manual_seed(MixSeed(options.seed, static_cast<uint64_t>(step * world + rank)));
     auto losses = model.Losses(batch, step);
     const auto loss = losses.at("loss");

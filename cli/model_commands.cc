@@ -1,0 +1,92 @@
+// `motionpipe generate`: run a trained text-to-motion checkpoint (TEMOS/SINC and its baselines) and
+// write the motion as a clip file or a BVH. Torch stays in the plugins: the checkpoint's model.json
+// names the plugin that loads it.
+#include <cstdio>
+#include <iostream>
+
+#include "commands.h"
+#include "generators.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/formats/bvh.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/sinc/texts.h"
+
+namespace motionpipe::cli {
+
+namespace {
+
+int Fail(const Status& status) {
+  std::cerr << "error: " << status.message() << "\n";
+  return kExitFailure;
+}
+
+bool EndsWith(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+worker::PluginHost LoadPlugins(const std::vector<std::string>& extra) {
+  worker::PluginHost host;
+  for (const std::string& d : extra) host.LoadDirectory(d);
+  for (const std::string& d : worker::DefaultPluginDirs()) host.LoadDirectory(d);
+  return host;
+}
+
+// A generated motion as a clip: its text(s), one segment per action over the whole clip.
+Status WriteMotion(const std::string& out, const Motion& motion, const std::vector<std::string>& texts, const std::string& source) {
+  if (EndsWith(out, ".bvh")) return ExportBvhFile(out, motion, {});
+  if (!EndsWith(out, ".npz")) return InvalidArgument(out + ": the output must end in .npz (clip file) or .bvh");
+  Clip clip;
+  clip.id = "generated";
+  clip.source = source;
+  clip.motion = motion;
+  clip.joints = ComputeJoints(Skeleton::Smpl22(), motion);
+  clip.texts = {texts.size() == 1 ? texts[0] : sinc::EvalPairText(texts[0], texts[1])};
+  for (const std::string& t : texts) clip.segments.push_back({0, static_cast<int32_t>(motion.num_frames()), t, 0, ""});
+  return WriteClips(out, {clip});
+}
+
+}  // namespace
+
+void AddModelCommands(CLI::App& app, int* exit_code) {
+  auto* cmd = app.add_subcommand("generate", "Generate a motion from text with a trained checkpoint (TEMOS/SINC and baselines)");
+  static std::string model, out;
+  static std::vector<std::string> texts, plugin_dirs;
+  static double seconds = 4, fps = 30;
+  static uint64_t seed = 1;
+  static bool compositing = false;
+  cmd->add_option("--model", model, "Checkpoint: a model/ directory, a train task's output or a train stage's output")->required();
+  cmd->add_option("--text", texts, "Action text; give it twice for two simultaneous actions")->required();
+  cmd->add_option("--seconds", seconds, "Duration")->capture_default_str()->check(CLI::Range(0.1, 300.0));
+  cmd->add_option("--fps", fps, "Frame rate")->capture_default_str()->check(CLI::Range(1.0, 240.0));
+  cmd->add_option("--seed", seed, "Sampling seed")->capture_default_str();
+  cmd->add_option("--out", out, "Output: .npz (clip file) or .bvh (SMPL-22 BVH)")->required();
+  cmd->add_flag("--compositing", compositing,
+                "Single-action checkpoints: generate each action alone and compose them by the labeler's body parts");
+  cmd->add_option("--plugins", plugin_dirs, "Extra plugin directories");
+  cmd->callback([exit_code] {
+    if (texts.size() > 2) return void(*exit_code = Fail(InvalidArgument("generate: at most two --text (two simultaneous actions)")));
+    if (!EndsWith(out, ".npz") && !EndsWith(out, ".bvh")) {
+      return void(*exit_code = Fail(InvalidArgument(out + ": the output must end in .npz (clip file) or .bvh")));
+    }
+    const worker::PluginHost host = LoadPlugins(plugin_dirs);
+    nlohmann::json options = nlohmann::json::object();
+    if (compositing) options["compositing"] = true;
+    auto generator = worker::LoadGenerator(host, model, options);
+    if (!generator.ok()) return void(*exit_code = Fail(generator.status()));
+    plugin::GenerateRequest request;
+    request.texts = texts;
+    request.seconds = seconds;
+    request.fps = fps;
+    request.seed = seed;
+    auto motion = (*generator)->Generate(request);
+    if (!motion.ok()) return void(*exit_code = Fail(motion.status()));
+    if (Status s = WriteMotion(out, *motion, texts, "motionpipe:generate:" + (*generator)->Name()); !s.ok()) {
+      return void(*exit_code = Fail(s));
+    }
+    std::printf("%s: %lld frames at %.0f fps (%.2f s) from %s -> %s\n", (*generator)->Name().c_str(),
+                static_cast<long long>(motion->num_frames()), motion->fps, static_cast<double>(motion->num_frames()) / motion->fps,
+                model.c_str(), out.c_str());
+  });
+}
+
+}  // namespace motionpipe::cli

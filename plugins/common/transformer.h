@@ -1,0 +1,87 @@
+// Transformer layers for the model plugins: the arithmetic of torch::nn::TransformerEncoderLayer and
+// TransformerDecoderLayer (post-norm, GELU, sequence first), written out so that training is cheaper:
+//  - dropout masks come from a xoshiro256+ stream seeded by torch's generator (torch's bernoulli_
+//    draws a 64-bit mt19937 number per element, ~9% of a TEMOS step), same distribution;
+//  - cross-attention to a memory of one token (TEMOS's decoder: memory = the latent z) is computed in
+//    closed form: softmax over one key is 1, so each head's output is its value projection of z,
+//    scaled by the head's attention-dropout draw; no query/key projections or softmax are needed.
+#pragma once
+
+#include <torch/torch.h>
+
+namespace motionpipe::nn {
+
+// Inverted dropout with a fast mask; identity when !training or p == 0.
+torch::Tensor Dropout(const torch::Tensor& x, double p, bool training);
+// The mask alone: entries 0 or 1/(1-p), float, of `sizes`.
+torch::Tensor DropoutMask(at::IntArrayRef sizes, double p);
+
+struct TransformerOptions {
+  int64_t dim = 256, heads = 4, ff = 1024, layers = 2;
+  double dropout = 0.1;
+};
+
+class SelfAttentionImpl : public torch::nn::Module {
+ public:
+  SelfAttentionImpl(int64_t dim, int64_t heads, double dropout);
+  // x [L, N, dim], padding [N, L] (true = ignore that key) or undefined.
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& padding);
+
+ private:
+  int64_t dim_, heads_;
+  double dropout_;
+  torch::nn::Linear in_proj_{nullptr}, out_proj_{nullptr};
+};
+TORCH_MODULE(SelfAttention);
+
+class EncoderLayerImpl : public torch::nn::Module {
+ public:
+  explicit EncoderLayerImpl(const TransformerOptions& o);
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& padding);
+
+ private:
+  TransformerOptions o_;
+  SelfAttention attention_{nullptr};
+  torch::nn::Linear linear1_{nullptr}, linear2_{nullptr};
+  torch::nn::LayerNorm norm1_{nullptr}, norm2_{nullptr};
+};
+TORCH_MODULE(EncoderLayer);
+
+class EncoderImpl : public torch::nn::Module {
+ public:
+  explicit EncoderImpl(const TransformerOptions& o);
+  torch::Tensor forward(torch::Tensor x, const torch::Tensor& padding);
+
+ private:
+  torch::nn::ModuleList layers_;
+};
+TORCH_MODULE(Encoder);
+
+// A decoder layer whose memory is one token per example: self-attention over the queries, the
+// closed-form cross-attention to the memory, feed-forward.
+class OneTokenDecoderLayerImpl : public torch::nn::Module {
+ public:
+  explicit OneTokenDecoderLayerImpl(const TransformerOptions& o);
+  // x [T, N, dim], memory [N, dim], padding [N, T].
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& memory, const torch::Tensor& padding);
+
+ private:
+  TransformerOptions o_;
+  SelfAttention attention_{nullptr};
+  torch::nn::Linear value_{nullptr}, out_proj_{nullptr};  // cross-attention: value and output projections
+  torch::nn::Linear linear1_{nullptr}, linear2_{nullptr};
+  torch::nn::LayerNorm norm1_{nullptr}, norm2_{nullptr}, norm3_{nullptr};
+};
+TORCH_MODULE(OneTokenDecoderLayer);
+
+class OneTokenDecoderImpl : public torch::nn::Module {
+ public:
+  explicit OneTokenDecoderImpl(const TransformerOptions& o);
+  torch::Tensor forward(torch::Tensor x, const torch::Tensor& memory, const torch::Tensor& padding);
+
+ private:
+  torch::nn::ModuleList layers_;
+};
+TORCH_MODULE(OneTokenDecoder);
+
+}  // namespace motionpipe::nn

@@ -1,0 +1,146 @@
+"""The train stage and the temos_sinc plugin through real workers: two ranks take the same step as one
+rank on the union batch, the exported state dict loads in Python's torch, `motionpipe generate`
+writes the requested duration, and a gang that loses a rank resumes from its checkpoint and finishes
+on the same loss curve as an uninterrupted run."""
+import csv
+import glob
+import json
+import os
+import signal
+import subprocess
+import unittest
+
+import numpy as np
+
+from harness import MOTIONPIPE, EngineTest
+
+PIPELINE = """
+name: train_test
+output_root: OUT
+seed: 1
+vars: {world: 1, steps: 2, dropout: 0.0, every: 100, lr: 0.001}
+stages:
+  corpus: {kind: corpus, params: {clips: 40, triplets: 0, shard_size: 20}}
+  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}
+  sinc:
+    kind: train
+    inputs: [singles]
+    world_size: "${vars.world}"
+    params:
+      model: temos_sinc
+      config:
+        variant: sinc
+        model: {latent: 32, layers: 1, heads: 2, ff: 64, dropout: "${vars.dropout}",
+                text_encoder: {layers: 1, vocab: 200}}
+      data: {synthetic_p: 0.5, max_frames: 60}
+      steps: "${vars.steps}"
+      batch_size: 8
+      lr: "${vars.lr}"
+      warmup: 0
+      schedule: constant
+      checkpoint_every: "${vars.every}"
+      collective_timeout: 20
+"""
+
+
+def torch_load(path):
+    """Loads a state dict with Debian's python3-torch in a subprocess; returns {name: ndarray}."""
+    code = ("import sys, torch, numpy as np; d = torch.load(sys.argv[1]); "
+            "np.savez(sys.argv[2], **{k: v.numpy() for k, v in d.items()})")
+    out = path + ".npz"
+    subprocess.run(["/usr/bin/python3", "-c", code, path, out], check=True, timeout=120)
+    with np.load(out) as z:
+        return {k: z[k] for k in z.files}
+
+
+def losses(job_dir):
+    with open(os.path.join(job_dir, "sinc", "task-00000", "losses.csv")) as f:
+        return list(csv.DictReader(f))
+
+
+class TrainStageTest(EngineTest):
+    def run_pipeline(self, name, workers, *overrides):
+        pipeline = self.write_pipeline(f"{name}.yaml", PIPELINE.replace("OUT", self.path(name)))
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", str(workers), "--threads", "1", *overrides],
+                                capture_output=True, text=True, timeout=600)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        jobs = glob.glob(self.path(name, "train_test-*"))
+        self.assertEqual(len(jobs), 1)
+        return jobs[0]
+
+    def test_two_ranks_take_the_step_of_one_rank_on_the_union_batch(self):
+        # Adam's first steps move every parameter by about lr whatever its gradient's size, so float
+        # rounding in the all-reduce shows up scaled by lr: a small lr keeps the comparison at 1e-5.
+        one = self.run_pipeline("one", 1, "vars.world=1", "vars.lr=0.0001")
+        two = self.run_pipeline("two", 2, "vars.world=2", "vars.lr=0.0001")
+        a = torch_load(os.path.join(one, "sinc", "task-00000", "state_dict.pt"))
+        b = torch_load(os.path.join(two, "sinc", "task-00000", "state_dict.pt"))
+        self.assertEqual(sorted(a), sorted(b))
+        self.assertTrue(any(k.startswith("decoder.") and k.endswith("linear1.weight") for k in a), sorted(a))
+        worst = max(float(np.abs(a[k] - b[k]).max()) for k in a)
+        self.assertLess(worst, 1e-5)
+        # ... and the parameters did move (the comparison is not of two initialisations).
+        with open(os.path.join(two, "sinc", "task-00001", "rank-1.json")) as f:
+            self.assertEqual(json.load(f)["world_size"], 2)
+        self.assertEqual([r["step"] for r in losses(one)], ["0", "1"])
+        for r1, r2 in zip(losses(one), losses(two)):
+            self.assertAlmostEqual(float(r1["loss"]), float(r2["loss"]), places=5)
+
+        # generate: the requested duration, finite, as a clip file and as BVH.
+        clip = self.path("walk.npz")
+        self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "walk forward while waving the right hand",
+                 "--seconds", "2.5", "--out", clip)
+        with np.load(clip) as z:
+            self.assertEqual(z["poses"].shape, (75, 22, 3))
+            self.assertTrue(np.isfinite(z["poses"]).all() and np.isfinite(z["trans"]).all())
+            self.assertEqual(str(z["texts"][0]), "walk forward while waving the right hand")
+        bvh = self.path("pair.bvh")
+        self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "walk forward", "--text", "wave the right hand",
+                 "--seconds", "2", "--fps", "20", "--out", bvh)
+        with open(bvh) as f:
+            text = f.read()
+        self.assertIn("Frames: 40", text)
+        refused = self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "a", "--compositing", "--out", clip, check=False)
+        self.assertEqual(refused.returncode, 1)
+        self.assertIn("compositing runs single-action models", refused.stderr)
+        missing = self.cli("generate", "--model", self.dir, "--text", "a", "--out", clip, check=False)
+        self.assertIn("not a checkpoint", missing.stderr)
+
+    def test_a_gang_that_loses_a_rank_resumes_from_its_checkpoint_and_finishes(self):
+        overrides = ["vars.world=2", "vars.steps=160", "vars.dropout=0.1", "vars.every=20"]
+        reference = self.run_pipeline("reference", 2, *overrides)
+
+        self.coordinator()
+        workers = {name: self.worker(name, extra=["--threads", "1"]) for name in ("w0", "w1", "w2")}
+        pipeline = self.write_pipeline("killed.yaml", PIPELINE.replace("OUT", self.path("killed")))
+        job = self.submit(pipeline, *overrides)
+        job_dir = None
+
+        def checkpointed():
+            nonlocal job_dir
+            found = glob.glob(self.path("killed", "train_test-*", "sinc", "state", "latest"))
+            if found:
+                job_dir = os.path.dirname(os.path.dirname(os.path.dirname(found[0])))
+            return bool(found)
+
+        self.wait_until(checkpointed, 240, "the first checkpoint")
+        busy = [w["id"] for w in self.status()["workers"] if w.get("running", 0) > 0 and w["id"] in workers]
+        self.assertTrue(busy, self.status())
+        workers[busy[0]].send(signal.SIGKILL)
+        code, out = self.wait_job(job, timeout=400)
+        self.assertEqual(code, 0, out)
+        ranks = []
+        for path in sorted(glob.glob(os.path.join(job_dir, "sinc", "task-*", "rank-*.json"))):
+            with open(path) as f:
+                ranks.append(json.load(f))
+        self.assertEqual(len(ranks), 2)
+        self.assertTrue(all(r["resumed_from"] > 0 and r["resumed_from"] % 20 == 0 for r in ranks), ranks)
+        # The curve has every step once and continues the uninterrupted run's curve.
+        resumed, uninterrupted = losses(job_dir), losses(reference)
+        self.assertEqual([int(r["step"]) for r in resumed], list(range(160)))
+        for a, b in zip(resumed, uninterrupted):
+            self.assertAlmostEqual(float(a["loss"]), float(b["loss"]), places=4, msg=f"step {a['step']}")
+
+
+if __name__ == "__main__":
+    unittest.main()

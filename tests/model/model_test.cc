@@ -1,0 +1,245 @@
+// LibTorch model code: the transformer layers against torch's own, the fast dropout, TEMOS's losses,
+// overfitting, checkpoints, per-example noise.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <filesystem>
+
+#include "../../plugins/common/text_encoder.h"
+#include "../../plugins/common/transformer.h"
+#include "../../plugins/temos_sinc/temos.h"
+
+namespace motionpipe {
+namespace {
+
+// Copies torch's layer weights into ours (same arithmetic, different module layout).
+void CopyAttention(torch::nn::MultiheadAttention& from, torch::nn::Module& to) {
+  auto params = to.named_parameters();
+  params["in_proj.weight"].copy_(from->in_proj_weight);
+  params["in_proj.bias"].copy_(from->in_proj_bias);
+  params["out_proj.weight"].copy_(from->out_proj->weight);
+  params["out_proj.bias"].copy_(from->out_proj->bias);
+}
+
+TEST(Transformer, EncoderLayerComputesWhatTorchsDoes) {
+  torch::manual_seed(3);
+  torch::NoGradGuard no_grad;
+  const int64_t dim = 32, heads = 4, ff = 64, length = 7, n = 3;
+  torch::nn::TransformerEncoderLayer theirs(torch::nn::TransformerEncoderLayerOptions(dim, heads).dim_feedforward(ff).dropout(0.1).activation(torch::kGELU));
+  nn::EncoderLayer ours(nn::TransformerOptions{dim, heads, ff, 1, 0.1});
+  CopyAttention(theirs->self_attn, *ours->named_children()["self_attn"]);
+  auto p = ours->named_parameters();
+  p["linear1.weight"].copy_(theirs->linear1->weight), p["linear1.bias"].copy_(theirs->linear1->bias);
+  p["linear2.weight"].copy_(theirs->linear2->weight), p["linear2.bias"].copy_(theirs->linear2->bias);
+  p["norm1.weight"].copy_(theirs->norm1->weight), p["norm1.bias"].copy_(theirs->norm1->bias);
+  p["norm2.weight"].copy_(theirs->norm2->weight), p["norm2.bias"].copy_(theirs->norm2->bias);
+  theirs->eval();
+  ours->eval();
+  const auto x = torch::randn({length, n, dim});
+  auto padding = torch::zeros({n, length}, torch::kBool);
+  padding[1].narrow(0, 4, 3).fill_(true);
+  padding[2].narrow(0, 6, 1).fill_(true);
+  const auto expected = theirs->forward(x, {}, padding);
+  const auto got = ours->forward(x, padding);
+  EXPECT_LT((expected - got).abs().max().item<double>(), 1e-5);
+}
+
+TEST(Transformer, OneTokenCrossAttentionComputesWhatTorchsDecoderDoes) {
+  torch::manual_seed(4);
+  torch::NoGradGuard no_grad;
+  const int64_t dim = 32, heads = 4, ff = 64, length = 9, n = 2;
+  torch::nn::TransformerDecoderLayer theirs(torch::nn::TransformerDecoderLayerOptions(dim, heads).dim_feedforward(ff).dropout(0.1).activation(torch::kGELU));
+  nn::OneTokenDecoderLayer ours(nn::TransformerOptions{dim, heads, ff, 1, 0.1});
+  CopyAttention(theirs->self_attn, *ours->named_children()["self_attn"]);
+  auto p = ours->named_parameters();
+  // Cross-attention: only the value third of torch's input projection matters with one key.
+  p["cross_value.weight"].copy_(theirs->multihead_attn->in_proj_weight.narrow(0, 2 * dim, dim));
+  p["cross_value.bias"].copy_(theirs->multihead_attn->in_proj_bias.narrow(0, 2 * dim, dim));
+  p["cross_out_proj.weight"].copy_(theirs->multihead_attn->out_proj->weight);
+  p["cross_out_proj.bias"].copy_(theirs->multihead_attn->out_proj->bias);
+  p["linear1.weight"].copy_(theirs->linear1->weight), p["linear1.bias"].copy_(theirs->linear1->bias);
+  p["linear2.weight"].copy_(theirs->linear2->weight), p["linear2.bias"].copy_(theirs->linear2->bias);
+  for (const char* norm : {"norm1", "norm2", "norm3"}) {
+    auto theirs_norm = theirs->named_parameters();
+    p[std::string(norm) + ".weight"].copy_(theirs_norm[std::string(norm) + ".weight"]);
+    p[std::string(norm) + ".bias"].copy_(theirs_norm[std::string(norm) + ".bias"]);
+  }
+  theirs->eval();
+  ours->eval();
+  const auto x = torch::randn({length, n, dim});
+  const auto z = torch::randn({n, dim});
+  auto padding = torch::zeros({n, length}, torch::kBool);
+  padding[0].narrow(0, 5, 4).fill_(true);
+  const auto expected = theirs->forward(x, z.unsqueeze(0), {}, {}, padding);
+  const auto got = ours->forward(x, z, padding);
+  EXPECT_LT((expected - got).abs().max().item<double>(), 1e-5);
+}
+
+TEST(Transformer, TrainingDropoutRepeatsUnderASeedAndVariesAcrossSeeds) {
+  torch::manual_seed(5);
+  const int64_t dim = 16, heads = 4, length = 5, n = 3;
+  nn::OneTokenDecoderLayer layer(nn::TransformerOptions{dim, heads, 32, 1, 0.5});
+  layer->train();
+  const auto x = torch::randn({length, n, dim});
+  const auto z = torch::randn({n, dim});
+  const auto padding = torch::zeros({n, length}, torch::kBool);
+  // Equal seeds: our forward draws the self-attention masks, then the cross weights; a second run
+  // under the same seed must give the same output (masks repeat), and differ under another seed.
+  torch::manual_seed(11);
+  const auto a = layer->forward(x, z, padding);
+  torch::manual_seed(11);
+  const auto b = layer->forward(x, z, padding);
+  torch::manual_seed(12);
+  const auto c = layer->forward(x, z, padding);
+  EXPECT_TRUE(torch::equal(a, b));
+  EXPECT_FALSE(torch::equal(a, c));
+  EXPECT_TRUE(torch::isfinite(a).all().item<bool>());
+}
+
+TEST(Transformer, DropoutMaskHasTheRightRateAndScale) {
+  torch::manual_seed(1);
+  const auto mask = nn::DropoutMask({1000, 1001}, 0.1);
+  const double zeros = mask.eq(0).to(torch::kFloat64).mean().item<double>();
+  EXPECT_NEAR(zeros, 0.1, 0.002);
+  EXPECT_NEAR(mask.to(torch::kFloat64).mean().item<double>(), 1.0, 0.003);
+  EXPECT_NEAR(mask.max().item<double>(), 1.0 / 0.9, 1e-6);
+  torch::manual_seed(1);
+  EXPECT_TRUE(torch::equal(mask, nn::DropoutMask({1000, 1001}, 0.1)));
+  const auto x = torch::randn({4, 5});
+  EXPECT_TRUE(torch::equal(nn::Dropout(x, 0.1, false), x));
+  EXPECT_TRUE(torch::equal(nn::Dropout(x, 0.0, true), x));
+}
+
+temos::Temos TinyTemos(double dropout) {
+  const nlohmann::json config = {{"latent", 32}, {"layers", 1}, {"heads", 2}, {"ff", 64}, {"dropout", dropout},
+                                 {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
+  temos::Temos net(temos::TemosOptions::FromJson(config));
+  net->text_encoder()->Fit({"walk forward", "wave the right hand", "jump in place", "sit down slowly", "turn left"});
+  return net;
+}
+
+struct TinyBatch {
+  std::vector<std::vector<std::string>> texts = {{"walk forward"}, {"wave the right hand"}, {"jump in place"}, {"sit down slowly"}};
+  torch::Tensor features, padding;
+  TinyBatch() {
+    torch::manual_seed(9);
+    const int64_t frames = 20;
+    padding = torch::zeros({4, frames}, torch::kBool);
+    padding[1].narrow(0, 15, 5).fill_(true);
+    padding[3].narrow(0, 12, 8).fill_(true);
+    // Smooth curves per example (so the decoder can fit them), zero on padded frames.
+    const auto t = torch::linspace(0, 1, frames).view({frames, 1, 1});
+    const auto phase = torch::randn({1, 4, temos::kFeatureDim});
+    features = torch::sin(6.0 * t + phase).masked_fill(padding.t().unsqueeze(2), 0.0);
+  }
+};
+
+TEST(Temos, MaskedLossIgnoresPaddingAndWeighsExamplesEqually) {
+  const auto target = torch::zeros({4, 2, 3});
+  auto prediction = torch::zeros({4, 2, 3});
+  auto padding = torch::zeros({2, 4}, torch::kBool);
+  padding[1].narrow(0, 1, 3).fill_(true);        // example 1 has one frame
+  prediction.select(1, 1).narrow(0, 1, 3).fill_(100.0);  // garbage on its padded frames: ignored
+  prediction[1][0].fill_(0.5);                   // example 0: one of 4 frames off by 0.5 -> smooth-L1 0.125
+  // example 0's mean: 0.125 / 4; example 1's: 0 -> batch mean 0.015625
+  EXPECT_NEAR(temos::MaskedSmoothL1(prediction, target, padding).item<double>(), 0.125 / 4 / 2, 1e-7);
+}
+
+TEST(Temos, KlOfIdenticalGaussiansIsZeroAndMatchesTheClosedForm) {
+  const auto mu = torch::tensor({{0.5f, -1.0f}});
+  const auto logvar = torch::tensor({{0.2f, -0.3f}});
+  EXPECT_NEAR(temos::KlDivergence(mu, logvar, mu, logvar).item<double>(), 0.0, 1e-7);
+  const auto zeros = torch::zeros({1, 2});
+  // KL(N(mu, s^2) || N(0, 1)) = 0.5 * sum(s^2 + mu^2 - 1 - log s^2)
+  const double expected = 0.5 * ((std::exp(0.2) + 0.25 - 1 - 0.2) + (std::exp(-0.3) + 1.0 - 1 + 0.3));
+  EXPECT_NEAR(temos::KlDivergence(mu, logvar, zeros, zeros).item<double>(), expected, 1e-6);
+}
+
+TEST(Temos, OverfitsASmallBatch) {
+  torch::manual_seed(2);
+  auto net = TinyTemos(0.0);
+  const TinyBatch batch;
+  torch::optim::AdamW optimizer(net->parameters(), torch::optim::AdamWOptions(2e-3));
+  net->train();
+  double first = 0, last = 0;
+  for (int step = 0; step < 150; ++step) {
+    auto losses = net->Losses(batch.texts, batch.features, batch.padding);
+    optimizer.zero_grad();
+    losses.at("loss").backward();
+    optimizer.step();
+    if (step == 0) first = losses.at("loss").item<double>();
+    last = losses.at("loss").item<double>();
+  }
+  EXPECT_LT(last, 0.25 * first) << "first " << first << " last " << last;
+}
+
+TEST(Temos, SavedAndLoadedModelGivesIdenticalOutputs) {
+  torch::manual_seed(3);
+  auto net = TinyTemos(0.1);
+  net->eval();
+  const TinyBatch batch;
+  const std::string dir = ::testing::TempDir() + "/temos_ckpt";
+  std::filesystem::create_directories(dir);
+  torch::serialize::OutputArchive out;
+  net->save(out);
+  out.save_to(dir + "/model.pt");
+  net->text_encoder()->SaveExtras(dir);
+  torch::manual_seed(99);  // different initial weights
+  auto loaded = TinyTemos(0.1);
+  loaded->text_encoder()->LoadExtras(dir);
+  torch::serialize::InputArchive in;
+  in.load_from(dir + "/model.pt");
+  loaded->load(in);
+  loaded->eval();
+  torch::NoGradGuard no_grad;
+  const auto a = net->EncodeText(batch.texts, false);
+  const auto b = loaded->EncodeText(batch.texts, false);
+  EXPECT_TRUE(torch::equal(a.mu, b.mu));
+  EXPECT_TRUE(torch::equal(net->Decode(a.mu, batch.padding), loaded->Decode(b.mu, batch.padding)));
+  EXPECT_TRUE(torch::equal(net->EncodeMotion(batch.features, batch.padding, false).mu, loaded->EncodeMotion(batch.features, batch.padding, false).mu));
+}
+
+TEST(Temos, ExampleNoiseDependsOnlyOnTheExamplesSeed) {
+  const auto all = temos::ExampleNoise(torch::tensor({11, 12, 13, 14}, torch::kInt64), 2, 8);
+  const auto odd = temos::ExampleNoise(torch::tensor({12, 14}, torch::kInt64), 2, 8);
+  ASSERT_EQ(all.sizes(), (std::vector<int64_t>{2, 4, 8}));
+  EXPECT_TRUE(torch::equal(all.select(1, 1), odd.select(1, 0)));
+  EXPECT_TRUE(torch::equal(all.select(1, 3), odd.select(1, 1)));
+  EXPECT_FALSE(torch::equal(all.select(1, 0), all.select(1, 1)));
+}
+
+TEST(Temos, SplitBatchGradientsAverageToTheUnionBatchGradient) {
+  // The train stage averages the ranks' gradients; with per-example losses and per-example noise
+  // that is the union batch's gradient (dropout off, where masks would differ by construction).
+  torch::manual_seed(6);
+  auto net = TinyTemos(0.0);
+  net->train();
+  const TinyBatch batch;
+  const auto seeds = torch::tensor({101, 102, 103, 104}, torch::kInt64);
+  const auto gradients = [&](const std::vector<int64_t>& rows) {
+    const auto index = torch::tensor(rows, torch::kInt64);
+    std::vector<std::vector<std::string>> texts;
+    for (int64_t r : rows) texts.push_back(batch.texts[static_cast<size_t>(r)]);
+    net->zero_grad();
+    net->Losses(texts, batch.features.index_select(1, index), batch.padding.index_select(0, index), seeds.index_select(0, index))
+        .at("loss")
+        .backward();
+    std::vector<torch::Tensor> g;
+    for (const auto& p : net->parameters()) g.push_back(p.grad().defined() ? p.grad().clone() : torch::zeros_like(p));
+    return g;
+  };
+  const auto whole = gradients({0, 1, 2, 3});
+  const auto even = gradients({0, 2});
+  const auto odd = gradients({1, 3});
+  double worst = 0;
+  const auto names = net->named_parameters().keys();
+  for (size_t k = 0; k < whole.size(); ++k) {
+    const double error = ((even[k] + odd[k]) / 2 - whole[k]).abs().max().item<double>();
+    EXPECT_LT(error, 1e-5) << names[k];
+    worst = std::max(worst, error);
+  }
+  EXPECT_LT(worst, 1e-5);
+}
+
+}  // namespace
+}  // namespace motionpipe
