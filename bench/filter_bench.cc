@@ -18,28 +18,16 @@
 #include "motionpipe/similarity/filter.h"
 #include "motionpipe/similarity/similarity.h"
 
+#include "bench_util.h"
+
 namespace fs = std::filesystem;
 using namespace motionpipe;
 using namespace motionpipe::similarity;
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::Run;
+using bench::Since;
 
 namespace {
-
-double Since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-std::string Run(const std::string& command) {
-  std::string output;
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return output;
-  char buffer[4096];
-  while (size_t n = std::fread(buffer, 1, sizeof buffer, pipe)) output.append(buffer, n);
-  const int status = ::pclose(pipe);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    std::fprintf(stderr, "command failed: %s\n%s\n", command.c_str(), output.c_str());
-    std::exit(1);
-  }
-  return output;
-}
 
 struct Item {
   const TripletColumns* columns;

@@ -1,0 +1,32 @@
+// What the benchmarks share: a stopwatch and running a command (the reference implementations, the
+// motionpipe binary) for its output, exiting with its output when it fails.
+#pragma once
+
+#include <sys/wait.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+namespace motionpipe::bench {
+
+using Clock = std::chrono::steady_clock;
+
+inline double Since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+inline std::string Run(const std::string& command) {
+  std::string output;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return output;
+  char buffer[4096];
+  while (size_t n = std::fread(buffer, 1, sizeof buffer, pipe)) output.append(buffer, n);
+  const int status = ::pclose(pipe);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    std::fprintf(stderr, "command failed: %s\n%s\n", command.c_str(), output.c_str());
+    std::exit(1);
+  }
+  return output;
+}
+
+}  // namespace motionpipe::bench
