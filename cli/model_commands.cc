@@ -1,6 +1,9 @@
 // `motionpipe generate`: run a trained text-to-motion checkpoint (TEMOS/SINC and its baselines) and
-// write the motion as a clip file or a BVH. Torch stays in the plugins: the checkpoint's model.json
+// write the motion as a clip file or a BVH. `motionpipe edit`: edit a user's motion (clip file, AMASS
+// npz or BVH) with a trained editor (MDT, TMED, MDM, MDM-BP). Torch stays in the plugins: the checkpoint's model.json
 // names the plugin that loads it.
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <iostream>
 
@@ -48,6 +51,57 @@ Status WriteMotion(const std::string& out, const Motion& motion, const std::vect
 }  // namespace
 
 void AddModelCommands(CLI::App& app, int* exit_code) {
+  {  // edit
+    auto* cmd = app.add_subcommand("edit", "Edit a motion from a text instruction with a trained editor (MDT, TMED, MDM, MDM-BP)");
+    static std::string model, source_path, clip_id, text, out, sampler = "ddpm";
+    static std::vector<std::string> plugin_dirs;
+    static int steps = 0;
+    static uint64_t seed = 1;
+    static double fps = 30;
+    static bool body_parts = false;
+    cmd->add_option("--model", model, "Checkpoint: a model/ directory, a train task's output or a train stage's output")->required();
+    cmd->add_option("--source", source_path, "The motion to edit: clip file (.npz), AMASS npz or BVH")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--clip", clip_id, "Clip id when the source file holds several (default: the first)");
+    cmd->add_option("--text", text, "The edit instruction, e.g. \"raise the right arm higher\"")->required();
+    cmd->add_option("--out", out, "Output: .npz (clip file) or .bvh (SMPL-22 BVH)")->required();
+    cmd->add_option("--sampler", sampler, "ddpm (every step) or ddim")->capture_default_str()->check(CLI::IsMember({"ddpm", "ddim"}));
+    cmd->add_option("--steps", steps, "DDIM steps (default 50)")->check(CLI::Range(1, 100000));
+    cmd->add_option("--seed", seed, "Sampling seed")->capture_default_str();
+    cmd->add_option("--fps", fps, "Frame rate to resample BVH/AMASS sources to")->capture_default_str()->check(CLI::Range(1.0, 240.0));
+    cmd->add_flag("--body-parts", body_parts, "MDM checkpoints: keep the body parts the text does not involve from the source (MDM-BP)");
+    cmd->add_option("--plugins", plugin_dirs, "Extra plugin directories");
+    cmd->callback([exit_code] {
+      if (!EndsWith(out, ".npz") && !EndsWith(out, ".bvh")) {
+        return void(*exit_code = Fail(InvalidArgument(out + ": the output must end in .npz (clip file) or .bvh")));
+      }
+      auto clips = LoadMotionFile(source_path, fps);
+      if (!clips.ok()) return void(*exit_code = Fail(clips.status()));
+      const auto it = clip_id.empty() ? clips->begin()
+                                      : std::find_if(clips->begin(), clips->end(), [](const Clip& c) { return c.id == clip_id; });
+      if (it == clips->end()) return void(*exit_code = Fail(NotFound(source_path + ": no clip '" + clip_id + "'")));
+      const worker::PluginHost host = LoadPlugins(plugin_dirs);
+      nlohmann::json options = nlohmann::json::object();
+      if (body_parts) options["body_parts"] = true;
+      auto generator = worker::LoadGenerator(host, model, options);
+      if (!generator.ok()) return void(*exit_code = Fail(generator.status()));
+      plugin::GenerateRequest request;
+      request.texts = {text};
+      request.source = &it->motion;
+      request.seed = seed;
+      request.sampler = sampler;
+      request.steps = steps;
+      const auto started = std::chrono::steady_clock::now();
+      auto edited = (*generator)->Generate(request);
+      if (!edited.ok()) return void(*exit_code = Fail(edited.status()));
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      if (Status s = WriteMotion(out, *edited, {text}, "motionpipe:edit:" + (*generator)->Name() + ":" + it->source); !s.ok()) {
+        return void(*exit_code = Fail(s));
+      }
+      std::printf("%s: edited %s (%lld frames) with \"%s\" in %.1f s (%s) -> %s\n", (*generator)->Name().c_str(), it->id.c_str(),
+                  static_cast<long long>(edited->num_frames()), text.c_str(), seconds,
+                  sampler == "ddim" ? ("DDIM " + std::to_string(steps > 0 ? steps : 50) + " steps").c_str() : "DDPM", out.c_str());
+    });
+  }
   auto* cmd = app.add_subcommand("generate", "Generate a motion from text with a trained checkpoint (TEMOS/SINC and baselines)");
   static std::string model, out;
   static std::vector<std::string> texts, plugin_dirs;

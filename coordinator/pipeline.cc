@@ -248,6 +248,15 @@ KindRegistry KindRegistry::WithBuiltins() {
     if (!p.contains("model") || !p["model"].is_string()) errors->push_back(path + ".params.model: the model plugin's name is required (e.g. temos_sinc)");
     if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;  // training runs long
   });
+  // Editing a test split with a trained editor: `shards` tasks (default 2), each every count-th triplet.
+  registry.Add("edit", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    if (!stage->shards_set) stage->shards = 2;
+    stage->reduce = false;
+    if (stage->inputs.empty()) errors->push_back(path + ": needs inputs: the train stage of the editor and a stage with triplets");
+    const auto& p = stage->params;
+    if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim") errors->push_back(path + ".params.sampler: ddpm or ddim");
+    if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
+  });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
   registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
     stage->shards = 1;

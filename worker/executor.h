@@ -69,6 +69,7 @@ class PluginHost;
 // the stages that use labelers access to plugin labelers (may be null).
 void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins = nullptr);
 void RegisterSincExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
+void RegisterModelExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
 
 // Runs `executor` on the task with its thread budget, catching exceptions.
 TaskReport RunTask(StageExecutor& executor, TaskContext& ctx);

@@ -14,7 +14,8 @@ namespace motionpipe::plugin {
 
 struct GenerateRequest {
   std::vector<std::string> texts;  // one text, or the actions of a composition (compositing baselines)
-  double seconds = 4;
+  double seconds = 4;              // text-to-motion duration (editors keep the source's length)
+  int64_t frames = 0;              // > 0: exactly this many frames (overrides seconds and the source)
   double fps = 30;
   uint64_t seed = 1;
   const Motion* source = nullptr;  // editing models: the motion to edit
@@ -27,6 +28,16 @@ class Generator {
   virtual ~Generator() = default;
   virtual std::string Name() const = 0;
   virtual Result<Motion> Generate(const GenerateRequest& request) = 0;
+  // Several requests at once (models batch them where they can; they share sampler and steps).
+  virtual Result<std::vector<Motion>> GenerateBatch(const std::vector<GenerateRequest>& requests) {
+    std::vector<Motion> out;
+    for (const auto& r : requests) {
+      auto m = Generate(r);
+      if (!m.ok()) return m.status();
+      out.push_back(std::move(*m));
+    }
+    return out;
+  }
   // Embeddings in the model's latent space (evaluators): of motions and of texts.
   virtual Result<std::vector<std::vector<float>>> EncodeMotions(const std::vector<Motion>& motions) {
     (void)motions;

@@ -1,11 +1,14 @@
 #include "text_encoder.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include "motionpipe/base/file.h"
 #include "motionpipe/formats/npz.h"
@@ -304,6 +307,31 @@ void TextEncoderImpl::LoadExtras(const std::string& dir) {
   } else {
     Fit({});
   }
+}
+
+void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, const std::string& state_dir, int rank) {
+  if (encoder->options().kind != "learned") {
+    encoder->Fit({});
+    return;
+  }
+  const std::string path = state_dir.empty() ? "" : state_dir + "/tokenizer.model";
+  if (!path.empty() && std::filesystem::exists(path)) {
+    encoder->LoadExtras(state_dir);
+    return;
+  }
+  if (rank == 0 || path.empty()) {
+    encoder->Fit(texts);
+    if (!path.empty()) {
+      std::filesystem::create_directories(state_dir);
+      encoder->SaveExtras(state_dir);
+    }
+    return;
+  }
+  for (int waited = 0; !std::filesystem::exists(path); ++waited) {
+    if (waited > 6000) throw std::runtime_error("rank " + std::to_string(rank) + ": rank 0 never wrote " + path);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  encoder->LoadExtras(state_dir);
 }
 
 }  // namespace motionpipe::nn

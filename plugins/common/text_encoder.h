@@ -87,6 +87,11 @@ class TextEncoderImpl : public torch::nn::Module {
 };
 TORCH_MODULE(TextEncoder);
 
+// Fits a training run's text encoder once for all its ranks: rank 0 trains the tokenizer (or loads
+// the table) and writes it into state_dir, the other ranks and resumed runs load that file, so every
+// rank has the same vocabulary. An empty state_dir fits locally.
+void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, const std::string& state_dir, int rank);
+
 // Sinusoidal positional encodings [length, 1, dim].
 torch::Tensor PositionalEncoding(int64_t length, int64_t dim);
 

@@ -1,17 +1,32 @@
-// Thread settings for LibTorch in a worker: torch's intra-op pool, its inter-op pool and the BLAS.
-// Debian's LibTorch uses the system OpenBLAS (pthreads build), whose own thread pool ignores
-// torch::set_num_threads and spins on sched_yield beside the worker's threads; it is sized here too.
+// Run-time settings for LibTorch in a worker: torch's intra-op pool, its inter-op pool and the BLAS
+// (Debian's LibTorch uses the system OpenBLAS, pthreads build, whose own thread pool ignores
+// torch::set_num_threads and spins on sched_yield beside the worker's threads), and the allocator.
 #pragma once
 
 #include <torch/torch.h>
 
 #include <dlfcn.h>
+#include <malloc.h>
 
 #include <algorithm>
 
 namespace motionpipe::nn {
 
+// glibc serves every block over 32 MiB with a fresh mmap and unmaps it on free, so a model whose
+// activations are that large (attention scores of long sequences) pays page faults that zero the
+// memory again on every step: half of the CPU time in system mode. Heap-only allocation with a
+// high trim threshold lets the freed blocks be reused. Done once per process.
+inline void KeepLargeAllocations() {
+  static const bool done = [] {
+    mallopt(M_MMAP_MAX, 0);
+    mallopt(M_TRIM_THRESHOLD, 1 << 30);
+    return true;
+  }();
+  (void)done;
+}
+
 inline void SetTorchThreads(int threads) {
+  KeepLargeAllocations();
   threads = std::max(1, threads);
   torch::set_num_threads(threads);
   using SetBlasThreads = void (*)(int);

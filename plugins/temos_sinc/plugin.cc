@@ -10,6 +10,7 @@
 //
 // Factories: ("model", "temos_sinc") for the train stage; ("generator", "temos_sinc") loads a
 // checkpoint directory written by the train stage.
+#include <omp.h>
 #include <torch/torch.h>
 
 #include <chrono>
@@ -20,6 +21,7 @@
 #include "../api/generator.hpp"
 #include "../api/model.hpp"
 #include "../api/plugin.hpp"
+#include "../common/threads.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/features/temos135.h"
 #include "motionpipe/labels/labeler.h"
@@ -148,32 +150,9 @@ class SincModel : public plugin::Model {
     if (context.rank == 0) std::fprintf(stderr, "temos_sinc: text encoder from %s (%s)\n", dir.c_str(), freeze ? "frozen" : "fine-tuned");
   }
 
-  // The tokenizer is made once per training run: rank 0 trains it into state_dir, the other ranks
-  // (and a resumed run) load that file, so every rank has the same vocabulary.
   void FitTextEncoder(const SincDataset& dataset, const plugin::DataContext& context) {
     auto encoder = net_->text_encoder();
-    if (encoder->options().kind != "learned") {
-      encoder->Fit({});
-      return;
-    }
-    const std::string path = context.state_dir.empty() ? "" : context.state_dir + "/tokenizer.model";
-    if (!path.empty() && fs::exists(path)) {
-      encoder->LoadExtras(context.state_dir);
-      return;
-    }
-    if (context.rank == 0 || path.empty()) {
-      encoder->Fit(dataset.AllTexts());
-      if (!path.empty()) {
-        fs::create_directories(context.state_dir);
-        encoder->SaveExtras(context.state_dir);
-      }
-      return;
-    }
-    for (int waited = 0; !fs::exists(path); ++waited) {
-      if (waited > 6000) throw std::runtime_error("rank " + std::to_string(context.rank) + ": rank 0 never wrote " + path);
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    encoder->LoadExtras(context.state_dir);
+    nn::FitShared(encoder, dataset.AllTexts(), context.state_dir, context.rank);
   }
 
   nlohmann::json config_;
@@ -206,8 +185,9 @@ class SincGenerator : public plugin::Generator {
 
   Result<Motion> Generate(const plugin::GenerateRequest& request) override {
     if (request.texts.empty()) return InvalidArgument("generate: give at least one text");
-    const auto frames = static_cast<int64_t>(std::lround(request.seconds * request.fps));
+    const int64_t frames = request.frames > 0 ? request.frames : static_cast<int64_t>(std::lround(request.seconds * request.fps));
     if (frames < 2 || frames > 10000) return InvalidArgument("generate: " + std::to_string(frames) + " frames is not a sensible duration");
+    nn::SetTorchThreads(omp_get_max_threads());  // the calling task's budget, for torch and the BLAS
     try {
       torch::NoGradGuard no_grad;
       torch::manual_seed(request.seed);

@@ -208,6 +208,7 @@ void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plug
   registry->Register("corpus", std::make_unique<CorpusStage>());
   registry->Register("filter", std::make_unique<FilterStage>());
   RegisterSincExecutors(registry, plugins);
+  RegisterModelExecutors(registry, plugins);
 }
 
 }  // namespace motionpipe::worker

@@ -1,0 +1,115 @@
+// The editing networks (REFERENCE 3.2-3.3), all predicting the clean target x0 from a noisy target:
+//
+//   mdt   SimMotionEdit's Motion Diffusion Transformer. A condition transformer over [text token;
+//         source frames] (post-LN encoder) enhances both and feeds the similarity head (MLP with
+//         SiLU -> K classes, or 1 value in regression); DiT blocks with adaLN-Zero run over
+//         [enhanced source; separator; noisy target], conditioned on timestep embedding + enhanced
+//         text token. Ablations: raw text/motion features instead of enhanced, no text in adaLN.
+//   tmed  MotionFix's TMED: one transformer encoder over [timestep; text tokens; source; separator;
+//         noisy target].
+//   mdm   MDM: one transformer encoder over [timestep + text token; noisy target], no source
+//         (MDM-BP is MDM sampled with the unedited body parts kept from the source).
+#pragma once
+
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include "../common/text_encoder.h"
+#include "../common/transformer.h"
+#include "diffusion.h"
+
+namespace motionpipe::mdt {
+
+inline constexpr int64_t kEditFeatureDim = 207;
+
+struct EditorOptions {
+  std::string variant = "mdt";  // mdt | tmed | mdm
+  int64_t dim = 512, cond_layers = 4, layers = 8, heads = 8, ff = 1024, sim_hidden = 1024;
+  double dropout = 0.1;
+  // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
+  std::string aux = "classes";
+  int classes = 3;
+  double aux_weight = 0.05;            // the authors' code; the paper writes L = L_aux + L_e (1.0)
+  std::vector<double> class_weights;   // default [1, 0, 1] for K = 3 (the authors' code), else ones
+  bool enhanced_text = true, enhanced_motion = true;  // DiT inputs: condition-transformer outputs or raw projections
+  bool adaln_text = true;              // the text token joins the timestep in adaLN (reference default: zeros)
+  int64_t diffusion_steps = 300;
+  double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
+  double guidance_motion = 2, guidance_text = 2;                  // g_m, g_t
+  nn::TextEncoderOptions text;
+  static EditorOptions FromJson(const nlohmann::json& j);
+  nlohmann::json ToJson() const;
+  bool uses_source() const { return variant != "mdm"; }
+  int64_t sim_outputs() const { return aux == "regression" ? 1 : classes; }
+};
+
+// What the denoiser is conditioned on; drop_* [N] bool remove the text / the source per example.
+struct Condition {
+  std::vector<std::string> texts;
+  torch::Tensor source;          // [Ts, N, 207] normalised (undefined for mdm)
+  torch::Tensor source_padding;  // [N, Ts] true = padding
+  torch::Tensor drop_text, drop_source;
+};
+
+struct Prediction {
+  torch::Tensor x0;          // [Tt, N, 207]
+  torch::Tensor similarity;  // mdt: [N, Ts, K] logits (or [N, Ts] regression); else undefined
+};
+
+// A DiT block with adaLN-Zero: shift/scale/gate for attention and MLP from SiLU -> Linear(d, 6d),
+// zero-initialised, so that the block starts as the identity; LayerNorms without affine; tanh-GELU MLP.
+class DiTBlockImpl : public torch::nn::Module {
+ public:
+  DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff);
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& c, const torch::Tensor& padding);
+
+ private:
+  int64_t dim_;
+  nn::SelfAttention attention_{nullptr};
+  torch::nn::Linear fc1_{nullptr}, fc2_{nullptr}, modulation_{nullptr};
+};
+TORCH_MODULE(DiTBlock);
+
+class EditorNetImpl : public torch::nn::Module {
+ public:
+  explicit EditorNetImpl(const EditorOptions& o);
+  // xt [Tt, N, 207] at steps t [N], target_padding [N, Tt].
+  Prediction forward(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
+  nn::TextEncoder text_encoder() const { return text_encoder_; }
+  const EditorOptions& options() const { return o_; }
+
+ private:
+  // Pooled text [N, dim] (zeros where dropped) and token features [L, N, dim] with padding.
+  std::pair<torch::Tensor, nn::TextFeatures> EncodeText(const Condition& c);
+  torch::Tensor TimeEmbedding(const torch::Tensor& t);
+  Prediction ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
+  Prediction ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
+
+  EditorOptions o_;
+  nn::TextEncoder text_encoder_{nullptr};
+  torch::nn::Linear text_proj_{nullptr}, source_in_{nullptr}, target_in_{nullptr}, out_{nullptr};
+  torch::nn::Sequential time_mlp_{nullptr}, sim_head_{nullptr};
+  nn::Encoder condition_{nullptr}, encoder_{nullptr};
+  torch::nn::ModuleList blocks_{nullptr};
+  torch::nn::Linear final_modulation_{nullptr};
+  torch::Tensor separator_;
+};
+TORCH_MODULE(EditorNet);
+
+// Masked MSE on x0 averaged per feature group (the 207-d layout's five), then over the groups, per
+// example, then over the examples. prediction/target [T, N, 207], padding [N, T].
+torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding);
+
+// The auxiliary similarity loss (SimMotionEdit eq. 11) on the frames that count: a curve exists
+// (classes >= 0), the frame is real (not padding) and the example's source was not dropped.
+// classes mode: cross-entropy with the class weights, averaged by weight; regression: MSE of the
+// sigmoid against S^N. Returns "aux" (and "aux_accuracy" for classes).
+std::map<std::string, torch::Tensor> SimilarityLoss(const torch::Tensor& prediction, const torch::Tensor& classes, const torch::Tensor& similarity,
+                                                    const torch::Tensor& source_padding, const torch::Tensor& drop_source, const EditorOptions& o);
+
+// Columns of the 207-d feature that belong to each body part (SMPL-22 parts; global = pelvis
+// velocity, orientation, heading change): [6, 207] bool.
+torch::Tensor PartColumns();
+
+}  // namespace motionpipe::mdt

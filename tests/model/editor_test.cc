@@ -1,0 +1,176 @@
+// The MDT editor's pieces: the noise schedule, guidance, adaLN-Zero, the similarity loss's masks,
+// overfitting, editing length and finiteness, sampler determinism.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cmath>
+
+#include "../../plugins/mdt_editor/diffusion.h"
+#include "../../plugins/mdt_editor/editor.h"
+
+namespace motionpipe::mdt {
+namespace {
+
+TEST(Diffusion, CosineScheduleHasTheReferenceValues) {
+  const CosineSchedule s(300);
+  ASSERT_EQ(s.betas().size(), 300u);
+  // alpha_bar(t) = f(t+1)/f(0) after step t, f(t) = cos^2(((t/T) + 0.008)/1.008 * pi/2)
+  const auto f = [](double t) {
+    const double c = std::cos((t / 300.0 + 0.008) / 1.008 * M_PI / 2);
+    return c * c;
+  };
+  EXPECT_NEAR(s.alpha_bar()[0], f(1) / f(0), 1e-12);
+  EXPECT_NEAR(s.alpha_bar()[149], f(150) / f(0), 1e-9);
+  EXPECT_NEAR(s.betas()[0], 1 - f(1) / f(0), 1e-12);
+  EXPECT_NEAR(s.betas()[299], 0.999, 1e-12);  // clipped at 0.999
+  for (size_t t = 1; t < 300; ++t) EXPECT_LT(s.alpha_bar()[t], s.alpha_bar()[t - 1]);
+  EXPECT_LT(s.alpha_bar()[299], 1e-6);
+  // The fixed-small posterior variance beta (1 - abar_{t-1}) / (1 - abar_t)
+  EXPECT_NEAR(s.PosteriorVariance(10), s.betas()[10] * (1 - s.alpha_bar()[9]) / (1 - s.alpha_bar()[10]), 1e-12);
+}
+
+TEST(Diffusion, QSampleAndPosteriorAreConsistent) {
+  const CosineSchedule s(300);
+  const auto x0 = torch::randn({5, 2, 3});
+  const auto eps = torch::randn({5, 2, 3});
+  const auto xt = s.QSample(x0, torch::tensor({0, 200}), eps);
+  EXPECT_NEAR((xt.select(1, 1) - (std::sqrt(s.alpha_bar()[200]) * x0.select(1, 1) + std::sqrt(1 - s.alpha_bar()[200]) * eps.select(1, 1)))
+                  .abs().max().item<double>(), 0.0, 1e-5);
+  // With the true x0 and eps, a DDIM step lands on the same trajectory: x_{t'} = sqrt(abar') x0 + sqrt(1-abar') eps.
+  const auto xt1 = s.QSample(x0, torch::tensor({200, 200}), eps);
+  const auto next = s.DdimStep(x0, xt1, 200, 100);
+  const auto expected = std::sqrt(s.alpha_bar()[100]) * x0 + std::sqrt(1 - s.alpha_bar()[100]) * eps;
+  EXPECT_LT((next - expected).abs().max().item<double>(), 1e-4);
+  EXPECT_EQ(DdimTimesteps(300, 50).front(), 299);
+  EXPECT_EQ(DdimTimesteps(300, 50).back(), 0);
+  EXPECT_EQ(DdimTimesteps(300, 50).size(), 50u);
+}
+
+TEST(Diffusion, ThreeWayGuidanceIsTheFormula) {
+  const auto u = torch::tensor({1.0f}), cm = torch::tensor({2.0f}), ctm = torch::tensor({4.0f});
+  // u + g_m (c_m - u) + g_t (c_tm - c_m) = 1 + 2 * 1 + 3 * 2
+  EXPECT_FLOAT_EQ(GuideThreeWay(u, cm, ctm, 2.0, 3.0).item<float>(), 9.0f);
+  // g = 1, 1 gives back the fully conditioned prediction.
+  EXPECT_FLOAT_EQ(GuideThreeWay(u, cm, ctm, 1.0, 1.0).item<float>(), 4.0f);
+}
+
+TEST(Editor, AdaLnZeroBlocksStartAsTheIdentity) {
+  torch::manual_seed(1);
+  DiTBlock block(32, 4, 64);
+  const auto x = torch::randn({7, 3, 32});
+  const auto c = torch::randn({3, 32});
+  EXPECT_TRUE(torch::equal(block->forward(x, c, torch::zeros({3, 7}, torch::kBool)), x));
+}
+
+EditorOptions Tiny(const std::string& variant, const std::string& aux = "classes") {
+  nlohmann::json j = {{"variant", variant},
+                      {"model", {{"dim", 32}, {"cond_layers", 1}, {"layers", 2}, {"heads", 4}, {"ff", 64}, {"sim_hidden", 32}, {"dropout", 0.0},
+                                 {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"dim", 32}}}}},
+                      {"diffusion", {{"steps", 50}}}};
+  j["aux"] = {{"mode", variant == "mdt" ? aux : "none"}};
+  return EditorOptions::FromJson(j);
+}
+
+TEST(Editor, SimilarityLossCountsOnlyRealFramesWithACurveAndASource) {
+  EditorOptions o = Tiny("mdt");
+  o.class_weights = {1, 1, 1};
+  // Two examples, 3 source frames; logits favour class 0 everywhere.
+  auto logits = torch::zeros({2, 3, 3});
+  logits.select(2, 0).fill_(2.0);
+  auto classes = torch::tensor({{0, 1, -1}, {2, 2, 2}}, torch::kInt64);
+  auto padding = torch::tensor({{0, 1, 0}, {0, 0, 0}}, torch::kInt64).to(torch::kBool);  // frame 1 of example 0 is padding
+  const auto similarity = torch::zeros({2, 3});
+  const double p0 = std::exp(2.0) / (std::exp(2.0) + 2);
+  // Example 1's source dropped: only frame 0 of example 0 counts (class 0).
+  auto out = SimilarityLoss(logits, classes, similarity, padding, torch::tensor({0, 1}).to(torch::kBool), o);
+  EXPECT_NEAR(out["aux"].item<double>(), -std::log(p0), 1e-6);
+  EXPECT_NEAR(out["aux_accuracy"].item<double>(), 1.0, 1e-6);
+  // Nothing dropped: frames (0,0) class 0 and example 1's three class-2 frames.
+  out = SimilarityLoss(logits, classes, similarity, padding, torch::tensor({0, 0}).to(torch::kBool), o);
+  const double p2 = 1 / (std::exp(2.0) + 2);
+  EXPECT_NEAR(out["aux"].item<double>(), (-std::log(p0) - 3 * std::log(p2)) / 4, 1e-6);
+  EXPECT_NEAR(out["aux_accuracy"].item<double>(), 0.25, 1e-6);
+  // The reference class weights [1, 0, 1] ignore the middle class.
+  o.class_weights = {1, 0, 1};
+  classes = torch::tensor({{1, 1, 1}, {0, 1, 1}}, torch::kInt64);
+  out = SimilarityLoss(logits, classes, similarity, torch::zeros({2, 3}, torch::kBool), torch::tensor({0, 0}).to(torch::kBool), o);
+  EXPECT_NEAR(out["aux"].item<double>(), -std::log(p0), 1e-6);
+}
+
+struct TinyTriplets {
+  std::vector<std::string> texts = {"raise the right arm", "walk faster", "bend the knees more"};
+  torch::Tensor source, source_padding, target, target_padding;
+  TinyTriplets() {
+    torch::manual_seed(9);
+    const auto t = torch::linspace(0, 1, 12).view({12, 1, 1});
+    source = torch::sin(5.0 * t + torch::randn({1, 3, kEditFeatureDim}));
+    target = source + 0.5 * torch::cos(3.0 * t + torch::randn({1, 3, kEditFeatureDim}));
+    source_padding = torch::zeros({3, 12}, torch::kBool);
+    target_padding = torch::zeros({3, 12}, torch::kBool);
+    target_padding[2].narrow(0, 9, 3).fill_(true);
+  }
+};
+
+TEST(Editor, EveryVariantOverfitsAFewTriplets) {
+  for (const std::string variant : {"mdt", "tmed", "mdm"}) {
+    torch::manual_seed(2);
+    EditorNet net(Tiny(variant, "none"));
+    const TinyTriplets data;
+    net->text_encoder()->Fit(data.texts);
+    const CosineSchedule schedule(50);
+    torch::optim::AdamW optimizer(net->parameters(), torch::optim::AdamWOptions(2e-3));
+    net->train();
+    double first = 0, last = 0;
+    for (int step = 0; step < 150; ++step) {
+      // A fixed moderate noise level: the x0 loss of a denoiser that learned these targets falls.
+      const auto t = torch::full({3}, 10, torch::kInt64);
+      torch::manual_seed(step % 4);
+      const auto xt = schedule.QSample(data.target, t, torch::randn_like(data.target));
+      Condition c{data.texts, variant == "mdm" ? torch::Tensor() : data.source, data.source_padding, {}, {}};
+      const auto loss = GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0, data.target, data.target_padding);
+      optimizer.zero_grad();
+      loss.backward();
+      optimizer.step();
+      if (step == 0) first = loss.item<double>();
+      last = loss.item<double>();
+    }
+    EXPECT_LT(last, 0.2 * first) << variant << ": first " << first << " last " << last;
+  }
+}
+
+TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
+  torch::manual_seed(3);
+  EditorNet net(Tiny("mdt"));
+  const TinyTriplets data;
+  net->text_encoder()->Fit(data.texts);
+  net->eval();
+  const CosineSchedule schedule(50);
+  Condition c{{data.texts[0], data.texts[0], data.texts[0]}, data.source.narrow(1, 0, 1).repeat({1, 3, 1}),
+              data.source_padding.narrow(0, 0, 1).repeat({3, 1}), torch::tensor({1, 1, 0}).to(torch::kBool),
+              torch::tensor({1, 0, 0}).to(torch::kBool)};
+  const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
+    const auto x0 = net->forward(xt.repeat({1, 3, 1}), torch::full({3}, t, torch::kInt64), torch::zeros({3, 17}, torch::kBool), c).x0.chunk(3, 1);
+    return GuideThreeWay(x0[0], x0[1], x0[2], 2.0, 2.0);
+  };
+  const auto run = [&](uint64_t seed, bool ddim) {
+    auto generator = at::make_generator<at::CPUGeneratorImpl>(seed);
+    return ddim ? SampleDdim(schedule, {17, 1, kEditFeatureDim}, 10, denoise, generator) : SampleDdpm(schedule, {17, 1, kEditFeatureDim}, denoise, generator);
+  };
+  for (bool ddim : {false, true}) {
+    const auto a = run(5, ddim), b = run(5, ddim), other = run(6, ddim);
+    EXPECT_EQ(a.sizes(), (std::vector<int64_t>{17, 1, kEditFeatureDim}));
+    EXPECT_TRUE(torch::isfinite(a).all().item<bool>());
+    EXPECT_TRUE(torch::equal(a, b));
+    EXPECT_FALSE(torch::equal(a, other));
+  }
+}
+
+TEST(Editor, PartColumnsPartitionTheFeature) {
+  const auto columns = PartColumns();
+  // Every column belongs to exactly one part (pelvis position columns 141:144 to global).
+  EXPECT_TRUE(columns.to(torch::kInt64).sum(0).eq(1).all().item<bool>());
+  EXPECT_EQ(columns[0].sum().item<int64_t>(), 15 + 3);
+}
+
+}  // namespace
+}  // namespace motionpipe::mdt
