@@ -12,6 +12,7 @@
 #include "motionpipe/base/file.h"
 #include "motionpipe/formats/bvh.h"
 #include "motionpipe/formats/clip.h"
+#include "motionpipe/render/motion_render.h"
 #include "motionpipe/sinc/texts.h"
 
 namespace motionpipe::cli {
@@ -51,6 +52,41 @@ Status WriteMotion(const std::string& out, const Motion& motion, const std::vect
 }  // namespace
 
 void AddModelCommands(CLI::App& app, int* exit_code) {
+  {  // render
+    auto* cmd = app.add_subcommand("render", "Render motions as a skeleton animation (GIF) or film strip (PNG), side by side");
+    static std::vector<std::string> inputs, titles;
+    static std::string out, clip_id;
+    static render::RenderOptions options;
+    static double source_fps = 30;
+    cmd->add_option("motions", inputs, "Motion files (clip .npz, AMASS npz, BVH): one panel each, side by side")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--out", out, "Output: .gif (animation) or .png (film strip)")->required();
+    cmd->add_option("--title", titles, "Panel titles, in order (default: the clip id)");
+    cmd->add_option("--clip", clip_id, "Clip id to take from files holding several (default: the first)");
+    cmd->add_option("--fps", options.fps, "GIF frame rate")->capture_default_str()->check(CLI::Range(1.0, 60.0));
+    cmd->add_option("--size", options.panel_width, "Panel width and height in pixels")->capture_default_str()->check(CLI::Range(64, 2048));
+    cmd->add_option("--frames", options.strip_frames, "PNG film strip: frames per panel")->capture_default_str()->check(CLI::Range(1, 64));
+    cmd->add_option("--source-fps", source_fps, "Frame rate to resample BVH/AMASS inputs to")->capture_default_str();
+    cmd->callback([exit_code] {
+      options.panel_height = options.panel_width;
+      std::vector<render::Panel> panels;
+      for (size_t k = 0; k < inputs.size(); ++k) {
+        auto clips = LoadMotionFile(inputs[k], source_fps);
+        if (!clips.ok()) return void(*exit_code = Fail(clips.status()));
+        const auto it = clip_id.empty() ? clips->begin()
+                                        : std::find_if(clips->begin(), clips->end(), [](const Clip& c) { return c.id == clip_id; });
+        if (it == clips->end()) return void(*exit_code = Fail(NotFound(inputs[k] + ": no clip '" + clip_id + "'")));
+        render::Panel panel;
+        panel.motion = it->motion;
+        panel.title = k < titles.size() ? titles[k] : it->id;
+        if (!it->texts.empty()) panel.caption = it->texts.front();
+        panels.push_back(std::move(panel));
+      }
+      const auto started = std::chrono::steady_clock::now();
+      if (Status s = render::RenderMotionFile(out, panels, options); !s.ok()) return void(*exit_code = Fail(s));
+      std::printf("rendered %zu motion(s) -> %s in %.1f s\n", panels.size(), out.c_str(),
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+    });
+  }
   {  // edit
     auto* cmd = app.add_subcommand("edit", "Edit a motion from a text instruction with a trained editor (MDT, TMED, MDM, MDM-BP)");
     static std::string model, source_path, clip_id, text, out, sampler = "ddpm";
