@@ -174,3 +174,40 @@ TEST(Editor, PartColumnsPartitionTheFeature) {
 
 }  // namespace
 }  // namespace motionpipe::mdt
+
+namespace motionpipe::mdt {
+namespace {
+
+TEST(Editor, GroupedMseAveragesPerGroupThenOverGroups) {
+  // One example, 2 real frames + 1 padded; error 1 on every column of group 0 (3 columns) in one
+  // frame: group 0's mean = 3 / (2 * 3) = 0.5, the other four groups 0 -> loss 0.5 / 5.
+  auto prediction = torch::zeros({3, 1, kEditFeatureDim});
+  const auto target = torch::zeros({3, 1, kEditFeatureDim});
+  prediction[0][0].narrow(0, 0, 3).fill_(1.0);
+  prediction[2][0].fill_(100.0);  // padding: ignored
+  auto padding = torch::zeros({1, 3}, torch::kBool);
+  padding[0][2] = true;
+  EXPECT_NEAR(GroupedMaskedMse(prediction, target, padding).item<double>(), 0.1, 1e-7);
+}
+
+TEST(Editor, RegressionModePredictsTheNormalisedCurve) {
+  EditorOptions o = Tiny("mdt", "regression");
+  EXPECT_EQ(o.sim_outputs(), 1);
+  // sigmoid(0) = 0.5 against S^N 0.5 and 1.0 on real frames with a curve; -1 = no curve.
+  const auto prediction = torch::zeros({1, 3});
+  const auto similarity = torch::tensor({{0.5f, 1.0f, -1.0f}});
+  const auto classes = torch::tensor({{0, 2, -1}}, torch::kInt64);
+  const auto out = SimilarityLoss(prediction, classes, similarity, torch::zeros({1, 3}, torch::kBool), torch::tensor({0}).to(torch::kBool), o);
+  EXPECT_NEAR(out.at("aux").item<double>(), (0.0 + 0.25) / 2, 1e-7);
+  // K = 5 and K = 9 build their heads and default to equal class weights.
+  for (int k : {5, 9}) {
+    auto j = o.ToJson();
+    j["aux"] = {{"mode", "classes"}, {"classes", k}};
+    const EditorOptions ok = EditorOptions::FromJson(j);
+    EXPECT_EQ(ok.sim_outputs(), k);
+    EXPECT_EQ(ok.class_weights, std::vector<double>(static_cast<size_t>(k), 1.0));
+  }
+}
+
+}  // namespace
+}  // namespace motionpipe::mdt

@@ -8,6 +8,7 @@
 #include "../../plugins/common/text_encoder.h"
 #include "../../plugins/common/transformer.h"
 #include "../../plugins/temos_sinc/temos.h"
+#include "motionpipe/formats/npz.h"
 
 namespace motionpipe {
 namespace {
@@ -239,6 +240,50 @@ TEST(Temos, SplitBatchGradientsAverageToTheUnionBatchGradient) {
     worst = std::max(worst, error);
   }
   EXPECT_LT(worst, 1e-5);
+}
+
+}  // namespace
+}  // namespace motionpipe
+
+namespace motionpipe {
+namespace {
+
+TEST(TextEncoder, PrecomputedTableGivesItsEmbeddingsAndNamesUnknownTexts) {
+  const std::string path = ::testing::TempDir() + "/clip_features.npz";
+  Npz npz;
+  npz.Add("texts", NpyArray::Strings({2}, {"walk forward", "wave the right hand"}));
+  npz.Add("embeddings", NpyArray::Float32({2, 3}, {1, 0, 0, 0, 1, 0}));
+  ASSERT_TRUE(WriteNpz(path, npz).ok());
+  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson({{"kind", "precomputed"}, {"table", path}, {"dim", 8}, {"heads", 2}, {"layers", 1}}));
+  encoder->Fit({});
+  encoder->eval();
+  torch::NoGradGuard no_grad;
+  const auto a = encoder->forward({"walk forward", "wave the right hand", "walk forward"});
+  ASSERT_EQ(a.tokens.sizes(), (std::vector<int64_t>{1, 3, 8}));
+  EXPECT_TRUE(torch::equal(a.tokens.select(1, 0), a.tokens.select(1, 2)));  // the same text, the same features
+  EXPECT_FALSE(torch::equal(a.tokens.select(1, 0), a.tokens.select(1, 1)));
+  try {
+    encoder->forward({"jump"});
+    FAIL() << "an unknown text must be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("no embedding for 'jump'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+  nn::TextEncoder missing(nn::TextEncoderOptions::FromJson({{"kind", "precomputed"}, {"dim", 8}, {"heads", 2}}));
+  EXPECT_THROW(missing->Fit({}), std::invalid_argument);
+}
+
+TEST(TextEncoder, TokenizerIsDeterministicAndRoundTrips) {
+  nn::Tokenizer a, b;
+  const std::vector<std::string> texts = {"walk forward slowly", "wave the right hand", "walking forwards", "jump in place"};
+  a.Train(texts, 80);
+  b.Train(texts, 80);
+  EXPECT_EQ(a.serialized(), b.serialized());
+  nn::Tokenizer c;
+  c.Load(a.serialized());
+  EXPECT_EQ(c.Encode("walk the right hand forward", 32), a.Encode("walk the right hand forward", 32));
+  EXPECT_LE(a.Encode("walk the right hand forward", 3).size(), 3u);
+  for (int64_t id : a.Encode("zzz unseen", 32)) EXPECT_GT(id, 0);  // never the padding id
 }
 
 }  // namespace
