@@ -1,0 +1,60 @@
+// Evaluation metrics of the two papers (REFERENCE 3.4, 4.6), as plain functions on embeddings and
+// joint positions, so that each can be checked on hand-computed cases:
+//   retrieval   motion-to-motion (or text-to-motion) R@1/2/3 in percent and AvgR, ties averaged, in
+//               seeded batches of 32 (remainder dropped; SimMotionEdit's protocol) or over all;
+//   APE / AVE   TEMOS's average positional error and average variance error: root joint, global
+//               trajectory (horizontal root), mean local (joints relative to the root), mean global;
+//   FID         Frechet distance between two embedding sets; diversity and multimodality.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace motionpipe::eval {
+
+// Row-major n x d embeddings.
+struct Embeddings {
+  int64_t n = 0, d = 0;
+  std::vector<double> values;
+  const double* row(int64_t i) const { return values.data() + i * d; }
+};
+
+// Cosine similarity matrix [a.n x b.n], row-major.
+std::vector<double> CosineSimilarity(const Embeddings& a, const Embeddings& b);
+
+// Rank (1-based) of the true match i for each query i of a square similarity matrix: 1 + the
+// number of candidates scoring higher + half the number tying with it (ties averaged).
+std::vector<double> TrueMatchRanks(const std::vector<double>& similarity, int64_t n);
+
+struct RetrievalScores {
+  double r1 = 0, r2 = 0, r3 = 0;  // percent of queries whose rank is <= k
+  double avg_rank = 0;
+  int64_t queries = 0;
+};
+RetrievalScores Summarise(const std::vector<double>& ranks);
+
+// Query i of `queries` should retrieve row i of `gallery`. batch <= 0: one batch of everything.
+// Otherwise a seeded shuffle split into batches of `batch` (the remainder dropped), ranks within
+// each batch, scores over all the batches' queries.
+RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch, uint64_t seed);
+
+struct PositionErrors {
+  double root = 0, trajectory = 0, mean_local = 0, mean_global = 0;
+};
+// APE and AVE between generated and ground-truth joints [frames, joints, 3] (z up; joint 0 the root).
+// Both are cropped to the shorter length.
+PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints);
+PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints);
+
+// Frechet distance between Gaussians fitted to two embedding sets (unbiased covariances).
+double FrechetDistance(const Embeddings& a, const Embeddings& b);
+// Mean Euclidean distance between `pairs` seeded random pairs of distinct rows.
+double Diversity(const Embeddings& x, int64_t pairs, uint64_t seed);
+// Mean distance between generations of the same condition: groups[g] lists rows of x.
+double Multimodality(const Embeddings& x, const std::vector<std::vector<int64_t>>& groups);
+
+// Eigen-decomposition of a symmetric matrix (cyclic Jacobi): eigenvalues, and eigenvectors as
+// columns of a row-major n x n matrix.
+void SymmetricEigen(std::vector<double> matrix, int64_t n, std::vector<double>* values, std::vector<double>* vectors);
+
+}  // namespace motionpipe::eval

@@ -1,0 +1,133 @@
+// The evaluation metrics on hand-computed cases.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "motionpipe/eval/metrics.h"
+
+namespace motionpipe::eval {
+namespace {
+
+TEST(Retrieval, RanksCountHigherCandidatesAndAverageTies) {
+  // Query 0: own 0.9, best -> rank 1. Query 1: own 0.5, one higher (0.8) -> 2. Query 2: own 0.3,
+  // ties with one (0.3) and one higher (0.7) -> 1 + 1 + 0.5 = 2.5. Query 3: own lowest -> 4.
+  const std::vector<double> s = {0.9, 0.1, 0.2, 0.3,   //
+                                 0.8, 0.5, 0.1, 0.2,   //
+                                 0.7, 0.3, 0.3, 0.1,   //
+                                 0.5, 0.6, 0.7, 0.0};
+  const auto ranks = TrueMatchRanks(s, 4);
+  EXPECT_EQ(ranks, (std::vector<double>{1, 2, 2.5, 4}));
+  const RetrievalScores r = Summarise(ranks);
+  EXPECT_DOUBLE_EQ(r.r1, 25.0);
+  EXPECT_DOUBLE_EQ(r.r2, 50.0);
+  EXPECT_DOUBLE_EQ(r.r3, 75.0);
+  EXPECT_DOUBLE_EQ(r.avg_rank, 2.375);
+  // All equal: every query ties with n - 1 others -> rank (n + 1) / 2.
+  EXPECT_EQ(TrueMatchRanks(std::vector<double>(9, 0.5), 3), (std::vector<double>{2, 2, 2}));
+}
+
+Embeddings Random(int64_t n, int64_t d, uint64_t seed, double shift = 0) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0, 1);
+  Embeddings e{n, d, {}};
+  for (int64_t i = 0; i < n * d; ++i) e.values.push_back(normal(rng) + shift);
+  return e;
+}
+
+TEST(Retrieval, IdenticalEmbeddingsAreFoundFirstAndBatchesDropTheRemainder) {
+  const Embeddings x = Random(70, 8, 1);
+  const RetrievalScores all = Retrieval(x, x, 0, 1);
+  EXPECT_EQ(all.queries, 70);
+  EXPECT_DOUBLE_EQ(all.r1, 100.0);
+  EXPECT_DOUBLE_EQ(all.avg_rank, 1.0);
+  const RetrievalScores batched = Retrieval(x, x, 32, 7);
+  EXPECT_EQ(batched.queries, 64);  // 2 batches of 32, 6 dropped
+  EXPECT_DOUBLE_EQ(batched.r1, 100.0);
+  // Unrelated embeddings: mean rank near (32 + 1) / 2 in batches of 32, the same under the same seed.
+  const Embeddings y = Random(640, 8, 2);
+  const RetrievalScores chance = Retrieval(Random(640, 8, 3), y, 32, 5);
+  EXPECT_NEAR(chance.avg_rank, 16.5, 1.5);
+  EXPECT_DOUBLE_EQ(Retrieval(Random(640, 8, 3), y, 32, 5).avg_rank, chance.avg_rank);
+}
+
+TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {
+  // Two joints, three frames. Truth: root at the origin, joint 1 at (0, 0, 1). Generated: the whole
+  // body shifted by (3, 4, 0) -> root and global errors 5, trajectory 5, local 0.
+  std::vector<float> truth, shifted;
+  for (int t = 0; t < 3; ++t) {
+    truth.insert(truth.end(), {0, 0, 0, 0, 0, 1});
+    shifted.insert(shifted.end(), {3, 4, 0, 3, 4, 1});
+  }
+  PositionErrors ape = AveragePositionalError(shifted, truth, 2);
+  EXPECT_NEAR(ape.root, 5, 1e-9);
+  EXPECT_NEAR(ape.trajectory, 5, 1e-9);
+  EXPECT_NEAR(ape.mean_global, 5, 1e-9);
+  EXPECT_NEAR(ape.mean_local, 0, 1e-9);
+  // A vertical-only offset does not count in the trajectory.
+  std::vector<float> raised = truth;
+  for (size_t k = 2; k < raised.size(); k += 3) raised[k] += 2;
+  ape = AveragePositionalError(raised, truth, 2);
+  EXPECT_NEAR(ape.root, 2, 1e-9);
+  EXPECT_NEAR(ape.trajectory, 0, 1e-9);
+  // AVE: a constant offset has the same variance (0); a root moving 0, 1, 2 along x has variance 1
+  // in x (unbiased), the still truth 0 -> root AVE 1; joint 1 moves with it: local 0, global 1.
+  EXPECT_NEAR(AverageVarianceError(shifted, truth, 2).mean_global, 0, 1e-9);
+  std::vector<float> moving = {0, 0, 0, 0, 0, 1, 1, 0, 0, 1, 0, 1, 2, 0, 0, 2, 0, 1};
+  const PositionErrors ave = AverageVarianceError(moving, truth, 2);
+  EXPECT_NEAR(ave.root, 1, 1e-9);
+  EXPECT_NEAR(ave.trajectory, 1, 1e-9);
+  EXPECT_NEAR(ave.mean_global, 1, 1e-9);
+  EXPECT_NEAR(ave.mean_local, 0, 1e-9);
+  // Different lengths are cropped to the shorter.
+  std::vector<float> longer = truth;
+  longer.insert(longer.end(), {9, 9, 9, 9, 9, 9});
+  EXPECT_NEAR(AveragePositionalError(longer, truth, 2).root, 0, 1e-9);
+}
+
+TEST(Fid, IsZeroForIdenticalSetsAndTheClosedFormOtherwise) {
+  const Embeddings x = Random(400, 6, 4);
+  EXPECT_NEAR(FrechetDistance(x, x), 0, 1e-6);
+  // A shifted copy: only the mean term, |shift|^2 = 6 * 0.5^2.
+  Embeddings shifted = x;
+  for (auto& v : shifted.values) v += 0.5;
+  EXPECT_NEAR(FrechetDistance(x, shifted), 1.5, 1e-6);
+  // A scaled copy (covariance times 4): Tr(C + 4C - 2 * 2C) = Tr(C), and the mean term |mu|^2 (1 - 2)^2.
+  Embeddings scaled = x;
+  for (auto& v : scaled.values) v *= 2;
+  double trace = 0, mean_sq = 0;
+  for (int64_t k = 0; k < 6; ++k) {
+    double m = 0, s = 0;
+    for (int64_t i = 0; i < 400; ++i) m += x.row(i)[k];
+    m /= 400;
+    for (int64_t i = 0; i < 400; ++i) s += (x.row(i)[k] - m) * (x.row(i)[k] - m);
+    trace += s / 399;
+    mean_sq += m * m;
+  }
+  EXPECT_NEAR(FrechetDistance(x, scaled), trace + mean_sq, 1e-6);
+}
+
+TEST(Fid, SymmetricEigenReconstructsTheMatrix) {
+  const std::vector<double> m = {4, 1, 2, 1, 3, 0, 2, 0, 5};
+  std::vector<double> values, vectors;
+  SymmetricEigen(m, 3, &values, &vectors);
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      double s = 0;
+      for (int k = 0; k < 3; ++k) s += vectors[static_cast<size_t>(i * 3 + k)] * values[static_cast<size_t>(k)] * vectors[static_cast<size_t>(j * 3 + k)];
+      EXPECT_NEAR(s, m[static_cast<size_t>(i * 3 + j)], 1e-10);
+    }
+  }
+  EXPECT_NEAR(values[0] + values[1] + values[2], 12, 1e-10);
+}
+
+TEST(Diversity, MeasuresDistancesBetweenRowsAndWithinGroups) {
+  // Two points 5 apart: every pair of distinct rows is at distance 5.
+  const Embeddings x{2, 2, {0, 0, 3, 4}};
+  EXPECT_DOUBLE_EQ(Diversity(x, 10, 1), 5.0);
+  const Embeddings y{4, 1, {0, 1, 10, 14}};
+  EXPECT_DOUBLE_EQ(Multimodality(y, {{0, 1}, {2, 3}}), 2.5);
+}
+
+}  // namespace
+}  // namespace motionpipe::eval
