@@ -257,6 +257,18 @@ KindRegistry KindRegistry::WithBuiltins() {
     if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim") errors->push_back(path + ".params.sampler: ddpm or ddim");
     if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
   });
+  // Scoring an edit stage with an evaluator checkpoint: one task.
+  registry.Add("eval_edit", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = 1;
+    stage->reduce = false;
+    const auto& p = stage->params;
+    for (const char* key : {"evaluator", "edits"}) {
+      if (p.contains(key) && (!p[key].is_string() ||
+                              std::find(stage->inputs.begin(), stage->inputs.end(), p[key].get<std::string>()) == stage->inputs.end())) {
+        errors->push_back(path + ".params." + key + ": must name one of the stage's inputs");
+      }
+    }
+  });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
   registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
     stage->shards = 1;

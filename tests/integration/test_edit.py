@@ -2,6 +2,7 @@
 classes) and MDM train on filtered corpus triplets, the `edit` stage edits the test split across
 workers, and `motionpipe edit` edits a real CMU clip, deterministically under a seed."""
 import glob
+import json
 import os
 import subprocess
 import unittest
@@ -42,6 +43,21 @@ stages:
     inputs: [mdt, corpus]
     shards: 2
     params: {split: test, limit: 3, sampler: ddim, steps: 4, batch: 2}
+  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}
+  evaluator:
+    kind: train
+    inputs: [singles]
+    params:
+      model: temos_sinc
+      config: {variant: tmr, model: {latent: 32, layers: 1, heads: 2, ff: 64, text_encoder: {layers: 1, vocab: 200}}}
+      data: {real_pairs: false, synthetic_p: 0, max_frames: 60}
+      steps: 2
+      batch_size: 4
+      warmup: 0
+  eval_mdt:
+    kind: eval_edit
+    inputs: [evaluator, edit_mdt, corpus]
+    params: {evaluator: evaluator, edits: edit_mdt, batch: 2}
 """
 
 
@@ -83,6 +99,20 @@ class EditTest(EngineTest):
                     sources[str(tid)] = z["source_offsets"][i + 1] - z["source_offsets"][i]
         for tid, poses in edited.items():
             self.assertEqual(poses.shape, (sources[tid], 22, 3), tid)
+
+        # eval_edit: retrieval of the 3 edits against their targets and sources, plausibility.
+        with open(os.path.join(job, "eval_mdt", "task-00000", "metrics.json")) as f:
+            metrics = json.load(f)
+        self.assertEqual(metrics["motions"], 3)
+        self.assertEqual(metrics["method"], "mdt_editor/mdt")
+        for key in ("generated_to_target", "generated_to_source"):
+            batches, everything = metrics[key]["batches"], metrics[key]["all"]
+            self.assertEqual(batches["queries"], 2)  # one batch of 2, the third dropped
+            self.assertEqual(everything["queries"], 3)
+            self.assertTrue(1 <= everything["AvgR"] <= 3)
+            self.assertTrue(0 <= everything["R@1"] <= everything["R@2"] <= everything["R@3"] == 100)
+        for who in ("generated", "target"):
+            self.assertIn("foot_skate_ratio", metrics["plausibility"][who])
 
         # motionpipe edit on a real CMU clip: the source's length, finite, repeatable under a seed.
         model = os.path.join(job, "mdt")

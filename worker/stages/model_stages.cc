@@ -1,6 +1,9 @@
 // Stages that run trained models through the torch-free generator interface (generators.h):
 // `edit` edits the test split's triplets with an editing checkpoint (MDT, TMED, MDM, MDM-BP),
-// sharded over workers, writing the edited motions as a clip file per task.
+// sharded over workers, writing the edited motions as a clip file per task;
+// `eval_edit` scores an edit stage's motions with an evaluator checkpoint (TMR): motion-to-motion
+// retrieval generated-to-target and generated-to-source (SimMotionEdit Table 1), and physical
+// plausibility of the edits and of the targets.
 //
 // params (edit): model (the input stage holding the checkpoint; default: the input that has one),
 //   split (test), limit (0 = all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed,
@@ -8,10 +11,13 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <map>
 
 #include "../executor.h"
 #include "../generators.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/eval/metrics.h"
+#include "motionpipe/motion/plausibility.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
@@ -23,21 +29,25 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// Triplet files of the inputs: DIR/motionfix/triplets*.npz or DIR/triplets*.npz, sorted.
+// Triplet files of the inputs: DIR/motionfix/triplets*.npz or DIR/triplets*.npz, sorted. An input
+// with a result directory (a corpus) is read from there only: its task directories hold the same
+// triplets as shards.
 std::vector<std::string> TripletFiles(const TaskContext& ctx) {
   std::vector<std::string> files;
-  for (const auto& input : ctx.spec.inputs()) {
-    std::vector<std::string> dirs(input.dirs().begin(), input.dirs().end());
-    if (!input.result_dir().empty()) dirs.push_back(input.result_dir());
-    for (const auto& dir : dirs) {
-      for (const std::string& folder : {dir, dir + "/motionfix"}) {
-        if (!fs::is_directory(folder)) continue;
-        for (const auto& entry : fs::directory_iterator(folder)) {
-          const std::string name = entry.path().filename().string();
-          if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz") files.push_back(entry.path().string());
-        }
+  const auto scan = [&](const std::string& dir) {
+    size_t found = 0;
+    for (const std::string& folder : {dir, dir + "/motionfix"}) {
+      if (!fs::is_directory(folder)) continue;
+      for (const auto& entry : fs::directory_iterator(folder)) {
+        const std::string name = entry.path().filename().string();
+        if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz") files.push_back(entry.path().string()), ++found;
       }
     }
+    return found;
+  };
+  for (const auto& input : ctx.spec.inputs()) {
+    if (!input.result_dir().empty() && scan(input.result_dir()) > 0) continue;
+    for (const auto& dir : input.dirs()) scan(dir);
   }
   std::sort(files.begin(), files.end());
   files.erase(std::unique(files.begin(), files.end()), files.end());
@@ -152,10 +162,115 @@ class EditStage : public StageExecutor {
   const PluginHost* plugins_;
 };
 
+Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
+  const auto& side = source ? c.source : c.target;
+  const int64_t begin = side.offsets[static_cast<size_t>(row)], end = side.offsets[static_cast<size_t>(row) + 1];
+  Motion m;
+  m.fps = c.fps[static_cast<size_t>(row)];
+  m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
+  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
+  return m;
+}
+
+json ScoresJson(const eval::RetrievalScores& s) {
+  return {{"R@1", s.r1}, {"R@2", s.r2}, {"R@3", s.r3}, {"AvgR", s.avg_rank}, {"queries", s.queries}};
+}
+
+// params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
+// batch (32), seed, method (a name for the report; default: the edit stage's model).
+class EvalEditStage : public StageExecutor {
+ public:
+  explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
+  std::string Description() const override { return "scores edited motions: retrieval against targets and sources, plausibility"; }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    if (!plugins_) return TaskReport::Error("eval_edit: this worker has no plugin host");
+    fs::create_directories(ctx.output_dir());
+    const std::string evaluator_stage = p.value("evaluator", std::string("evaluator"));
+    const std::string evaluator = FindCheckpoint(ctx, evaluator_stage);
+    if (evaluator.empty()) return TaskReport::BadInput("eval_edit: input stage '" + evaluator_stage + "' holds no evaluator checkpoint");
+    auto encoder = LoadGenerator(*plugins_, evaluator);
+    if (!encoder.ok()) return TaskReport::BadInput(encoder.status().message());
+    // The edited motions by triplet id, from every edit task.
+    const std::string edits_stage = p.value("edits", std::string());
+    std::map<std::string, Motion> edited;
+    std::string method = p.value("method", std::string());
+    for (const auto& input : ctx.spec.inputs()) {
+      if (!edits_stage.empty() && input.stage() != edits_stage) continue;
+      for (const auto& dir : input.dirs()) {
+        if (!fs::exists(dir + "/edited.npz")) continue;
+        auto clips = ReadClips(dir + "/edited.npz");
+        if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
+        for (auto& clip : *clips) edited[clip.id] = std::move(clip.motion);
+        if (method.empty()) {
+          if (auto summary = ReadFile(dir + "/edits.json"); summary.ok()) method = json::parse(*summary).value("model", std::string());
+        }
+      }
+    }
+    if (edited.size() < 2) return TaskReport::BadInput("eval_edit: fewer than 2 edited motions in the inputs (an edit stage)");
+    // Their triplets' sources and targets.
+    std::vector<Motion> generated, targets, sources;
+    std::vector<std::string> ids;
+    for (const std::string& path : TripletFiles(ctx)) {
+      auto c = ReadTripletColumns(path, {0, -1, true, false});
+      if (!c.ok()) return TaskReport::BadInput(c.status().message());
+      for (int64_t r = 0; r < c->rows; ++r) {
+        const auto it = edited.find(c->ids[static_cast<size_t>(r)]);
+        if (it == edited.end() || std::find(ids.begin(), ids.end(), it->first) != ids.end()) continue;
+        ids.push_back(it->first);
+        generated.push_back(it->second);
+        targets.push_back(SideMotion(*c, r, false));
+        sources.push_back(SideMotion(*c, r, true));
+      }
+    }
+    if (generated.size() != edited.size()) {
+      return TaskReport::BadInput("eval_edit: " + std::to_string(edited.size() - generated.size()) + " edited motion(s) have no triplet in the inputs");
+    }
+    const auto embed = [&](const std::vector<Motion>& motions) -> Result<eval::Embeddings> {
+      MP_ASSIGN_OR_RETURN(const auto rows, (*encoder)->EncodeMotions(motions));
+      eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
+      for (const auto& row : rows) e.values.insert(e.values.end(), row.begin(), row.end());
+      return e;
+    };
+    auto g = embed(generated), t = embed(targets), s = embed(sources);
+    for (const auto* e : {&g, &t, &s}) {
+      if (!e->ok()) return TaskReport::Error("eval_edit: " + e->status().message());
+    }
+    const int64_t batch = p.value("batch", int64_t{32});
+    const uint64_t seed = p.value("seed", ctx.spec.seed());
+    json metrics = {{"method", method}, {"evaluator", evaluator}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}};
+    for (const auto& [name, gallery] : {std::pair{"generated_to_target", &*t}, std::pair{"generated_to_source", &*s}}) {
+      metrics[name] = {{"batches", ScoresJson(eval::Retrieval(*g, *gallery, batch, seed))}, {"all", ScoresJson(eval::Retrieval(*g, *gallery, 0, seed))}};
+    }
+    metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(*t, *s, batch, seed))}};
+    // Physical plausibility of the edits and of the ground truth, averaged.
+    const auto plausibility = [](const std::vector<Motion>& motions) {
+      double skate = 0, penetration = 0, floating = 0, jerk = 0;
+      for (const Motion& m : motions) {
+        const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
+        skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
+      }
+      const double n = static_cast<double>(std::max<size_t>(1, motions.size()));
+      return json{{"foot_skate_ratio", skate / n}, {"penetration_mean_m", penetration / n}, {"float_ratio", floating / n}, {"jerk_mean", jerk / n}};
+    };
+    metrics["plausibility"] = {{"generated", plausibility(generated)}, {"target", plausibility(targets)}};
+    if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    TaskReport out = TaskReport::Ok();
+    out.metrics["R1_generated_to_target"] = metrics["generated_to_target"]["batches"]["R@1"].get<double>();
+    out.metrics["AvgR_generated_to_target"] = metrics["generated_to_target"]["batches"]["AvgR"].get<double>();
+    return out;
+  }
+
+ private:
+  const PluginHost* plugins_;
+};
+
 }  // namespace
 
 void RegisterModelExecutors(ExecutorRegistry* registry, const PluginHost* plugins) {
   registry->Register("edit", std::make_unique<EditStage>(plugins));
+  registry->Register("eval_edit", std::make_unique<EvalEditStage>(plugins));
 }
 
 }  // namespace motionpipe::worker
