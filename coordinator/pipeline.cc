@@ -269,6 +269,28 @@ KindRegistry KindRegistry::WithBuiltins() {
       }
     }
   });
+  // Text-to-motion generation of a test split (`shards` tasks, default 2) and its scoring (one task).
+  registry.Add("generate", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    if (!stage->shards_set) stage->shards = 2;
+    stage->reduce = false;
+    if (stage->inputs.empty()) errors->push_back(path + ": needs inputs: the train stage of the model and a `singles` stage");
+    const auto& p = stage->params;
+    if (p.contains("spans") && p["spans"] != "pairs" && p["spans"] != "singles" && p["spans"] != "all") {
+      errors->push_back(path + ".params.spans: pairs, singles or all");
+    }
+    if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
+  });
+  registry.Add("eval_generate", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = 1;
+    stage->reduce = false;
+    const auto& p = stage->params;
+    for (const char* key : {"evaluator", "temos", "generated"}) {
+      if (p.contains(key) && (!p[key].is_string() ||
+                              std::find(stage->inputs.begin(), stage->inputs.end(), p[key].get<std::string>()) == stage->inputs.end())) {
+        errors->push_back(path + ".params." + key + ": must name one of the stage's inputs");
+      }
+    }
+  });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
   registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
     stage->shards = 1;

@@ -18,7 +18,7 @@ PIPELINE = """
 name: train_test
 output_root: OUT
 seed: 1
-vars: {world: 1, steps: 2, dropout: 0.0, every: 100, lr: 0.001}
+vars: {world: 1, steps: 2, dropout: 0.0, every: 100, lr: 0.001, split: train}
 stages:
   corpus: {kind: corpus, params: {clips: 40, triplets: 0, shard_size: 20}}
   singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}
@@ -40,6 +40,14 @@ stages:
       schedule: constant
       checkpoint_every: "${vars.every}"
       collective_timeout: 20
+  gen:
+    kind: generate
+    inputs: [sinc, singles]
+    params: {model: sinc, split: "${vars.split}", spans: all, limit: 4}
+  evaluate:
+    kind: eval_generate
+    inputs: [sinc, gen, singles]
+    params: {evaluator: sinc, generated: gen, batch: 2}
 """
 
 
@@ -86,6 +94,21 @@ class TrainStageTest(EngineTest):
         for r1, r2 in zip(losses(one), losses(two)):
             self.assertAlmostEqual(float(r1["loss"]), float(r2["loss"]), places=5)
 
+        # The generate and eval_generate stages: 4 spans over 2 tasks, each at its ground truth's
+        # length; the TEMOS score in [0, 1], APE/AVE and retrieval.
+        generated = {}
+        for path in glob.glob(os.path.join(two, "gen", "task-*", "generated.npz")):
+            with np.load(path) as z:
+                for i, sid in enumerate(z["ids"]):
+                    generated[str(sid)] = z["offsets"][i + 1] - z["offsets"][i]
+        self.assertEqual(len(generated), 4)
+        with open(os.path.join(two, "evaluate", "task-00000", "metrics.json")) as f:
+            metrics = json.load(f)
+        self.assertEqual(metrics["motions"], 4)
+        self.assertTrue(0 <= metrics["temos_score"] <= 1)
+        self.assertGreater(metrics["APE"]["mean_global"], 0)
+        self.assertEqual(metrics["text_to_generated"]["batches"]["queries"], 4)
+        self.assertEqual(metrics["generated_to_truth"]["all"]["queries"], 4)
         # generate: the requested duration, finite, as a clip file and as BVH.
         clip = self.path("walk.npz")
         self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "walk forward while waving the right hand",

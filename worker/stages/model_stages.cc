@@ -3,7 +3,11 @@
 // sharded over workers, writing the edited motions as a clip file per task;
 // `eval_edit` scores an edit stage's motions with an evaluator checkpoint (TMR): motion-to-motion
 // retrieval generated-to-target and generated-to-source (SimMotionEdit Table 1), and physical
-// plausibility of the edits and of the targets.
+// plausibility of the edits and of the targets;
+// `generate` generates the test split's action texts (SINC: two-action pairs by default) with a
+// text-to-motion checkpoint, at each ground-truth motion's length, sharded;
+// `eval_generate` scores them against the ground truth (SINC Tables 2-3): TEMOS score, APE/AVE,
+// text-to-motion and motion-to-motion retrieval, diversity, plausibility.
 //
 // params (edit): model (the input stage holding the checkpoint; default: the input that has one),
 //   split (test), limit (0 = all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed,
@@ -16,8 +20,11 @@
 #include "../executor.h"
 #include "../generators.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/random.h"
 #include "motionpipe/eval/metrics.h"
 #include "motionpipe/motion/plausibility.h"
+#include "motionpipe/sinc/spans.h"
+#include "motionpipe/sinc/texts.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
@@ -266,11 +273,217 @@ class EvalEditStage : public StageExecutor {
   const PluginHost* plugins_;
 };
 
+
+// The spans table of an input `singles` stage.
+Result<sinc::SpanTable> InputSpans(const TaskContext& ctx) {
+  for (const auto& input : ctx.spec.inputs()) {
+    for (const auto& dir : input.dirs()) {
+      if (fs::exists(dir + "/spans.npz")) return sinc::ReadSpans(dir + "/spans.npz");
+    }
+  }
+  return NotFound("no spans.npz in the inputs (a `singles` stage)");
+}
+
+// The spans a generation covers: split, kind (pairs | singles | all), limit; in table order.
+std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p) {
+  const std::string split = p.value("split", std::string("test")), kind = p.value("spans", std::string("pairs"));
+  const int64_t limit = p.value("limit", int64_t{0});
+  std::vector<int64_t> out;
+  for (int64_t i = 0; i < table.size(); ++i) {
+    if (table.splits[static_cast<size_t>(i)] != split) continue;
+    if ((kind == "pairs" && table.single(i)) || (kind == "singles" && !table.single(i))) continue;
+    out.push_back(i);
+    if (limit > 0 && static_cast<int64_t>(out.size()) >= limit) break;
+  }
+  return out;
+}
+
+std::string SpanText(const sinc::SpanTable& table, int64_t i) {
+  return table.single(i) ? table.text_a[static_cast<size_t>(i)] : sinc::EvalPairText(table.text_a[static_cast<size_t>(i)], table.text_b[static_cast<size_t>(i)]);
+}
+
+// params: model (the train stage), split (test), spans (pairs | singles | all), limit, compositing
+// (single-action checkpoints: the GPT-compositing baseline), samples (generations per text, 1).
+class GenerateStage : public StageExecutor {
+ public:
+  explicit GenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
+  std::string Description() const override { return "generates the test split's action texts with a text-to-motion checkpoint, sharded"; }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    if (!plugins_) return TaskReport::Error("generate: this worker has no plugin host");
+    fs::create_directories(ctx.output_dir());
+    const std::string checkpoint = FindCheckpoint(ctx, p.value("model", std::string()));
+    if (checkpoint.empty()) return TaskReport::BadInput("generate: no input holds a checkpoint (a train stage's model/)");
+    json options = p.value("options", json::object());
+    if (p.value("compositing", false)) options["compositing"] = true;
+    auto generator = LoadGenerator(*plugins_, checkpoint, options);
+    if (!generator.ok()) return TaskReport::BadInput(generator.status().message());
+    auto table = InputSpans(ctx);
+    if (!table.ok()) return TaskReport::BadInput("generate: " + table.status().message());
+    const auto spans = SelectSpans(*table, p);
+    if (spans.empty()) return TaskReport::BadInput("generate: no spans of that split and kind in the inputs");
+    const int samples = std::max(1, p.value("samples", 1));
+    std::vector<Clip> clips;
+    const auto started = std::chrono::steady_clock::now();
+    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < spans.size(); k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
+      if (ctx.cancelled()) return TaskReport::Error("cancelled");
+      const int64_t i = spans[k];
+      for (int sample = 0; sample < samples; ++sample) {
+        plugin::GenerateRequest r;
+        r.texts = {table->text_a[static_cast<size_t>(i)]};
+        if (!table->single(i)) r.texts.push_back(table->text_b[static_cast<size_t>(i)]);
+        r.frames = table->frames(i);
+        r.fps = table->fps[static_cast<size_t>(i)];
+        r.seed = MixSeed(ctx.spec.seed(), static_cast<uint64_t>(i * 1000 + sample));
+        auto motion = (*generator)->Generate(r);
+        if (!motion.ok()) return TaskReport::Error(motion.status().message());
+        Clip clip;
+        clip.id = table->ids[static_cast<size_t>(i)] + (samples > 1 ? "#" + std::to_string(sample) : "");
+        clip.source = "generate:" + (*generator)->Name();
+        clip.motion = std::move(*motion);
+        clip.texts = {SpanText(*table, i)};
+        clips.push_back(std::move(clip));
+      }
+    }
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    if (!clips.empty()) {
+      if (Status st = WriteClips(ctx.output_dir() + "/generated.npz", clips); !st.ok()) return TaskReport::Error(st.message());
+    }
+    const json summary = {{"model", (*generator)->Name()}, {"checkpoint", checkpoint}, {"generated", clips.size()}, {"seconds", seconds},
+                          {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)}};
+    if (Status st = WriteFileAtomic(ctx.output_dir() + "/generate.json", summary.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    TaskReport out = TaskReport::Ok();
+    out.metrics["generated"] = static_cast<double>(clips.size());
+    return out;
+  }
+
+ private:
+  const PluginHost* plugins_;
+};
+
+eval::Embeddings ToEmbeddings(const std::vector<std::vector<float>>& rows) {
+  eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
+  for (const auto& row : rows) e.values.insert(e.values.end(), row.begin(), row.end());
+  return e;
+}
+
+// params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
+// evaluator), generated (the generate stage), batch (32), seed, diversity_pairs (300), method.
+class EvalGenerateStage : public StageExecutor {
+ public:
+  explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
+  std::string Description() const override { return "scores generated motions against the ground truth: TEMOS score, APE/AVE, retrieval"; }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    if (!plugins_) return TaskReport::Error("eval_generate: this worker has no plugin host");
+    fs::create_directories(ctx.output_dir());
+    const auto load = [&](const std::string& stage) -> Result<GeneratorPtr> {
+      const std::string dir = FindCheckpoint(ctx, stage);
+      if (dir.empty()) return NotFound("input stage '" + stage + "' holds no checkpoint");
+      return LoadGenerator(*plugins_, dir);
+    };
+    auto tmr = load(p.value("evaluator", std::string("evaluator")));
+    if (!tmr.ok()) return TaskReport::BadInput("eval_generate: " + tmr.status().message());
+    const std::string temos_stage = p.value("temos", std::string());
+    Result<GeneratorPtr> temos = temos_stage.empty() ? Result<GeneratorPtr>(NotFound("")) : load(temos_stage);
+    if (!temos_stage.empty() && !temos.ok()) return TaskReport::BadInput("eval_generate: " + temos.status().message());
+    plugin::Generator& temos_encoder = temos_stage.empty() ? **tmr : **temos;
+    auto table = InputSpans(ctx);
+    if (!table.ok()) return TaskReport::BadInput("eval_generate: " + table.status().message());
+    std::map<std::string, int64_t> span_of;
+    for (int64_t i = 0; i < table->size(); ++i) span_of[table->ids[static_cast<size_t>(i)]] = i;
+    // The generated motions (first sample of each span) and their ground truth.
+    const std::string generated_stage = p.value("generated", std::string());
+    std::vector<Motion> generated, truth;
+    std::vector<std::string> texts, ids;
+    std::string method = p.value("method", std::string());
+    for (const auto& input : ctx.spec.inputs()) {
+      if (!generated_stage.empty() && input.stage() != generated_stage) continue;
+      for (const auto& dir : input.dirs()) {
+        if (!fs::exists(dir + "/generated.npz")) continue;
+        auto clips = ReadClips(dir + "/generated.npz");
+        if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
+        for (auto& clip : *clips) {
+          const auto it = span_of.find(clip.id);
+          if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
+          ids.push_back(clip.id);
+          texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
+          generated.push_back(std::move(clip.motion));
+          truth.push_back(table->MotionOf(it->second));
+        }
+        if (method.empty()) {
+          if (auto summary = ReadFile(dir + "/generate.json"); summary.ok()) method = json::parse(*summary).value("model", std::string());
+        }
+      }
+    }
+    if (generated.size() < 2) return TaskReport::BadInput("eval_generate: fewer than 2 generated motions with a ground truth in the inputs");
+    auto g_tmr = (*tmr)->EncodeMotions(generated), t_tmr = (*tmr)->EncodeMotions(truth), text_tmr = (*tmr)->EncodeTexts(texts);
+    auto g_temos = temos_encoder.EncodeMotions(generated), t_temos = temos_encoder.EncodeMotions(truth);
+    for (const auto* r : {&g_tmr, &t_tmr, &text_tmr, &g_temos, &t_temos}) {
+      if (!r->ok()) return TaskReport::Error("eval_generate: " + r->status().message());
+    }
+    // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
+    double temos_score = 0;
+    for (size_t i = 0; i < generated.size(); ++i) {
+      const auto& a = (*g_temos)[i];
+      const auto& b = (*t_temos)[i];
+      double dot = 0, na = 0, nb = 0;
+      for (size_t k = 0; k < a.size(); ++k) dot += a[k] * b[k], na += a[k] * a[k], nb += b[k] * b[k];
+      temos_score += (1 + dot / std::max(1e-12, std::sqrt(na * nb))) / 2;
+    }
+    temos_score /= static_cast<double>(generated.size());
+    // APE / AVE on joint positions.
+    eval::PositionErrors ape, ave;
+    for (size_t i = 0; i < generated.size(); ++i) {
+      const auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
+      const auto a = eval::AveragePositionalError(gj, tj, kNumJoints), v = eval::AverageVarianceError(gj, tj, kNumJoints);
+      ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local, ape.mean_global += a.mean_global;
+      ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local, ave.mean_global += v.mean_global;
+    }
+    const double n = static_cast<double>(generated.size());
+    const auto errors_json = [n](const eval::PositionErrors& e) {
+      return json{{"root", e.root / n}, {"trajectory", e.trajectory / n}, {"mean_local", e.mean_local / n}, {"mean_global", e.mean_global / n}};
+    };
+    const int64_t batch = p.value("batch", int64_t{32});
+    const uint64_t seed = p.value("seed", ctx.spec.seed());
+    const auto gen = ToEmbeddings(*g_tmr), gt = ToEmbeddings(*t_tmr), txt = ToEmbeddings(*text_tmr);
+    json metrics = {{"method", method}, {"motions", generated.size()}, {"temos_score", temos_score}, {"APE", errors_json(ape)},
+                    {"AVE", errors_json(ave)}, {"batch", batch}, {"seed", seed}};
+    metrics["text_to_generated"] = {{"batches", ScoresJson(eval::Retrieval(txt, gen, batch, seed))}, {"all", ScoresJson(eval::Retrieval(txt, gen, 0, seed))}};
+    metrics["generated_to_truth"] = {{"batches", ScoresJson(eval::Retrieval(gen, gt, batch, seed))}, {"all", ScoresJson(eval::Retrieval(gen, gt, 0, seed))}};
+    metrics["text_to_truth"] = {{"all", ScoresJson(eval::Retrieval(txt, gt, 0, seed))}};
+    const int64_t pairs = p.value("diversity_pairs", int64_t{300});
+    metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)}, {"truth", eval::Diversity(gt, pairs, seed)}};
+    metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen)) : json(nullptr);  // needs more motions than dimensions
+    const auto plausibility = [](const std::vector<Motion>& motions) {
+      double skate = 0, penetration = 0, floating = 0, jerk = 0;
+      for (const Motion& m : motions) {
+        const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
+        skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
+      }
+      const double count = static_cast<double>(std::max<size_t>(1, motions.size()));
+      return json{{"foot_skate_ratio", skate / count}, {"penetration_mean_m", penetration / count}, {"float_ratio", floating / count}, {"jerk_mean", jerk / count}};
+    };
+    metrics["plausibility"] = {{"generated", plausibility(generated)}, {"truth", plausibility(truth)}};
+    if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    TaskReport out = TaskReport::Ok();
+    out.metrics["temos_score"] = temos_score;
+    return out;
+  }
+
+ private:
+  const PluginHost* plugins_;
+};
+
 }  // namespace
 
 void RegisterModelExecutors(ExecutorRegistry* registry, const PluginHost* plugins) {
   registry->Register("edit", std::make_unique<EditStage>(plugins));
   registry->Register("eval_edit", std::make_unique<EvalEditStage>(plugins));
+  registry->Register("generate", std::make_unique<GenerateStage>(plugins));
+  registry->Register("eval_generate", std::make_unique<EvalGenerateStage>(plugins));
 }
 
 }  // namespace motionpipe::worker
