@@ -1,5 +1,5 @@
-// What the benchmarks share: a stopwatch and running a command (the reference implementations, the
-// motionpipe binary) for its output, exiting with its output when it fails.
+// What the benchmarks share: a stopwatch, running a command (the reference implementations, the
+// motionpipe binary) for its output, exiting with its output when it fails, and writing arrays.
 #pragma once
 
 #include <sys/wait.h>
@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+
+#include "motionpipe/formats/npy.h"
 
 namespace motionpipe::bench {
 
@@ -27,6 +29,14 @@ inline std::string Run(const std::string& command) {
     std::exit(1);
   }
   return output;
+}
+
+// Writes an array for a reference implementation to read, exiting with the reason on failure.
+inline void SaveNpy(const std::string& path, const NpyArray& array) {
+  if (Status s = WriteNpy(path, array); !s.ok()) {
+    std::fprintf(stderr, "%s\n", s.message().c_str());
+    std::exit(1);
+  }
 }
 
 }  // namespace motionpipe::bench

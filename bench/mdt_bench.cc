@@ -44,13 +44,6 @@ std::vector<std::string> Texts(int64_t n) {
   return t;
 }
 
-void Save(const std::string& path, const NpyArray& array) {
-  if (Status s = WriteNpy(path, array); !s.ok()) {
-    std::fprintf(stderr, "%s\n", s.message().c_str());
-    std::exit(1);
-  }
-}
-
 template <typename T>
 std::vector<T> Values(const torch::Tensor& t) {
   const auto c = t.contiguous();
@@ -138,12 +131,12 @@ int main(int argc, char** argv) {
       const std::string dir = "/tmp/motionpipe_mdt_bench";
       fs::create_directories(dir);
       const auto tokens = net->text_encoder()->TokenIds(texts);
-      Save(dir + "/tokens.npy", NpyArray::Int64({tokens.size(0), tokens.size(1)}, Values<int64_t>(tokens)));
-      Save(dir + "/source.npy", NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(source)));
-      Save(dir + "/target.npy", NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(target)));
-      Save(dir + "/classes.npy", NpyArray::Int64({batch, frames}, Values<int64_t>(classes)));
+      bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({tokens.size(0), tokens.size(1)}, Values<int64_t>(tokens)));
+      bench::SaveNpy(dir + "/source.npy", NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(source)));
+      bench::SaveNpy(dir + "/target.npy", NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(target)));
+      bench::SaveNpy(dir + "/classes.npy", NpyArray::Int64({batch, frames}, Values<int64_t>(classes)));
       for (const auto& [name, pad] : {std::pair{"source_padding", source_padding}, std::pair{"target_padding", target_padding}}) {
-        Save(dir + "/" + name + ".npy", NpyArray::Bool({batch, frames}, Values<uint8_t>(pad.to(torch::kUInt8))));
+        bench::SaveNpy(dir + "/" + name + ".npy", NpyArray::Bool({batch, frames}, Values<uint8_t>(pad.to(torch::kUInt8))));
       }
       std::ostringstream command;
       command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR

@@ -54,13 +54,6 @@ std::vector<std::string> Texts(int64_t n) {
   return texts;
 }
 
-void Save(const std::string& path, const NpyArray& array) {
-  if (Status s = WriteNpy(path, array); !s.ok()) {
-    std::fprintf(stderr, "%s\n", s.message().c_str());
-    std::exit(1);
-  }
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -126,13 +119,13 @@ int main(int argc, char** argv) {
       const std::string dir = "/tmp/motionpipe_train_bench";
       fs::create_directories(dir);
       const auto tokens = net->text_encoder()->TokenIds(texts).contiguous();
-      Save(dir + "/tokens.npy", NpyArray::Int64({tokens.size(0), tokens.size(1)},
+      bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({tokens.size(0), tokens.size(1)},
                                                std::vector<int64_t>(tokens.data_ptr<int64_t>(), tokens.data_ptr<int64_t>() + tokens.numel())));
       const auto f = features.contiguous();
-      Save(dir + "/features.npy", NpyArray::Float32({frames, batch, temos::kFeatureDim},
+      bench::SaveNpy(dir + "/features.npy", NpyArray::Float32({frames, batch, temos::kFeatureDim},
                                                    std::vector<float>(f.data_ptr<float>(), f.data_ptr<float>() + f.numel())));
       const auto pad = padding.to(torch::kUInt8).contiguous();
-      Save(dir + "/padding.npy", NpyArray::Bool({batch, frames}, std::vector<uint8_t>(pad.data_ptr<uint8_t>(), pad.data_ptr<uint8_t>() + pad.numel())));
+      bench::SaveNpy(dir + "/padding.npy", NpyArray::Bool({batch, frames}, std::vector<uint8_t>(pad.data_ptr<uint8_t>(), pad.data_ptr<uint8_t>() + pad.numel())));
       std::ostringstream command;
       command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
               << "/bench/reference/temos_ref.py --batch-dir " << dir << " --latent " << size.latent << " --layers " << size.layers

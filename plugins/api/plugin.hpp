@@ -55,4 +55,16 @@ int RunStage(const mp_task_io* io, char* error, size_t error_size, Fn fn) {
   }
 }
 
+// An object factory's create(): builds the object from its JSON configuration with `make`;
+// exceptions become the factory's error message, prefixed with the plugin's name.
+template <typename Make>
+void* CreateFromJson(const char* plugin_name, const char* config_json, char* error, size_t error_size, Make make) {
+  try {
+    return make(nlohmann::json::parse(config_json ? config_json : "{}"));
+  } catch (const std::exception& e) {
+    std::snprintf(error, error_size, "%s: %s", plugin_name, e.what());
+    return nullptr;
+  }
+}
+
 }  // namespace motionpipe::plugin

@@ -283,25 +283,15 @@ class EditorGenerator : public plugin::Generator {
   std::string labeler_;
 };
 
-template <typename T>
-void* CreateObject(const char* config_json, char* error, size_t error_size, T make) {
-  try {
-    return make(nlohmann::json::parse(config_json ? config_json : "{}"));
-  } catch (const std::exception& e) {
-    std::snprintf(error, error_size, "mdt_editor: %s", e.what());
-    return nullptr;
-  }
-}
-
 const mp_object_factory kFactories[] = {
     {"model", "mdt_editor",
      [](const char* config, char* error, size_t size) {
-       return CreateObject(config, error, size, [](const nlohmann::json& c) -> void* { return static_cast<plugin::Model*>(new EditorModel(c)); });
+       return plugin::CreateFromJson("mdt_editor", config, error, size, [](const nlohmann::json& c) -> void* { return static_cast<plugin::Model*>(new EditorModel(c)); });
      },
      [](void* object) { delete static_cast<plugin::Model*>(object); }},
     {"generator", "mdt_editor",
      [](const char* config, char* error, size_t size) {
-       return CreateObject(config, error, size, [](const nlohmann::json& c) -> void* {
+       return plugin::CreateFromJson("mdt_editor", config, error, size, [](const nlohmann::json& c) -> void* {
          return static_cast<plugin::Generator*>(new EditorGenerator(c.at("checkpoint").get<std::string>(), c));
        });
      },

@@ -257,27 +257,17 @@ class SincGenerator : public plugin::Generator {
   bool compositing_ = false;
 };
 
-template <typename T>
-void* CreateObject(const char* config_json, char* error, size_t error_size, T make) {
-  try {
-    return make(nlohmann::json::parse(config_json ? config_json : "{}"));
-  } catch (const std::exception& e) {
-    std::snprintf(error, error_size, "temos_sinc: %s", e.what());
-    return nullptr;
-  }
-}
-
 const mp_object_factory kFactories[] = {
     {"model", "temos_sinc",
      [](const char* config, char* error, size_t size) {
-       return CreateObject(config, error, size, [](const nlohmann::json& c) -> void* {
+       return plugin::CreateFromJson("temos_sinc", config, error, size, [](const nlohmann::json& c) -> void* {
          return static_cast<plugin::Model*>(new SincModel(c));
        });
      },
      [](void* object) { delete static_cast<plugin::Model*>(object); }},
     {"generator", "temos_sinc",
      [](const char* config, char* error, size_t size) {
-       return CreateObject(config, error, size, [](const nlohmann::json& c) -> void* {
+       return plugin::CreateFromJson("temos_sinc", config, error, size, [](const nlohmann::json& c) -> void* {
          return static_cast<plugin::Generator*>(new SincGenerator(c.at("checkpoint").get<std::string>(), c));
        });
      },

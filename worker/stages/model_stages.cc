@@ -71,6 +71,31 @@ std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
   return "";
 }
 
+Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
+  const auto& side = source ? c.source : c.target;
+  const int64_t begin = side.offsets[static_cast<size_t>(row)], end = side.offsets[static_cast<size_t>(row) + 1];
+  Motion m;
+  m.fps = c.fps[static_cast<size_t>(row)];
+  m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
+  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
+  return m;
+}
+
+json ScoresJson(const eval::RetrievalScores& s) {
+  return {{"R@1", s.r1}, {"R@2", s.r2}, {"R@3", s.r3}, {"AvgR", s.avg_rank}, {"queries", s.queries}};
+}
+
+// Physical plausibility averaged over motions: foot skating, floor penetration, floating, jerk.
+json MeanPlausibility(const std::vector<Motion>& motions) {
+  double skate = 0, penetration = 0, floating = 0, jerk = 0;
+  for (const Motion& m : motions) {
+    const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
+    skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
+  }
+  const double n = static_cast<double>(std::max<size_t>(1, motions.size()));
+  return json{{"foot_skate_ratio", skate / n}, {"penetration_mean_m", penetration / n}, {"float_ratio", floating / n}, {"jerk_mean", jerk / n}};
+}
+
 class EditStage : public StageExecutor {
  public:
   explicit EditStage(const PluginHost* plugins) : plugins_(plugins) {}
@@ -110,23 +135,13 @@ class EditStage : public StageExecutor {
     for (size_t k = static_cast<size_t>(ctx.spec.index()); k < items.size(); k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
       mine.push_back(items[k]);
     }
-    const auto motion_of = [&](const Item& item, bool source) {
-      const TripletColumns& c = files[item.file];
-      const auto& side = source ? c.source : c.target;
-      const int64_t begin = side.offsets[static_cast<size_t>(item.row)], end = side.offsets[static_cast<size_t>(item.row) + 1];
-      Motion m;
-      m.fps = c.fps[static_cast<size_t>(item.row)];
-      m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
-      m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
-      return m;
-    };
     std::vector<Clip> clips;
     const auto started = std::chrono::steady_clock::now();
     for (size_t at = 0; at < mine.size(); at += static_cast<size_t>(batch_size)) {
       if (ctx.cancelled()) return TaskReport::Error("cancelled");
       const size_t end = std::min(mine.size(), at + static_cast<size_t>(batch_size));
       std::vector<Motion> sources;
-      for (size_t k = at; k < end; ++k) sources.push_back(motion_of(mine[k], true));
+      for (size_t k = at; k < end; ++k) sources.push_back(SideMotion(files[mine[k].file], mine[k].row, true));
       std::vector<plugin::GenerateRequest> requests;
       for (size_t k = at; k < end; ++k) {
         const TripletColumns& c = files[mine[k].file];
@@ -168,20 +183,6 @@ class EditStage : public StageExecutor {
  private:
   const PluginHost* plugins_;
 };
-
-Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
-  const auto& side = source ? c.source : c.target;
-  const int64_t begin = side.offsets[static_cast<size_t>(row)], end = side.offsets[static_cast<size_t>(row) + 1];
-  Motion m;
-  m.fps = c.fps[static_cast<size_t>(row)];
-  m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
-  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
-  return m;
-}
-
-json ScoresJson(const eval::RetrievalScores& s) {
-  return {{"R@1", s.r1}, {"R@2", s.r2}, {"R@3", s.r3}, {"AvgR", s.avg_rank}, {"queries", s.queries}};
-}
 
 // params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
 // batch (32), seed, method (a name for the report; default: the edit stage's model).
@@ -251,17 +252,7 @@ class EvalEditStage : public StageExecutor {
       metrics[name] = {{"batches", ScoresJson(eval::Retrieval(*g, *gallery, batch, seed))}, {"all", ScoresJson(eval::Retrieval(*g, *gallery, 0, seed))}};
     }
     metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(*t, *s, batch, seed))}};
-    // Physical plausibility of the edits and of the ground truth, averaged.
-    const auto plausibility = [](const std::vector<Motion>& motions) {
-      double skate = 0, penetration = 0, floating = 0, jerk = 0;
-      for (const Motion& m : motions) {
-        const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
-        skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
-      }
-      const double n = static_cast<double>(std::max<size_t>(1, motions.size()));
-      return json{{"foot_skate_ratio", skate / n}, {"penetration_mean_m", penetration / n}, {"float_ratio", floating / n}, {"jerk_mean", jerk / n}};
-    };
-    metrics["plausibility"] = {{"generated", plausibility(generated)}, {"target", plausibility(targets)}};
+    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"target", MeanPlausibility(targets)}};
     if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
     TaskReport out = TaskReport::Ok();
     out.metrics["R1_generated_to_target"] = metrics["generated_to_target"]["batches"]["R@1"].get<double>();
@@ -457,16 +448,7 @@ class EvalGenerateStage : public StageExecutor {
     const int64_t pairs = p.value("diversity_pairs", int64_t{300});
     metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)}, {"truth", eval::Diversity(gt, pairs, seed)}};
     metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen)) : json(nullptr);  // needs more motions than dimensions
-    const auto plausibility = [](const std::vector<Motion>& motions) {
-      double skate = 0, penetration = 0, floating = 0, jerk = 0;
-      for (const Motion& m : motions) {
-        const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
-        skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
-      }
-      const double count = static_cast<double>(std::max<size_t>(1, motions.size()));
-      return json{{"foot_skate_ratio", skate / count}, {"penetration_mean_m", penetration / count}, {"float_ratio", floating / count}, {"jerk_mean", jerk / count}};
-    };
-    metrics["plausibility"] = {{"generated", plausibility(generated)}, {"truth", plausibility(truth)}};
+    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"truth", MeanPlausibility(truth)}};
     if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
     TaskReport out = TaskReport::Ok();
     out.metrics["temos_score"] = temos_score;
