@@ -129,6 +129,16 @@ class TrainStageTest(EngineTest):
         missing = self.cli("generate", "--model", self.dir, "--text", "a", "--out", clip, check=False)
         self.assertIn("not a checkpoint", missing.stderr)
 
+    def test_bad_model_configs_fail_the_task_with_the_reason(self):
+        for overrides, reason in ((["stages.sinc.params.model=no_such_model"], "no model plugin 'no_such_model'"),
+                                  (["stages.sinc.params.config.model.heads=3"], "must be divisible by heads"),
+                                  (["stages.sinc.params.batch_size=7", "vars.world=2"], "must be divisible by world_size 2")):
+            pipeline = self.write_pipeline("bad.yaml", PIPELINE.replace("OUT", self.path("bad")))
+            result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2", "--threads", "1", *overrides],
+                                    capture_output=True, text=True, timeout=300)
+            self.assertNotEqual(result.returncode, 0)
+            self.assertIn(reason, result.stdout + result.stderr)
+
     def test_a_gang_that_loses_a_rank_resumes_from_its_checkpoint_and_finishes(self):
         overrides = ["vars.world=2", "vars.steps=160", "vars.dropout=0.1", "vars.every=20"]
         reference = self.run_pipeline("reference", 2, *overrides)
