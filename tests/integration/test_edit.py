@@ -4,6 +4,7 @@ workers, and `motionpipe edit` edits a real CMU clip, deterministically under a 
 import glob
 import json
 import os
+import sqlite3
 import subprocess
 import unittest
 
@@ -57,7 +58,7 @@ stages:
   eval_mdt:
     kind: eval_edit
     inputs: [evaluator, edit_mdt, corpus]
-    params: {evaluator: evaluator, edits: edit_mdt, batch: 2}
+    params: {evaluator: evaluator, edits: edit_mdt, batch: 2, history: HISTORY, regression_margin: 0.0}
 """
 
 
@@ -74,7 +75,14 @@ def rotation_matrices(axis_angle):
 
 class EditTest(EngineTest):
     def test_train_edit_stage_and_cli(self):
-        pipeline = self.write_pipeline("edit.yaml", PIPELINE)
+        # An evaluation history whose best AvgR (0.5) no run can reach: this run is a regression.
+        history = self.path("history.sqlite")
+        with sqlite3.connect(history) as db:
+            db.execute("CREATE TABLE history (id INTEGER PRIMARY KEY, time INTEGER, job TEXT, method TEXT, metric TEXT, "
+                       "value REAL, higher_is_better INTEGER, checkpoint TEXT, config_hash TEXT, data_hash TEXT)")
+            db.execute("INSERT INTO history (time, method, metric, value, higher_is_better, checkpoint) "
+                       "VALUES (0, 'mdt_editor/mdt', 'generated_to_target.all.AvgR', 0.5, 0, 'an-old-checkpoint')")
+        pipeline = self.write_pipeline("edit.yaml", PIPELINE.replace("HISTORY", history))
         result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2", "--threads", "1"], capture_output=True, text=True, timeout=900)
         self.assertEqual(result.returncode, 0, result.stdout[-3000:] + result.stderr[-3000:])
         job = glob.glob(self.path("out", "edit_test-*"))[0]
@@ -113,6 +121,13 @@ class EditTest(EngineTest):
             self.assertTrue(0 <= everything["R@1"] <= everything["R@2"] <= everything["R@3"] == 100)
         for who in ("generated", "target"):
             self.assertIn("foot_skate_ratio", metrics["plausibility"][who])
+        # The history got this run's metrics with the hashes, and the AvgR regression is reported.
+        self.assertEqual([r["metric"] for r in metrics["regressions"]], ["generated_to_target.all.AvgR"])
+        self.assertEqual(metrics["regressions"][0]["best_checkpoint"], "an-old-checkpoint")
+        with sqlite3.connect(history) as db:
+            rows = db.execute("SELECT metric, config_hash, data_hash FROM history WHERE job != ''").fetchall()
+        self.assertEqual(sorted(r[0] for r in rows), ["generated_to_target.all.AvgR", "generated_to_target.all.R@1"])
+        self.assertTrue(all(len(r[1]) == 16 and len(r[2]) == 16 for r in rows))
 
         # motionpipe edit on a real CMU clip: the source's length, finite, repeatable under a seed.
         model = os.path.join(job, "mdt")

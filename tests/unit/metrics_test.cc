@@ -2,8 +2,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <random>
 
+#include "metric_history.h"
 #include "motionpipe/eval/metrics.h"
 
 namespace motionpipe::eval {
@@ -131,3 +133,38 @@ TEST(Diversity, MeasuresDistancesBetweenRowsAndWithinGroups) {
 
 }  // namespace
 }  // namespace motionpipe::eval
+
+namespace motionpipe::worker {
+namespace {
+
+TEST(MetricHistory, ARegressionIsAFallOfMoreThanTheMarginBelowTheBest) {
+  const std::string path = ::testing::TempDir() + "/history.sqlite";
+  std::filesystem::remove(path);
+  const auto record = [](const std::string& method, const std::string& metric, double value, bool higher, const std::string& ckpt) {
+    MetricRecord r;
+    r.method = method, r.metric = metric, r.value = value, r.higher_is_better = higher, r.checkpoint = ckpt;
+    return r;
+  };
+  auto first = AppendAndCompare(path, {record("mdt", "R@1", 50, true, "a"), record("mdt", "AvgR", 3.0, false, "a")}, 2.0);
+  ASSERT_TRUE(first.ok()) << first.status().message();
+  EXPECT_TRUE(first->empty());  // nothing to compare with
+  ASSERT_TRUE(AppendAndCompare(path, {record("mdt", "R@1", 60, true, "b")}, 2.0).ok());
+  // 59 is within the margin of the best (60); 57 is not; AvgR 5.5 is worse than 3.0 by more than 2.
+  EXPECT_TRUE(AppendAndCompare(path, {record("mdt", "R@1", 59, true, "c")}, 2.0)->empty());
+  auto worse = AppendAndCompare(path, {record("mdt", "R@1", 57, true, "d"), record("mdt", "AvgR", 5.5, false, "d"),
+                                       record("tmed", "R@1", 10, true, "d")}, 2.0);
+  ASSERT_TRUE(worse.ok());
+  ASSERT_EQ(worse->size(), 2u);  // tmed has no history yet
+  EXPECT_EQ((*worse)[0].metric, "R@1");
+  EXPECT_DOUBLE_EQ((*worse)[0].best, 60);
+  EXPECT_EQ((*worse)[0].best_checkpoint, "b");
+  EXPECT_EQ((*worse)[1].metric, "AvgR");
+  EXPECT_DOUBLE_EQ((*worse)[1].best, 3.0);
+  EXPECT_NE((*worse)[0].Describe().find("regressed: 57 against its best 60"), std::string::npos) << (*worse)[0].Describe();
+  EXPECT_FALSE(AppendAndCompare("/no/such/dir/history.sqlite", {record("m", "x", 1, true, "")}, 0).ok());
+  EXPECT_EQ(HashText("abc"), HashText("abc"));
+  EXPECT_NE(HashText("abc"), HashText("abd"));
+}
+
+}  // namespace
+}  // namespace motionpipe::worker

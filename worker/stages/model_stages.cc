@@ -15,11 +15,15 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <ctime>
 #include <map>
+#include <optional>
 
 #include "../executor.h"
 #include "../generators.h"
+#include "../metric_history.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/log.h"
 #include "motionpipe/base/random.h"
 #include "motionpipe/eval/metrics.h"
 #include "motionpipe/motion/plausibility.h"
@@ -184,6 +188,53 @@ class EditStage : public StageExecutor {
   const PluginHost* plugins_;
 };
 
+// The evaluation history (params.history: a SQLite file; off when absent): appends the tracked
+// metrics, adds "regressions" to `metrics`, logs each one, and (fail_on_regression) fails the task,
+// which fails the job: the exit code of `run` and `wait`. A regression is a metric more than
+// params.regression_margin (absolute, in the metric's units) below its best earlier value.
+struct Tracked {
+  const char* name;
+  double value;
+  bool higher_is_better;
+};
+
+std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics, const std::string& method, const std::string& checkpoint,
+                                        const std::vector<std::string>& ids, const std::vector<Tracked>& tracked) {
+  const json& p = ctx.params;
+  const std::string path = p.value("history", std::string());
+  if (path.empty()) return std::nullopt;
+  std::string data;
+  for (const auto& id : ids) data += id + "\n";
+  auto config = ReadFile(checkpoint + "/model.json");
+  std::vector<MetricRecord> records;
+  for (const Tracked& t : tracked) {
+    MetricRecord r;
+    r.method = method;
+    r.metric = t.name;
+    r.value = t.value;
+    r.higher_is_better = t.higher_is_better;
+    r.checkpoint = checkpoint;
+    r.config_hash = config.ok() ? HashText(*config) : "";
+    r.data_hash = HashText(data);
+    r.job = std::to_string(ctx.spec.job_id());
+    r.time_unix = static_cast<int64_t>(std::time(nullptr));
+    records.push_back(r);
+  }
+  auto regressions = AppendAndCompare(path, records, p.value("regression_margin", 0.0));
+  if (!regressions.ok()) return TaskReport::Error(regressions.status().message());
+  (*metrics)["history"] = path;
+  (*metrics)["regressions"] = json::array();
+  for (const auto& r : *regressions) {
+    (*metrics)["regressions"].push_back({{"metric", r.metric}, {"value", r.value}, {"best", r.best}, {"best_checkpoint", r.best_checkpoint}});
+    MP_LOG(kWarn, "eval") << "regression: " << r.Describe();
+  }
+  if (!regressions->empty() && p.value("fail_on_regression", false)) {
+    return TaskReport::BadInput("regression: " + regressions->front().Describe() +
+                                (regressions->size() > 1 ? " (and " + std::to_string(regressions->size() - 1) + " more)" : ""));
+  }
+  return std::nullopt;
+}
+
 // params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
 // batch (32), seed, method (a name for the report; default: the edit stage's model).
 class EvalEditStage : public StageExecutor {
@@ -253,8 +304,25 @@ class EvalEditStage : public StageExecutor {
     }
     metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(*t, *s, batch, seed))}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"target", MeanPlausibility(targets)}};
+    std::string edited_checkpoint;
+    for (const auto& input : ctx.spec.inputs()) {
+      for (const auto& dir : input.dirs()) {
+        if (auto summary = ReadFile(dir + "/edits.json"); summary.ok() && edited_checkpoint.empty()) {
+          edited_checkpoint = json::parse(*summary).value("checkpoint", std::string());
+        }
+      }
+    }
+    const json& g2t = metrics["generated_to_target"]["all"];
+    if (auto failed = RecordHistory(ctx, &metrics, method, edited_checkpoint, ids,
+                                    {{"generated_to_target.all.R@1", g2t["R@1"].get<double>(), true},
+                                     {"generated_to_target.all.AvgR", g2t["AvgR"].get<double>(), false}})) {
+      if (failed->outcome != Outcome::kBadInput) return *failed;
+      (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n");
+      return *failed;
+    }
     if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
     TaskReport out = TaskReport::Ok();
+    out.metrics["regressions"] = metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
     out.metrics["R1_generated_to_target"] = metrics["generated_to_target"]["batches"]["R@1"].get<double>();
     out.metrics["AvgR_generated_to_target"] = metrics["generated_to_target"]["batches"]["AvgR"].get<double>();
     return out;
@@ -449,8 +517,25 @@ class EvalGenerateStage : public StageExecutor {
     metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)}, {"truth", eval::Diversity(gt, pairs, seed)}};
     metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen)) : json(nullptr);  // needs more motions than dimensions
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"truth", MeanPlausibility(truth)}};
+    std::string generated_checkpoint;
+    for (const auto& input : ctx.spec.inputs()) {
+      for (const auto& dir : input.dirs()) {
+        if (auto summary = ReadFile(dir + "/generate.json"); summary.ok() && generated_checkpoint.empty()) {
+          generated_checkpoint = json::parse(*summary).value("checkpoint", std::string());
+        }
+      }
+    }
+    if (auto failed = RecordHistory(ctx, &metrics, method, generated_checkpoint, ids,
+                                    {{"temos_score", temos_score, true},
+                                     {"APE.mean_global", metrics["APE"]["mean_global"].get<double>(), false},
+                                     {"text_to_generated.all.R@1", metrics["text_to_generated"]["all"]["R@1"].get<double>(), true}})) {
+      if (failed->outcome != Outcome::kBadInput) return *failed;
+      (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n");
+      return *failed;
+    }
     if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
     TaskReport out = TaskReport::Ok();
+    out.metrics["regressions"] = metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
     out.metrics["temos_score"] = temos_score;
     return out;
   }
