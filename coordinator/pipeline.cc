@@ -203,6 +203,13 @@ bool ParseDuration(const std::string& text, double* seconds) {
   return true;
 }
 
+// A stage parameter naming one of the stage's inputs, or a path pattern (it has a '/').
+static bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs) {
+  if (!value.is_string()) return false;
+  const std::string name = value.get<std::string>();
+  return name.find('/') != std::string::npos || std::find(inputs.begin(), inputs.end(), name) != inputs.end();
+}
+
 KindRegistry KindRegistry::WithBuiltins() {
   KindRegistry registry;
   // Diagnostic kinds: `tasks` map tasks each.
@@ -263,10 +270,7 @@ KindRegistry KindRegistry::WithBuiltins() {
     stage->reduce = false;
     const auto& p = stage->params;
     for (const char* key : {"evaluator", "edits"}) {
-      if (p.contains(key) && (!p[key].is_string() ||
-                              std::find(stage->inputs.begin(), stage->inputs.end(), p[key].get<std::string>()) == stage->inputs.end())) {
-        errors->push_back(path + ".params." + key + ": must name one of the stage's inputs");
-      }
+      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs)) errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
     }
   });
   // Text-to-motion generation of a test split (`shards` tasks, default 2) and its scoring (one task).
@@ -285,10 +289,7 @@ KindRegistry KindRegistry::WithBuiltins() {
     stage->reduce = false;
     const auto& p = stage->params;
     for (const char* key : {"evaluator", "temos", "generated"}) {
-      if (p.contains(key) && (!p[key].is_string() ||
-                              std::find(stage->inputs.begin(), stage->inputs.end(), p[key].get<std::string>()) == stage->inputs.end())) {
-        errors->push_back(path + ".params." + key + ": must name one of the stage's inputs");
-      }
+      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs)) errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
     }
   });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
@@ -370,13 +371,16 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
       errors.push_back("seed: must be a non-negative integer");
     }
   }
-  if (doc.contains("schedule")) {
+  if (doc.contains("schedule") && !doc["schedule"].is_null()) {
     if (!doc["schedule"].is_string()) {
       errors.push_back("schedule: must be a cron string such as \"0 3 * * *\"");
     } else {
+      // An empty schedule (the override `schedule=`, or `schedule=""`) runs a recurring pipeline once, now.
       spec.schedule = doc["schedule"].get<std::string>();
-      auto cron = ParseCron(spec.schedule);
-      if (!cron.ok()) errors.push_back("schedule: " + cron.status().message());
+      if (!spec.schedule.empty()) {
+        auto cron = ParseCron(spec.schedule);
+        if (!cron.ok()) errors.push_back("schedule: " + cron.status().message());
+      }
     }
   }
   StageSpec defaults;

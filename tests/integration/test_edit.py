@@ -73,6 +73,24 @@ def rotation_matrices(axis_angle):
     return np.eye(3) + s * k + (1 - c) * (k @ k)
 
 
+NIGHTLY = """
+name: nightly
+output_root: OUT/../nightly
+seed: 1
+stages:
+  corpus: {kind: corpus, params: {clips: 60, triplets: 60, shard_size: 30}}
+  edit:
+    kind: edit
+    inputs: [corpus]
+    shards: 1
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 2, batch: 2}
+  score:
+    kind: eval_edit
+    inputs: [edit, corpus]
+    params: {evaluator: "JOBS/evaluator", edits: edit, batch: 2, history: HISTORY, fail_on_regression: true}
+"""
+
+
 class EditTest(EngineTest):
     def test_train_edit_stage_and_cli(self):
         # An evaluation history whose best AvgR (0.5) no run can reach: this run is a regression.
@@ -128,6 +146,15 @@ class EditTest(EngineTest):
             rows = db.execute("SELECT metric, config_hash, data_hash FROM history WHERE job != ''").fetchall()
         self.assertEqual(sorted(r[0] for r in rows), ["generated_to_target.all.AvgR", "generated_to_target.all.R@1"])
         self.assertTrue(all(len(r[1]) == 16 and len(r[2]) == 16 for r in rows))
+
+        # A scheduled-style evaluation that finds the newest checkpoints by path pattern, with the
+        # history: the regression against the seeded AvgR fails the job (exit code 1) with its reason.
+        nightly = self.write_pipeline("nightly.yaml", NIGHTLY.replace("JOBS", self.path("out", "edit_test-*")).replace("HISTORY", history))
+        result = subprocess.run([MOTIONPIPE, "run", nightly, "--workers", "2", "--threads", "1"], capture_output=True, text=True, timeout=600)
+        self.assertEqual(result.returncode, 1, result.stdout[-2000:] + result.stderr[-2000:])
+        self.assertIn("regression: mdt_editor/mdt generated_to_target.all.AvgR regressed", result.stdout + result.stderr)
+        with open(glob.glob(self.path("nightly", "nightly-*", "edit", "task-00000", "edits.json"))[0]) as f:
+            self.assertEqual(json.load(f)["checkpoint"], os.path.join(job, "mdt", "task-00000", "model"))
 
         # motionpipe edit on a real CMU clip: the source's length, finite, repeatable under a seed.
         model = os.path.join(job, "mdt")

@@ -12,6 +12,8 @@
 // params (edit): model (the input stage holding the checkpoint; default: the input that has one),
 //   split (test), limit (0 = all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed,
 //   body_parts (MDM-BP), options (merged into the generator's configuration)
+#include <glob.h>
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -65,7 +67,26 @@ std::vector<std::string> TripletFiles(const TaskContext& ctx) {
   return files;
 }
 
+// A checkpoint named by a stage parameter: an input stage's name, or a path pattern (anything with
+// a '/', e.g. "out/train_mdt-*/mdt") whose newest checkpoint is taken: a scheduled evaluation of the
+// latest training job.
 std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
+  if (stage.find('/') != std::string::npos) {
+    glob_t matches{};
+    std::string newest;
+    fs::file_time_type newest_time{};
+    if (::glob(stage.c_str(), 0, nullptr, &matches) == 0) {
+      for (size_t k = 0; k < matches.gl_pathc; ++k) {
+        auto resolved = ResolveCheckpoint(matches.gl_pathv[k]);
+        if (!resolved.ok()) continue;
+        std::error_code ec;
+        const auto time = fs::last_write_time(*resolved + "/model.json", ec);
+        if (!ec && (newest.empty() || time > newest_time)) newest = *resolved, newest_time = time;
+      }
+    }
+    globfree(&matches);
+    return newest;
+  }
   for (const auto& input : ctx.spec.inputs()) {
     if (!stage.empty() && input.stage() != stage) continue;
     for (const auto& dir : input.dirs()) {
