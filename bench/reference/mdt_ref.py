@@ -10,26 +10,18 @@ on the batch bench/mdt_bench writes, with AdamW and gradient clipping, timed.
 prints one JSON line: {"samples_per_second": ..., "seconds": ..., "loss": ...}
 """
 import argparse
-import json
 import math
 import os
-import time
 
 import numpy as np
 import torch
 from torch import nn
 import torch.nn.functional as F
 
+# The shared layers and timing loop of the TEMOS reference (same directory).
+from temos_ref import encoder, positional_encoding, report_timed_steps
+
 GROUPS = [(0, 3), (3, 9), (9, 15), (15, 141), (141, 207)]
-
-
-def positional_encoding(length, dim):
-    position = torch.arange(length, dtype=torch.float32).unsqueeze(1)
-    div = torch.exp(torch.arange(0, dim, 2, dtype=torch.float32) * (-math.log(10000.0) / dim))
-    pe = torch.zeros(length, dim)
-    pe[:, 0::2] = torch.sin(position * div)
-    pe[:, 1::2] = torch.cos(position * div)
-    return pe.unsqueeze(1)
 
 
 def timestep_embedding(t, dim=256):
@@ -37,11 +29,6 @@ def timestep_embedding(t, dim=256):
     freqs = torch.exp(-math.log(10000.0) * torch.arange(half, dtype=torch.float32) / half)
     args = t.float().unsqueeze(1) * freqs.unsqueeze(0)
     return torch.cat([torch.cos(args), torch.sin(args)], 1)
-
-
-def encoder(dim, heads, ff, dropout, layers):
-    layer = nn.TransformerEncoderLayer(dim, heads, ff, dropout, activation="gelu")
-    return nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
 
 
 class DiTBlock(nn.Module):
@@ -139,7 +126,6 @@ def main():
     tokens, source, target = load("tokens"), load("source"), load("target")
     source_padding, target_padding, classes = load("source_padding"), load("target_padding"), load("classes")
     n = target.shape[1]
-    betas = []
     f = lambda t: math.cos((t / 300 + 0.008) / 1.008 * math.pi / 2) ** 2
     abar = torch.tensor([f(t + 1) / f(0) for t in range(300)], dtype=torch.float32)
     model = Mdt(a)
@@ -167,14 +153,7 @@ def main():
         optimizer.step()
         return loss.item()
 
-    for _ in range(a.warmup):
-        step()
-    start = time.perf_counter()
-    loss = 0.0
-    for _ in range(a.steps):
-        loss = step()
-    seconds = time.perf_counter() - start
-    print(json.dumps({"samples_per_second": a.steps * n / seconds, "seconds": seconds, "loss": loss}))
+    report_timed_steps(step, a.warmup, a.steps, n)
 
 
 if __name__ == "__main__":

@@ -115,6 +115,18 @@ class Temos(nn.Module):
         return loss + 1e-5 * F.smooth_l1_loss(t_z, m_z)
 
 
+def report_timed_steps(step, warmup, steps, batch):
+    """Runs `warmup` untimed steps, then times `steps`; prints the JSON line the benchmarks parse."""
+    for _ in range(warmup):
+        step()
+    start = time.perf_counter()
+    loss = 0.0
+    for _ in range(steps):
+        loss = step()
+    seconds = time.perf_counter() - start
+    print(json.dumps({"samples_per_second": steps * batch / seconds, "seconds": seconds, "loss": loss}))
+
+
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--batch-dir", required=True)
@@ -146,14 +158,7 @@ def main():
         optimizer.step()
         return loss.item()
 
-    for _ in range(a.warmup):
-        step()
-    start = time.perf_counter()
-    loss = 0.0
-    for _ in range(a.steps):
-        loss = step()
-    seconds = time.perf_counter() - start
-    print(json.dumps({"samples_per_second": a.steps * features.shape[1] / seconds, "seconds": seconds, "loss": loss}))
+    report_timed_steps(step, a.warmup, a.steps, features.shape[1])
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@
 #include <ctime>
 #include <map>
 #include <optional>
+#include <set>
 
 #include "../executor.h"
 #include "../generators.h"
@@ -121,6 +122,30 @@ json MeanPlausibility(const std::vector<Motion>& motions) {
   return json{{"foot_skate_ratio", skate / n}, {"penetration_mean_m", penetration / n}, {"float_ratio", floating / n}, {"jerk_mean", jerk / n}};
 }
 
+// The generator of the checkpoint named by params.model (see FindCheckpoint), with `options`.
+Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins, const json& options, std::string* checkpoint) {
+  *checkpoint = FindCheckpoint(ctx, ctx.params.value("model", std::string()));
+  if (checkpoint->empty()) return NotFound("no input holds a checkpoint (a train stage's model/)");
+  return LoadGenerator(plugins, *checkpoint, options);
+}
+
+// Embeddings from an encoder's rows.
+eval::Embeddings ToEmbeddings(const std::vector<std::vector<float>>& rows) {
+  eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
+  for (const auto& row : rows) e.values.insert(e.values.end(), row.begin(), row.end());
+  return e;
+}
+
+// What an evaluated stage's summary (edits.json, generate.json) says: the model's name and checkpoint.
+void ReadSummary(const std::string& path, std::string* method, std::string* checkpoint) {
+  auto text = ReadFile(path);
+  if (!text.ok()) return;
+  const json summary = json::parse(*text, nullptr, false);
+  if (summary.is_discarded()) return;
+  if (method->empty()) *method = summary.value("model", std::string());
+  if (checkpoint->empty()) *checkpoint = summary.value("checkpoint", std::string());
+}
+
 class EditStage : public StageExecutor {
  public:
   explicit EditStage(const PluginHost* plugins) : plugins_(plugins) {}
@@ -130,12 +155,11 @@ class EditStage : public StageExecutor {
     const json& p = ctx.params;
     if (!plugins_) return TaskReport::Error("edit: this worker has no plugin host");
     fs::create_directories(ctx.output_dir());
-    const std::string checkpoint = FindCheckpoint(ctx, p.value("model", std::string()));
-    if (checkpoint.empty()) return TaskReport::BadInput("edit: no input holds a checkpoint (a train stage's model/)");
     json options = p.value("options", json::object());
     if (p.value("body_parts", false)) options["body_parts"] = true;
-    auto generator = LoadGenerator(*plugins_, checkpoint, options);
-    if (!generator.ok()) return TaskReport::BadInput(generator.status().message());
+    std::string checkpoint;
+    auto generator = OpenModel(ctx, *plugins_, options, &checkpoint);
+    if (!generator.ok()) return TaskReport::BadInput("edit: " + generator.status().message());
     const std::string split = p.value("split", std::string("test"));
     const int64_t limit = p.value("limit", int64_t{0});
     const int batch_size = std::max(1, p.value("batch", 8));
@@ -250,10 +274,19 @@ std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics, c
     MP_LOG(kWarn, "eval") << "regression: " << r.Describe();
   }
   if (!regressions->empty() && p.value("fail_on_regression", false)) {
+    (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics->dump(1) + "\n");  // for the record; the task fails
     return TaskReport::BadInput("regression: " + regressions->front().Describe() +
                                 (regressions->size() > 1 ? " (and " + std::to_string(regressions->size() - 1) + " more)" : ""));
   }
   return std::nullopt;
+}
+
+// Writes metrics.json; the task's report carries the number of regressions.
+TaskReport WriteMetrics(const TaskContext& ctx, const json& metrics) {
+  if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+  TaskReport out = TaskReport::Ok();
+  out.metrics["regressions"] = metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
+  return out;
 }
 
 // params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
@@ -275,7 +308,7 @@ class EvalEditStage : public StageExecutor {
     // The edited motions by triplet id, from every edit task.
     const std::string edits_stage = p.value("edits", std::string());
     std::map<std::string, Motion> edited;
-    std::string method = p.value("method", std::string());
+    std::string method = p.value("method", std::string()), edited_checkpoint;
     for (const auto& input : ctx.spec.inputs()) {
       if (!edits_stage.empty() && input.stage() != edits_stage) continue;
       for (const auto& dir : input.dirs()) {
@@ -283,21 +316,20 @@ class EvalEditStage : public StageExecutor {
         auto clips = ReadClips(dir + "/edited.npz");
         if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
         for (auto& clip : *clips) edited[clip.id] = std::move(clip.motion);
-        if (method.empty()) {
-          if (auto summary = ReadFile(dir + "/edits.json"); summary.ok()) method = json::parse(*summary).value("model", std::string());
-        }
+        ReadSummary(dir + "/edits.json", &method, &edited_checkpoint);
       }
     }
     if (edited.size() < 2) return TaskReport::BadInput("eval_edit: fewer than 2 edited motions in the inputs (an edit stage)");
     // Their triplets' sources and targets.
     std::vector<Motion> generated, targets, sources;
     std::vector<std::string> ids;
+    std::set<std::string> seen;
     for (const std::string& path : TripletFiles(ctx)) {
       auto c = ReadTripletColumns(path, {0, -1, true, false});
       if (!c.ok()) return TaskReport::BadInput(c.status().message());
       for (int64_t r = 0; r < c->rows; ++r) {
         const auto it = edited.find(c->ids[static_cast<size_t>(r)]);
-        if (it == edited.end() || std::find(ids.begin(), ids.end(), it->first) != ids.end()) continue;
+        if (it == edited.end() || !seen.insert(it->first).second) continue;
         ids.push_back(it->first);
         generated.push_back(it->second);
         targets.push_back(SideMotion(*c, r, false));
@@ -307,43 +339,26 @@ class EvalEditStage : public StageExecutor {
     if (generated.size() != edited.size()) {
       return TaskReport::BadInput("eval_edit: " + std::to_string(edited.size() - generated.size()) + " edited motion(s) have no triplet in the inputs");
     }
-    const auto embed = [&](const std::vector<Motion>& motions) -> Result<eval::Embeddings> {
-      MP_ASSIGN_OR_RETURN(const auto rows, (*encoder)->EncodeMotions(motions));
-      eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
-      for (const auto& row : rows) e.values.insert(e.values.end(), row.begin(), row.end());
-      return e;
-    };
-    auto g = embed(generated), t = embed(targets), s = embed(sources);
-    for (const auto* e : {&g, &t, &s}) {
+    auto g_rows = (*encoder)->EncodeMotions(generated), t_rows = (*encoder)->EncodeMotions(targets), s_rows = (*encoder)->EncodeMotions(sources);
+    for (const auto* e : {&g_rows, &t_rows, &s_rows}) {
       if (!e->ok()) return TaskReport::Error("eval_edit: " + e->status().message());
     }
+    const auto g = ToEmbeddings(*g_rows), t = ToEmbeddings(*t_rows), s = ToEmbeddings(*s_rows);
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
     json metrics = {{"method", method}, {"evaluator", evaluator}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}};
-    for (const auto& [name, gallery] : {std::pair{"generated_to_target", &*t}, std::pair{"generated_to_source", &*s}}) {
-      metrics[name] = {{"batches", ScoresJson(eval::Retrieval(*g, *gallery, batch, seed))}, {"all", ScoresJson(eval::Retrieval(*g, *gallery, 0, seed))}};
+    for (const auto& [name, gallery] : {std::pair{"generated_to_target", &t}, std::pair{"generated_to_source", &s}}) {
+      metrics[name] = {{"batches", ScoresJson(eval::Retrieval(g, *gallery, batch, seed))}, {"all", ScoresJson(eval::Retrieval(g, *gallery, 0, seed))}};
     }
-    metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(*t, *s, batch, seed))}};
+    metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(t, s, batch, seed))}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"target", MeanPlausibility(targets)}};
-    std::string edited_checkpoint;
-    for (const auto& input : ctx.spec.inputs()) {
-      for (const auto& dir : input.dirs()) {
-        if (auto summary = ReadFile(dir + "/edits.json"); summary.ok() && edited_checkpoint.empty()) {
-          edited_checkpoint = json::parse(*summary).value("checkpoint", std::string());
-        }
-      }
-    }
     const json& g2t = metrics["generated_to_target"]["all"];
     if (auto failed = RecordHistory(ctx, &metrics, method, edited_checkpoint, ids,
                                     {{"generated_to_target.all.R@1", g2t["R@1"].get<double>(), true},
                                      {"generated_to_target.all.AvgR", g2t["AvgR"].get<double>(), false}})) {
-      if (failed->outcome != Outcome::kBadInput) return *failed;
-      (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n");
       return *failed;
     }
-    if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
-    TaskReport out = TaskReport::Ok();
-    out.metrics["regressions"] = metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
+    TaskReport out = WriteMetrics(ctx, metrics);
     out.metrics["R1_generated_to_target"] = metrics["generated_to_target"]["batches"]["R@1"].get<double>();
     out.metrics["AvgR_generated_to_target"] = metrics["generated_to_target"]["batches"]["AvgR"].get<double>();
     return out;
@@ -393,12 +408,11 @@ class GenerateStage : public StageExecutor {
     const json& p = ctx.params;
     if (!plugins_) return TaskReport::Error("generate: this worker has no plugin host");
     fs::create_directories(ctx.output_dir());
-    const std::string checkpoint = FindCheckpoint(ctx, p.value("model", std::string()));
-    if (checkpoint.empty()) return TaskReport::BadInput("generate: no input holds a checkpoint (a train stage's model/)");
     json options = p.value("options", json::object());
     if (p.value("compositing", false)) options["compositing"] = true;
-    auto generator = LoadGenerator(*plugins_, checkpoint, options);
-    if (!generator.ok()) return TaskReport::BadInput(generator.status().message());
+    std::string checkpoint;
+    auto generator = OpenModel(ctx, *plugins_, options, &checkpoint);
+    if (!generator.ok()) return TaskReport::BadInput("generate: " + generator.status().message());
     auto table = InputSpans(ctx);
     if (!table.ok()) return TaskReport::BadInput("generate: " + table.status().message());
     const auto spans = SelectSpans(*table, p);
@@ -442,12 +456,6 @@ class GenerateStage : public StageExecutor {
   const PluginHost* plugins_;
 };
 
-eval::Embeddings ToEmbeddings(const std::vector<std::vector<float>>& rows) {
-  eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
-  for (const auto& row : rows) e.values.insert(e.values.end(), row.begin(), row.end());
-  return e;
-}
-
 // params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
 // evaluator), generated (the generate stage), batch (32), seed, diversity_pairs (300), method.
 class EvalGenerateStage : public StageExecutor {
@@ -478,7 +486,7 @@ class EvalGenerateStage : public StageExecutor {
     const std::string generated_stage = p.value("generated", std::string());
     std::vector<Motion> generated, truth;
     std::vector<std::string> texts, ids;
-    std::string method = p.value("method", std::string());
+    std::string method = p.value("method", std::string()), generated_checkpoint;
     for (const auto& input : ctx.spec.inputs()) {
       if (!generated_stage.empty() && input.stage() != generated_stage) continue;
       for (const auto& dir : input.dirs()) {
@@ -493,9 +501,7 @@ class EvalGenerateStage : public StageExecutor {
           generated.push_back(std::move(clip.motion));
           truth.push_back(table->MotionOf(it->second));
         }
-        if (method.empty()) {
-          if (auto summary = ReadFile(dir + "/generate.json"); summary.ok()) method = json::parse(*summary).value("model", std::string());
-        }
+        ReadSummary(dir + "/generate.json", &method, &generated_checkpoint);
       }
     }
     if (generated.size() < 2) return TaskReport::BadInput("eval_generate: fewer than 2 generated motions with a ground truth in the inputs");
@@ -538,25 +544,13 @@ class EvalGenerateStage : public StageExecutor {
     metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)}, {"truth", eval::Diversity(gt, pairs, seed)}};
     metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen)) : json(nullptr);  // needs more motions than dimensions
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"truth", MeanPlausibility(truth)}};
-    std::string generated_checkpoint;
-    for (const auto& input : ctx.spec.inputs()) {
-      for (const auto& dir : input.dirs()) {
-        if (auto summary = ReadFile(dir + "/generate.json"); summary.ok() && generated_checkpoint.empty()) {
-          generated_checkpoint = json::parse(*summary).value("checkpoint", std::string());
-        }
-      }
-    }
     if (auto failed = RecordHistory(ctx, &metrics, method, generated_checkpoint, ids,
                                     {{"temos_score", temos_score, true},
                                      {"APE.mean_global", metrics["APE"]["mean_global"].get<double>(), false},
                                      {"text_to_generated.all.R@1", metrics["text_to_generated"]["all"]["R@1"].get<double>(), true}})) {
-      if (failed->outcome != Outcome::kBadInput) return *failed;
-      (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n");
       return *failed;
     }
-    if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
-    TaskReport out = TaskReport::Ok();
-    out.metrics["regressions"] = metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
+    TaskReport out = WriteMetrics(ctx, metrics);
     out.metrics["temos_score"] = temos_score;
     return out;
   }
