@@ -190,6 +190,87 @@ int IntParam(const nlohmann::json& params, const char* key, int fallback, int mi
   return static_cast<int>(v.get<int64_t>());
 }
 
+// `seeds: N` on a stage replicates it N times: `name`, `name-s2`, ..., `name-sN`, replicate k with
+// params.seed = (params.seed or the pipeline's seed) + k - 1. A seeded stage whose input is seeded
+// too takes the input's replicate k (both must have the same N), and top-level string params naming
+// that input follow it (model: mdt -> model: mdt-s2). An unseeded stage with a seeded input waits
+// for every replicate; its params keep naming replicate 1.
+void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>* errors) {
+  std::map<std::string, int> seeds;
+  for (const auto& [name, node] : stages->items()) {
+    if (!node.is_object() || !node.contains("seeds")) continue;
+    const Json& n = node["seeds"];
+    if (!n.is_number_integer() || n.get<int64_t>() < 1 || n.get<int64_t>() > 100) {
+      errors->push_back("stages." + name + ".seeds: must be an integer from 1 to 100");
+      continue;
+    }
+    seeds[name] = static_cast<int>(n.get<int64_t>());
+  }
+  if (seeds.empty()) return;
+  const auto replicate = [](const std::string& name, int k) { return k == 1 ? name : name + "-s" + std::to_string(k); };
+  Json out = Json::object();
+  for (const auto& [name, node] : stages->items()) {
+    if (!node.is_object()) {
+      out[name] = node;
+      continue;
+    }
+    std::vector<std::string> inputs;
+    if (node.contains("inputs") && node["inputs"].is_array()) {
+      for (const Json& i : node["inputs"]) {
+        if (i.is_string()) inputs.push_back(i.get<std::string>());
+      }
+    } else if (node.contains("inputs") && node["inputs"].is_string()) {
+      inputs.push_back(node["inputs"].get<std::string>());
+    }
+    const auto own = seeds.find(name);
+    if (own == seeds.end()) {  // unseeded: waits for every replicate of its seeded inputs
+      Json copy = node;
+      if (node.contains("inputs") && (node["inputs"].is_array() || node["inputs"].is_string())) {
+        Json all = Json::array();
+        for (const std::string& input : inputs) {
+          const auto s = seeds.find(input);
+          for (int k = 1; k <= (s == seeds.end() ? 1 : s->second); ++k) all.push_back(replicate(input, k));
+        }
+        copy["inputs"] = all;
+      }
+      out[name] = copy;
+      continue;
+    }
+    const int n = own->second;
+    for (const std::string& input : inputs) {
+      const auto s = seeds.find(input);
+      if (s != seeds.end() && s->second != n) {
+        errors->push_back("stages." + name + ".seeds: " + std::to_string(n) + " replicates, but its input '" + input + "' has " +
+                          std::to_string(s->second) + " (seeded chains need the same count)");
+      }
+    }
+    for (int k = 1; k <= n; ++k) {
+      Json copy = node;
+      copy.erase("seeds");
+      if (!inputs.empty()) {
+        Json renamed = Json::array();
+        for (const std::string& input : inputs) renamed.push_back(seeds.count(input) ? replicate(input, k) : input);
+        copy["inputs"] = renamed;
+      }
+      if (!copy.contains("params") || !copy["params"].is_object()) copy["params"] = Json::object();
+      Json& params = copy["params"];
+      for (auto& [key, value] : params.items()) {
+        if (value.is_string() && seeds.count(value.get<std::string>()) &&
+            std::find(inputs.begin(), inputs.end(), value.get<std::string>()) != inputs.end()) {
+          value = replicate(value.get<std::string>(), k);
+        }
+      }
+      if (k > 1) {
+        const uint64_t base = params.contains("seed") && params["seed"].is_number_integer() ? params["seed"].get<uint64_t>() : pipeline_seed;
+        params["seed"] = base + static_cast<uint64_t>(k - 1);
+      }
+      copy["replicate"] = k;
+      out[replicate(name, k)] = copy;
+    }
+  }
+  *stages = std::move(out);
+}
+
 }  // namespace
 
 bool ParseDuration(const std::string& text, double* seconds) {
@@ -292,6 +373,30 @@ KindRegistry KindRegistry::WithBuiltins() {
       if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs)) errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
     }
   });
+  // The job's HTML report: one task after its inputs (the evaluation stages).
+  registry.Add("report", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = 1;
+    stage->reduce = false;
+    if (stage->inputs.empty()) errors->push_back(path + ": needs inputs: the stages to wait for (the evaluations)");
+  });
+  // The CMU clips through import, composition, editing, metrics and rendering: one task.
+  registry.Add("showcase", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = 1;
+    stage->reduce = false;
+    for (const char* key : {"editor", "generator", "evaluator"}) {
+      if (stage->params.contains(key) && !NamesInputOrPath(stage->params[key], stage->inputs)) {
+        errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
+      }
+    }
+  });
+  // Real data (converted MotionFix, BABEL + AMASS) linked in the corpus stage's layout: one task.
+  registry.Add("dataset", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+    stage->shards = 1;
+    stage->reduce = false;
+    const auto& p = stage->params;
+    if (!p.contains("motionfix") && !p.contains("babel")) errors->push_back(path + ".params: give motionfix (converted .npz files) and/or babel + amass_root");
+    if (p.contains("babel") && !p.contains("amass_root")) errors->push_back(path + ".params.amass_root: required with babel (the AMASS directory)");
+  });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
   registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
     stage->shards = 1;
@@ -345,11 +450,31 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
                            ": malformed YAML: " + error.msg);
   }
   if (!doc.is_object()) return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
+  std::vector<std::string> errors;
+  // `scale: NAME` picks `scales.NAME`, a map of vars: they override the file's vars, and command-line
+  // overrides (which may also pick the scale) override both.
+  if (doc.contains("scale") || doc.contains("scales")) {
+    Json chosen = doc;
+    for (const std::string& o : overrides) MP_RETURN_IF_ERROR(ApplyOverride(&chosen, o).WithContext(origin));
+    const Json scale = chosen.value("scale", Json());
+    const Json scales = chosen.value("scales", Json::object());
+    if (!scale.is_string() || !scales.is_object() || !scales.contains(scale.get<std::string>()) ||
+        !scales[scale.get<std::string>()].is_object()) {
+      std::string known;
+      if (scales.is_object()) {
+        for (const auto& [name, value] : scales.items()) known += (known.empty() ? "" : ", ") + name;
+      }
+      errors.push_back("scale: must name one of scales (" + (known.empty() ? std::string("none defined") : known) + "), got " + scale.dump());
+    } else {
+      if (!doc.contains("vars") || !doc["vars"].is_object()) doc["vars"] = Json::object();
+      for (const auto& [key, value] : scales[scale.get<std::string>()].items()) doc["vars"][key] = value;
+      doc["vars"]["scale"] = scale;
+    }
+  }
   for (const std::string& o : overrides) MP_RETURN_IF_ERROR(ApplyOverride(&doc, o).WithContext(origin));
 
-  std::vector<std::string> errors;
   Interpolate(&doc, Json(doc), "", &errors);
-  CheckKeys(doc, {"name", "description", "output_root", "seed", "schedule", "vars", "defaults", "stages"}, "", &errors);
+  CheckKeys(doc, {"name", "description", "output_root", "seed", "schedule", "scale", "scales", "vars", "defaults", "stages"}, "", &errors);
 
   PipelineSpec spec;
   if (!doc.contains("name") || !doc["name"].is_string() || !ValidName(doc["name"].get<std::string>())) {
@@ -393,6 +518,7 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
     }
   }
 
+  if (doc.contains("stages") && doc["stages"].is_object()) ExpandSeeds(&doc["stages"], spec.seed, &errors);
   std::map<std::string, size_t> index;
   if (!doc.contains("stages") || !doc["stages"].is_object() || doc["stages"].empty()) {
     errors.push_back("stages: required, a map of stage name -> stage");
@@ -407,7 +533,7 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
         continue;
       }
       CheckKeys(node, {"kind", "inputs", "params", "shards", "reduce", "max_attempts", "retry_backoff", "timeout",
-                       "poison_threshold", "threads", "world_size", "description"},
+                       "poison_threshold", "threads", "world_size", "description", "replicate"},
                 path, &errors);
       if (!node.contains("kind") || !node["kind"].is_string()) {
         errors.push_back(path + ".kind: required");
@@ -444,6 +570,7 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
       }
       if (node.contains("world_size")) ReadInt(node["world_size"], path + ".world_size", 1, &stage.world_size, &errors);
       ReadStageSettings(node, path, &stage, &errors);
+      if (node.contains("replicate") && node["replicate"].is_number_integer()) stage.replicate = node["replicate"].get<int>();
       if (!stage.kind.empty()) {
         const StagePlanner* planner = kinds.Find(stage.kind);
         if (!planner) {

@@ -7,11 +7,14 @@
 //   output_root: out                # job outputs go to <output_root>/<name>-<job id>/
 //   seed: 1
 //   schedule: "0 3 * * *"           # optional cron: the job recurs
-//   vars: {scale: small}            # free values for ${vars.scale}
+//   vars: {steps: 300}              # free values for ${vars.steps}
+//   scale: small                    # picks scales.small, vars that override `vars` (the override
+//   scales: {small: {steps: 80}, paper: {steps: 20000}}   # scale=paper picks another)
 //   defaults: {max_attempts: 3, retry_backoff: 2s, timeout: 1h, poison_threshold: 3, threads: 1}
 //   stages:
 //     corpus:  {kind: corpus, params: {clips: 1500}}
 //     filter:  {kind: filter, inputs: [corpus], shards: 8, params: {...}}
+//     mdt:     {kind: train, inputs: [filter], seeds: 3, params: {...}}   # mdt, mdt-s2, mdt-s3
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -39,6 +42,7 @@ struct StageSpec {
   int poison_threshold = 3;            // a task that loses this many workers is quarantined
   int threads = 0;                     // per task; 0 = the worker's budget
   int world_size = 1;                  // gang size (training)
+  int replicate = 1;                   // k of `seeds: N` (the stage is named name-sk for k > 1)
 };
 
 struct PipelineSpec {

@@ -213,7 +213,9 @@ wire::TaskSpec Scheduler::MakeSpec(const Job& job, size_t stage_index, int task,
   spec.set_reduce(stage.spec.reduce && task == stage.spec.shards);
   spec.set_params_json(stage.spec.params.dump());
   spec.set_output_dir(StagingDir(job, stage, task, attempt));
-  spec.set_seed(job.spec.seed);
+  // A stage's own params.seed (seed replicates set it) overrides the pipeline's.
+  const auto& params = stage.spec.params;
+  spec.set_seed(params.contains("seed") && params["seed"].is_number_unsigned() ? params["seed"].get<uint64_t>() : job.spec.seed);
   spec.set_threads(stage.spec.threads);
   for (const std::string& input : stage.spec.inputs) {
     for (const Stage& other : job.stages) {

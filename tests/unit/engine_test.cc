@@ -94,6 +94,65 @@ TEST(Pipeline, OverridesAndInterpolation) {
   EXPECT_FALSE(ParsePipeline(PipelineIn("out"), {"name.sub=1"}, "p.yaml", Kinds()).ok());
 }
 
+TEST(Pipeline, SeedsReplicateStagesAndTheirChains) {
+  const std::string yaml = R"(
+name: seeds
+seed: 7
+stages:
+  data: {kind: noop}
+  mdt: {kind: noop, inputs: [data], seeds: 3, params: {tasks: 1}}
+  edit: {kind: noop, inputs: [mdt, data], seeds: 3, params: {model: mdt, other: data, seed: 40}}
+  report: {kind: noop, inputs: [edit]}
+)";
+  auto spec = ParsePipeline(yaml, {}, "s.yaml", Kinds());
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  std::map<std::string, const StageSpec*> by_name;
+  for (const StageSpec& s : spec->stages) by_name[s.name] = &s;
+  ASSERT_EQ(by_name.size(), 8u);
+  ASSERT_TRUE(by_name.count("mdt-s3") && by_name.count("edit-s2"));
+  EXPECT_FALSE(by_name["mdt"]->params.contains("seed"));  // replicate 1 is the stage as written
+  EXPECT_EQ(by_name["mdt-s2"]->params["seed"], 8);         // pipeline seed + 1
+  EXPECT_EQ(by_name["mdt-s3"]->replicate, 3);
+  EXPECT_EQ(by_name["edit-s2"]->inputs, (std::vector<std::string>{"mdt-s2", "data"}));
+  EXPECT_EQ(by_name["edit-s2"]->params["model"], "mdt-s2");  // a param naming a seeded input follows it
+  EXPECT_EQ(by_name["edit-s2"]->params["other"], "data");
+  EXPECT_EQ(by_name["edit-s3"]->params["seed"], 42);         // its own seed + 2
+  EXPECT_EQ(by_name["edit"]->params["seed"], 40);
+  EXPECT_EQ(by_name["report"]->inputs, (std::vector<std::string>{"edit", "edit-s2", "edit-s3"}));
+  EXPECT_EQ(spec->stages.back().name, "report");
+  // Chains must agree on the count; the count must be sane.
+  auto mismatch = ParsePipeline("name: m\nstages:\n  a: {kind: noop, seeds: 2}\n  b: {kind: noop, inputs: [a], seeds: 3}\n", {}, "m.yaml", Kinds());
+  ASSERT_FALSE(mismatch.ok());
+  EXPECT_NE(mismatch.status().message().find("stages.b.seeds: 3 replicates, but its input 'a' has 2"), std::string::npos);
+  auto zero = ParsePipeline("name: z\nstages:\n  a: {kind: noop, seeds: 0}\n", {}, "z.yaml", Kinds());
+  ASSERT_FALSE(zero.ok());
+  EXPECT_NE(zero.status().message().find("stages.a.seeds: must be an integer from 1 to 100"), std::string::npos);
+}
+
+TEST(Pipeline, ScalePicksVarsThatOverridesStillBeat) {
+  const std::string yaml = R"(
+name: scaled
+scale: small
+scales: {small: {n: 2}, big: {n: 6, m: 3}}
+vars: {n: 1, m: 1}
+stages:
+  a: {kind: noop, params: {tasks: "${vars.n}"}}
+  b: {kind: noop, params: {tasks: "${vars.m}"}}
+)";
+  auto small = ParsePipeline(yaml, {}, "s.yaml", Kinds());
+  ASSERT_TRUE(small.ok()) << small.status().ToString();
+  EXPECT_EQ(small->stages[0].shards, 2);
+  EXPECT_EQ(small->stages[1].shards, 1);
+  auto big = ParsePipeline(yaml, {"scale=big", "vars.m=4"}, "s.yaml", Kinds());
+  ASSERT_TRUE(big.ok()) << big.status().ToString();
+  EXPECT_EQ(big->stages[0].shards, 6);
+  EXPECT_EQ(big->stages[1].shards, 4);  // the command line beats the scale
+  auto unknown = ParsePipeline(yaml, {"scale=huge"}, "s.yaml", Kinds());
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().message().find("scale: must name one of scales (small, big), got \"huge\""), std::string::npos)
+      << unknown.status().message();
+}
+
 TEST(Pipeline, EveryProblemIsReportedWithItsYamlPath) {
   const std::string bad = R"(
 name: bad
