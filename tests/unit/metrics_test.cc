@@ -87,6 +87,20 @@ TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {
   EXPECT_NEAR(AveragePositionalError(longer, truth, 2).root, 0, 1e-9);
 }
 
+TEST(PositionErrors, LocalErrorsRemoveEachFramesHeading) {
+  // Three joints: root, left hip (+x), right hip (-x), hips 0.1 m from the root. The generated body
+  // is the truth turned 90 degrees about z (hips along y) and walked 2 m: root-relative joints
+  // differ by the turn, heading-aligned ones do not.
+  std::vector<float> truth = {0, 0, 1, 0.1f, 0, 1, -0.1f, 0, 1};
+  std::vector<float> turned = {2, 0, 1, 2, 0.1f, 1, 2, -0.1f, 1};
+  const PositionErrors plain = AveragePositionalError(turned, truth, 3);
+  EXPECT_NEAR(plain.mean_local, std::hypot(0.1, 0.1), 1e-6);  // each hip off by the 90-degree turn
+  const PositionErrors aligned = AveragePositionalError(turned, truth, 3, HeadingJoints{1, 2});
+  EXPECT_NEAR(aligned.mean_local, 0, 1e-6);
+  EXPECT_NEAR(aligned.root, 2, 1e-6);  // the global terms are unchanged
+  EXPECT_NEAR(aligned.mean_global, (2 + std::hypot(2 - 0.1, 0.1) + std::hypot(2 + 0.1, 0.1)) / 3, 1e-6);
+}
+
 TEST(Fid, IsZeroForIdenticalSetsAndTheClosedFormOtherwise) {
   const Embeddings x = Random(400, 6, 4);
   EXPECT_NEAR(FrechetDistance(x, x), 0, 1e-6);

@@ -91,11 +91,25 @@ double Norm3(const float* a, const float* b, bool horizontal_only = false) {
 }
 
 // Joints relative to the root, per frame.
-std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints) {
+// Root-relative joints; with hips given, each frame is also turned about z so that its hips' axis
+// (left minus right, on the ground plane) points along +x: the heading is removed.
+std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints, const HeadingJoints& heading) {
   std::vector<float> out(x.begin(), x.begin() + frames * joints * 3);
+  const bool align = heading.left >= 0 && heading.right >= 0 && heading.left < joints && heading.right < joints;
   for (int64_t t = 0; t < frames; ++t) {
+    float* frame = out.data() + t * joints * 3;
+    const float* root = x.data() + t * joints * 3;
+    double c = 1, s = 0;
+    if (align) {
+      const double ax = frame[heading.left * 3] - frame[heading.right * 3], ay = frame[heading.left * 3 + 1] - frame[heading.right * 3 + 1];
+      const double norm = std::hypot(ax, ay);
+      if (norm > 1e-9) c = ax / norm, s = ay / norm;  // rotate by -angle(ax, ay)
+    }
     for (int j = 0; j < joints; ++j) {
-      for (int c = 0; c < 3; ++c) out[static_cast<size_t>((t * joints + j) * 3 + c)] -= x[static_cast<size_t>(t * joints * 3 + c)];
+      const double px = frame[j * 3] - root[0], py = frame[j * 3 + 1] - root[1];
+      frame[j * 3] = static_cast<float>(c * px + s * py);
+      frame[j * 3 + 1] = static_cast<float>(-s * px + c * py);
+      frame[j * 3 + 2] -= root[2];
     }
   }
   return out;
@@ -135,9 +149,10 @@ double VarianceError(const std::vector<float>& a, const std::vector<float>& b, i
 
 }  // namespace
 
-PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints) {
+PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+                                      const HeadingJoints& heading) {
   const int64_t frames = Frames(generated, truth, joints);
-  const auto lg = Local(generated, frames, joints), lt = Local(truth, frames, joints);
+  const auto lg = Local(generated, frames, joints, heading), lt = Local(truth, frames, joints, heading);
   PositionErrors e;
   for (int64_t t = 0; t < frames; ++t) {
     const float* g = generated.data() + t * joints * 3;
@@ -154,9 +169,10 @@ PositionErrors AveragePositionalError(const std::vector<float>& generated, const
   return e;
 }
 
-PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints) {
+PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+                                    const HeadingJoints& heading) {
   const int64_t frames = Frames(generated, truth, joints);
-  const auto lg = Local(generated, frames, joints), lt = Local(truth, frames, joints);
+  const auto lg = Local(generated, frames, joints, heading), lt = Local(truth, frames, joints, heading);
   PositionErrors e;
   e.root = VarianceError(generated, truth, frames, joints, 0, false);
   e.trajectory = VarianceError(generated, truth, frames, joints, 0, true);

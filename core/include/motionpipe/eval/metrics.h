@@ -41,10 +41,19 @@ RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, 
 struct PositionErrors {
   double root = 0, trajectory = 0, mean_local = 0, mean_global = 0;
 };
-// APE and AVE between generated and ground-truth joints [frames, joints, 3] (z up; joint 0 the root).
-// Both are cropped to the shorter length.
-PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints);
-PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints);
+// The joints whose axis gives a frame's heading (SMPL-22: left hip 1, right hip 2); -1 = none.
+struct HeadingJoints {
+  int left = -1, right = -1;
+};
+inline constexpr HeadingJoints kSmpl22Hips{1, 2};
+// APE and AVE between generated and ground-truth joints [frames, joints, 3] (z up; joint 0 the root)
+// (REFERENCE 4.6): root joint, ground-plane trajectory, mean global (all joints) and mean local
+// (joints relative to the root, each frame's heading removed when `heading` names the hips).
+// Both motions are cropped to the shorter length.
+PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+                                      const HeadingJoints& heading = {});
+PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+                                    const HeadingJoints& heading = {});
 
 // Frechet distance between Gaussians fitted to two embedding sets (unbiased covariances).
 double FrechetDistance(const Embeddings& a, const Embeddings& b);
