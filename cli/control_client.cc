@@ -1,5 +1,7 @@
 #include "control_client.h"
 
+#include <ctime>
+
 #include <zmq.hpp>
 
 #include <cmath>
@@ -54,14 +56,30 @@ std::string Duration(double seconds) {
 }
 }  // namespace
 
-std::string FormatStatus(const wire::ControlReply& reply, bool tty, bool show_workers) {
+std::string FormatStatus(const wire::ControlReply& reply, bool tty, bool show_workers, bool compact) {
   std::string out;
   char line[512];
   for (const wire::JobStatus& job : reply.jobs()) {
     std::snprintf(line, sizeof(line), "job %lld %-20s %-10s %s\n", static_cast<long long>(job.id()), job.name().c_str(),
                   job.state().c_str(), job.output_dir().c_str());
     out += line;
+    // The whole job: stages and tasks done, elapsed time and an ETA from the tasks' pace so far.
+    int stages_done = 0, tasks_done = 0, tasks_total = 0, running = 0, waiting = 0;
     for (const wire::StageStatus& stage : job.stages()) {
+      stages_done += stage.committed() == stage.total();
+      waiting += stage.committed() == 0 && stage.running() == 0;
+      tasks_done += stage.committed(), tasks_total += stage.total(), running += stage.running();
+    }
+    const double end = job.finished_unix() > 0 ? job.finished_unix() : static_cast<double>(std::time(nullptr));
+    const double elapsed = job.created_unix() > 0 ? end - job.created_unix() : -1;
+    const double eta = tasks_done > 0 && elapsed > 0 && tasks_done < tasks_total ? elapsed * (tasks_total - tasks_done) / tasks_done : -1;
+    std::snprintf(line, sizeof(line), "  progress: stages %d/%d done, tasks %d/%d, %d running; elapsed %s, ETA %s%s\n", stages_done,
+                  job.stages_size(), tasks_done, tasks_total, running, Duration(elapsed).c_str(), Duration(eta).c_str(),
+                  eta >= 0 ? " (from the tasks' pace so far)" : "");
+    out += line;
+    for (const wire::StageStatus& stage : job.stages()) {
+      // Compact: only the stages at work or in trouble (long pipelines such as the demo).
+      if (compact && stage.running() == 0 && stage.failed() + stage.quarantined() == 0) continue;
       const double fraction = stage.total() > 0 ? static_cast<double>(stage.committed()) / stage.total() : 0;
       std::string bar;
       if (tty) {

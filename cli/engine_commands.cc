@@ -192,7 +192,7 @@ int Run(const RunOptions& o) {
     if (status.ok() && status->jobs_size() == 1) {
       const wire::JobStatus& job = status->jobs(0);
       if (tty) {
-        const std::string text_block = FormatStatus(*status, true, false);
+        const std::string text_block = FormatStatus(*status, true, false, job.stages_size() > 12);
         if (drawn_lines > 0) std::printf("\x1b[%dA", drawn_lines);
         drawn_lines = 0;
         size_t start = 0;
@@ -204,9 +204,9 @@ int Run(const RunOptions& o) {
         }
         std::fflush(stdout);
       } else if (!o.quiet) {
-        const std::string text_block = FormatStatus(*status, false, false);
+        const std::string text_block = FormatStatus(*status, false, false, job.stages_size() > 12);
         const auto now = std::chrono::steady_clock::now();
-        if (text_block != last_plain && now - last_plain_time > std::chrono::seconds(5)) {
+        if (text_block != last_plain && now - last_plain_time > std::chrono::seconds(job.stages_size() > 12 ? 20 : 5)) {
           std::fputs(text_block.c_str(), stdout);
           std::fflush(stdout);
           last_plain = text_block;

@@ -14,6 +14,7 @@
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/render/motion_render.h"
 #include "motionpipe/sinc/texts.h"
+#include "report.h"
 
 namespace motionpipe::cli {
 
@@ -68,14 +69,14 @@ void AddModelCommands(CLI::App& app, int* exit_code) {
     cmd->add_option("--source-fps", source_fps, "Frame rate to resample BVH/AMASS inputs to")->capture_default_str();
     cmd->callback([exit_code] {
       options.panel_height = options.panel_width;
-      std::vector<render::Panel> panels;
+      std::vector<render::MotionPanel> panels;
       for (size_t k = 0; k < inputs.size(); ++k) {
         auto clips = LoadMotionFile(inputs[k], source_fps);
         if (!clips.ok()) return void(*exit_code = Fail(clips.status()));
         const auto it = clip_id.empty() ? clips->begin()
                                         : std::find_if(clips->begin(), clips->end(), [](const Clip& c) { return c.id == clip_id; });
         if (it == clips->end()) return void(*exit_code = Fail(NotFound(inputs[k] + ": no clip '" + clip_id + "'")));
-        render::Panel panel;
+        render::MotionPanel panel;
         panel.motion = it->motion;
         panel.title = k < titles.size() ? titles[k] : it->id;
         if (!it->texts.empty()) panel.caption = it->texts.front();
@@ -85,6 +86,29 @@ void AddModelCommands(CLI::App& app, int* exit_code) {
       if (Status s = render::RenderMotionFile(out, panels, options); !s.ok()) return void(*exit_code = Fail(s));
       std::printf("rendered %zu motion(s) -> %s in %.1f s\n", panels.size(), out.c_str(),
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+    });
+  }
+  {  // report
+    auto* cmd = app.add_subcommand("report", "Write a job's self-contained HTML report: the papers' tables, claims, curves, previews");
+    static worker::ReportOptions options;
+    static bool no_previews = false;
+    cmd->add_option("job", options.job_dir, "The job's output directory, e.g. out/demo-1")->required()->check(CLI::ExistingDirectory);
+    cmd->add_option("--out", options.out_path, "Output HTML (default: JOB/report.html)");
+    cmd->add_option("--history", options.history, "An evaluation history (SQLite) to plot")->check(CLI::ExistingFile);
+    cmd->add_option("--title", options.title, "Report title (default: the job directory's name)");
+    cmd->add_option("--size", options.panel_size, "Preview panel size in pixels")->capture_default_str()->check(CLI::Range(64, 1024));
+    cmd->add_flag("--no-previews", no_previews, "Skip the rendered previews");
+    cmd->callback([exit_code] {
+      options.previews = !no_previews;
+      const auto started = std::chrono::steady_clock::now();
+      auto summary = worker::WriteReport(options);
+      if (!summary.ok()) return void(*exit_code = Fail(summary.status()));
+      std::printf("report: %d editing and %d composition methods, %d train stages, %d tables, %d images -> %s in %.1f s\n",
+                  summary->edit_methods, summary->generation_methods, summary->train_stages, summary->tables, summary->images,
+                  summary->path.c_str(), std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+      for (const worker::ClaimCheck& c : summary->claims) {
+        std::printf("  %-13s %-50s %-40s %s\n", c.paper.c_str(), c.claim.c_str(), c.verdict.c_str(), c.detail.c_str());
+      }
     });
   }
   {  // edit

@@ -55,6 +55,7 @@ std::vector<wire::OutputFile> ScanOutputs(const std::string& dir) {
   std::vector<std::filesystem::path> files;
   for (auto it = std::filesystem::recursive_directory_iterator(dir, ec); !ec && it != std::filesystem::recursive_directory_iterator();
        it.increment(ec)) {
+    if (it->is_symlink()) continue;  // links to the user's data (the dataset stage) are not task outputs
     if (it->is_regular_file()) files.push_back(it->path());
   }
   std::sort(files.begin(), files.end());

@@ -98,4 +98,35 @@ Result<std::vector<Regression>> AppendAndCompare(const std::string& path, const 
   return regressions;
 }
 
+Result<std::vector<MetricRecord>> ReadHistory(const std::string& path) {
+  Db db;
+  if (sqlite3_open_v2(path.c_str(), &db.db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
+    return IoError(path + ": cannot open the evaluation history: " + (db.db ? sqlite3_errmsg(db.db) : "out of memory"));
+  }
+  sqlite3_busy_timeout(db.db, 10000);
+  Statement rows;
+  if (sqlite3_prepare_v2(db.db,
+                         "SELECT time, job, method, metric, value, higher_is_better, checkpoint, config_hash, data_hash FROM history ORDER BY id",
+                         -1, &rows.stmt, nullptr) != SQLITE_OK) {
+    return DataLoss(path + ": not an evaluation history: " + sqlite3_errmsg(db.db));
+  }
+  const auto text = [&](int column) {
+    const unsigned char* value = sqlite3_column_text(rows.stmt, column);
+    return value ? std::string(reinterpret_cast<const char*>(value)) : std::string();
+  };
+  std::vector<MetricRecord> out;
+  int rc;
+  while ((rc = sqlite3_step(rows.stmt)) == SQLITE_ROW) {
+    MetricRecord r;
+    r.time_unix = sqlite3_column_int64(rows.stmt, 0);
+    r.job = text(1), r.method = text(2), r.metric = text(3);
+    r.value = sqlite3_column_double(rows.stmt, 4);
+    r.higher_is_better = sqlite3_column_int(rows.stmt, 5) != 0;
+    r.checkpoint = text(6), r.config_hash = text(7), r.data_hash = text(8);
+    out.push_back(std::move(r));
+  }
+  if (rc != SQLITE_DONE) return DataLoss(path + ": " + sqlite3_errmsg(db.db));
+  return out;
+}
+
 }  // namespace motionpipe::worker

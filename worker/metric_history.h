@@ -34,6 +34,9 @@ struct Regression {
 // (or higher than best + margin when lower is better). The comparison uses only earlier records.
 Result<std::vector<Regression>> AppendAndCompare(const std::string& path, const std::vector<MetricRecord>& records, double margin);
 
+// Every record of the history at `path`, oldest first (the report's history plots).
+Result<std::vector<MetricRecord>> ReadHistory(const std::string& path);
+
 // A short stable hash (FNV-1a 64, hex) of a file's bytes, or of a string.
 std::string HashText(const std::string& text);
 

@@ -1,16 +1,21 @@
 """The mdt_editor plugin through real workers: the MDT (with its similarity task on the filter's
 classes) and MDM train on filtered corpus triplets, the `edit` stage edits the test split across
 workers, and `motionpipe edit` edits a real CMU clip, deterministically under a seed."""
+import base64
 import glob
+import html.parser
+import http.server
+import io
 import json
 import os
 import sqlite3
 import subprocess
+import threading
 import unittest
 
 import numpy as np
 
-from harness import MOTIONPIPE, EngineTest
+from harness import MOTIONPIPE, EngineTest, free_port
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CMU = os.path.join(HERE, "..", "..", "data", "mocap", "cmu", "131_01.bvh")
@@ -59,6 +64,14 @@ stages:
     kind: eval_edit
     inputs: [evaluator, edit_mdt, corpus]
     params: {evaluator: evaluator, edits: edit_mdt, batch: 2, history: HISTORY, regression_margin: 0.0}
+  showcase:
+    kind: showcase
+    inputs: [mdt, evaluator, singles]
+    params: {clips: CMU_DIR, max_frames: 40, editor: mdt, generator: evaluator, evaluator: evaluator, steps: 2, panel_size: 96}
+  report:
+    kind: report
+    inputs: [eval_mdt, showcase]
+    params: {history: HISTORY, panel_size: 96}
 """
 
 
@@ -87,8 +100,80 @@ stages:
   score:
     kind: eval_edit
     inputs: [edit, corpus]
-    params: {evaluator: "JOBS/evaluator", edits: edit, batch: 2, history: HISTORY, fail_on_regression: true}
+    params: {evaluator: "JOBS/evaluator", edits: edit, batch: 2, history: HISTORY, fail_on_regression: true, pushgateway: "GATEWAY"}
 """
+
+
+class ReportParser(html.parser.HTMLParser):
+    """Collects a report's tables (caption and rows of cell texts) and its images' data URIs."""
+
+    def __init__(self):
+        super().__init__()
+        self.tables, self.images, self._cell, self._row, self._in_caption = [], [], None, None, False
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append({"caption": "", "rows": []})
+        elif tag == "caption":
+            self._in_caption = True
+        elif tag == "tr":
+            self._row = []
+        elif tag in ("td", "th"):
+            self._cell = ""
+        elif tag == "img":
+            self.images.append(dict(attrs))
+
+    def handle_endtag(self, tag):
+        if tag == "caption":
+            self._in_caption = False
+        elif tag in ("td", "th") and self._row is not None:
+            self._row.append(self._cell.strip())
+            self._cell = None
+        elif tag == "tr" and self.tables:
+            self.tables[-1]["rows"].append(self._row)
+            self._row = None
+
+    def handle_data(self, data):
+        if self._in_caption and self.tables:
+            self.tables[-1]["caption"] += data
+        if self._cell is not None:
+            self._cell += data
+
+
+def check_report(test, path):
+    """The report validates: every image is an embedded PNG or GIF that decodes with Pillow and has
+    pixels of more than one colour; returns the parsed tables by caption."""
+    from PIL import Image
+    parser = ReportParser()
+    with open(path, encoding="utf-8") as f:
+        text = f.read()
+    parser.feed(text)
+    test.assertTrue(text.startswith("<!DOCTYPE html>") and text.rstrip().endswith("</html>"))
+    test.assertNotIn('src="http', text)  # self-contained
+    for image in parser.images:
+        mime, _, data = image["src"].partition(";base64,")
+        test.assertIn(mime, ("data:image/png", "data:image/gif"), image.get("alt"))
+        decoded = Image.open(io.BytesIO(base64.b64decode(data)))
+        decoded.load()
+        test.assertGreater(decoded.size[0], 50)
+        test.assertGreater(len(set(decoded.convert("RGB").getdata())), 2, image.get("alt"))
+    return {t["caption"]: t["rows"] for t in parser.tables}, parser.images
+
+
+class Gateway(http.server.BaseHTTPRequestHandler):
+    """A Pushgateway stand-in on loopback: records each push's method, path and body."""
+    pushes = []
+
+    def do_PUT(self):
+        body = self.rfile.read(int(self.headers.get("Content-Length", 0))).decode()
+        Gateway.pushes.append((self.command, self.path, body))
+        self.send_response(202)
+        self.end_headers()
+
+    do_POST = do_PUT
+
+    def log_message(self, *args):
+        pass
 
 
 class EditTest(EngineTest):
@@ -100,7 +185,7 @@ class EditTest(EngineTest):
                        "value REAL, higher_is_better INTEGER, checkpoint TEXT, config_hash TEXT, data_hash TEXT)")
             db.execute("INSERT INTO history (time, method, metric, value, higher_is_better, checkpoint) "
                        "VALUES (0, 'mdt_editor/mdt', 'generated_to_target.all.AvgR', 0.5, 0, 'an-old-checkpoint')")
-        pipeline = self.write_pipeline("edit.yaml", PIPELINE.replace("HISTORY", history))
+        pipeline = self.write_pipeline("edit.yaml", PIPELINE.replace("HISTORY", history).replace("CMU_DIR", os.path.dirname(CMU)))
         result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2", "--threads", "1"], capture_output=True, text=True, timeout=900)
         self.assertEqual(result.returncode, 0, result.stdout[-3000:] + result.stderr[-3000:])
         job = glob.glob(self.path("out", "edit_test-*"))[0]
@@ -147,12 +232,54 @@ class EditTest(EngineTest):
         self.assertEqual(sorted(r[0] for r in rows), ["generated_to_target.all.AvgR", "generated_to_target.all.R@1"])
         self.assertTrue(all(len(r[1]) == 16 and len(r[2]) == 16 for r in rows))
 
+        # The CMU showcase: imported, composed with a corpus action, edited, scored, rendered.
+        with open(os.path.join(job, "showcase", "task-00000", "showcase.json")) as f:
+            showcase = json.load(f)
+        rows = showcase["table"]["rows"]
+        self.assertEqual([r[0] for r in rows[:3]], ["CMU 131_01 (imported)", "CMU 131_02 (imported)", "CMU 131_03 (imported)"])
+        self.assertTrue(rows[-1][0].startswith("MDT edit: raise the right arm higher"))
+        self.assertTrue(all(r[1] == 40 for r in rows[:3]))
+        self.assertAlmostEqual(rows[0][-1], 1.0, places=5)  # the source's cosine to itself
+        with np.load(os.path.join(job, "showcase", "task-00000", "edited.npz")) as z:
+            self.assertEqual(z["poses"].shape, (40, 22, 3))
+
+        # The report stage: the tables, every image embedded and decodable, the showcase included.
+        tables, images = check_report(self, os.path.join(job, "report", "task-00000", "report.html"))
+        table1 = tables["Editing: retrieval of the edits (batches)"]  # batches of 2 here
+        self.assertEqual(table1[2][0], "SimMotionEdit (MDT)")  # mdt_editor/mdt is the paper's row
+        self.assertEqual(table1[2][-4:], ["70.62", "82.92", "88.12", "2.38"])  # the paper's numbers beside ours
+        self.assertAlmostEqual(float(table1[2][2]), metrics["generated_to_target"]["batches"]["R@1"], delta=0.006)
+        self.assertIn("Claims", tables)
+        self.assertTrue(any(r[1] == "MDT beats TMED" and r[2] == "not measured" for r in tables["Claims"][1:]))
+        alts = [i["alt"] for i in images]
+        self.assertIn("editing preview", alts)
+        self.assertIn("training curve mdt", alts)
+        self.assertIn("history generated_to_target.all.R@1", alts)
+        self.assertTrue(any(a.startswith("SINC composition: walk forward while ") for a in alts), alts)
+        # The same report from the command line, elsewhere.
+        out = self.path("cli-report.html")
+        printed = self.cli("report", job, "--out", out, "--history", history, "--size", "80").stdout
+        self.assertIn("report: 1 editing and 0 composition methods, 3 train stages", printed)
+        self.assertEqual(check_report(self, out)[0].keys(), tables.keys())
+
         # A scheduled-style evaluation that finds the newest checkpoints by path pattern, with the
-        # history: the regression against the seeded AvgR fails the job (exit code 1) with its reason.
-        nightly = self.write_pipeline("nightly.yaml", NIGHTLY.replace("JOBS", self.path("out", "edit_test-*")).replace("HISTORY", history))
+        # history: the regression against the seeded AvgR fails the job (exit code 1) with its reason,
+        # and the metrics and the regression are pushed to the (stand-in) Pushgateway.
+        port = free_port()
+        server = http.server.HTTPServer(("127.0.0.1", port), Gateway)
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        self.addCleanup(server.shutdown)
+        nightly = self.write_pipeline("nightly.yaml", NIGHTLY.replace("JOBS", self.path("out", "edit_test-*")).replace("HISTORY", history)
+                                      .replace("GATEWAY", f"http://127.0.0.1:{port}"))
         result = subprocess.run([MOTIONPIPE, "run", nightly, "--workers", "2", "--threads", "1"], capture_output=True, text=True, timeout=600)
         self.assertEqual(result.returncode, 1, result.stdout[-2000:] + result.stderr[-2000:])
         self.assertIn("regression: mdt_editor/mdt generated_to_target.all.AvgR regressed", result.stdout + result.stderr)
+        self.assertTrue(Gateway.pushes, "nothing was pushed to the gateway")
+        method, path, body = Gateway.pushes[-1]
+        self.assertEqual((method, path), ("POST", "/metrics/job/motionpipe_eval/pipeline/nightly/stage/score"))
+        self.assertIn('motionpipe_eval_regression{method="mdt_editor/mdt",metric="generated_to_target.all.AvgR"} 1', body)
+        self.assertIn('motionpipe_eval_regression{method="mdt_editor/mdt",metric="generated_to_target.all.R@1"} 0', body)
+        self.assertIn('motionpipe_eval_regressions{method="mdt_editor/mdt"} 1', body)
         with open(glob.glob(self.path("nightly", "nightly-*", "edit", "task-00000", "edits.json"))[0]) as f:
             self.assertEqual(json.load(f)["checkpoint"], os.path.join(job, "mdt", "task-00000", "model"))
 

@@ -25,16 +25,24 @@
 #include "../executor.h"
 #include "../generators.h"
 #include "../metric_history.h"
+#include "../report.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/log.h"
 #include "motionpipe/base/random.h"
 #include "motionpipe/eval/metrics.h"
 #include "motionpipe/motion/plausibility.h"
+#include "motionpipe/labels/labeler.h"
+#include "motionpipe/render/motion_render.h"
+#include "motionpipe/sinc/composition.h"
 #include "motionpipe/sinc/spans.h"
 #include "motionpipe/sinc/texts.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
+
+#include <prometheus/gateway.h>
+#include <prometheus/gauge.h>
+#include <prometheus/registry.h>
 
 namespace motionpipe::worker {
 
@@ -129,6 +137,22 @@ Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins
   return LoadGenerator(plugins, *checkpoint, options);
 }
 
+// preview.npz next to metrics.json: the first evaluated example's motions as clips (ids = roles:
+// "source", "edited", "target"; "generated", "truth"), each with its text, for the report's renders.
+Status WritePreview(const TaskContext& ctx, const std::vector<std::pair<std::string, const Motion*>>& roles, const std::string& text,
+                    const std::string& example) {
+  std::vector<Clip> clips;
+  for (const auto& [role, motion] : roles) {
+    Clip clip;
+    clip.id = role;
+    clip.source = example;
+    clip.motion = *motion;
+    clip.texts = {text};
+    clips.push_back(std::move(clip));
+  }
+  return WriteClips(ctx.output_dir() + "/preview.npz", clips);
+}
+
 // Embeddings from an encoder's rows.
 eval::Embeddings ToEmbeddings(const std::vector<std::vector<float>>& rows) {
   eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
@@ -181,8 +205,22 @@ class EditStage : public StageExecutor {
     if (items.empty()) return TaskReport::BadInput("edit: no triplets of split '" + split + "' in the inputs");
     if (limit > 0 && static_cast<int64_t>(items.size()) > limit) items.resize(static_cast<size_t>(limit));
     std::vector<Item> mine;
+    std::vector<uint64_t> place;  // each item's place in the split: its sampling seed, whatever the batching
     for (size_t k = static_cast<size_t>(ctx.spec.index()); k < items.size(); k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
       mine.push_back(items[k]);
+      place.push_back(k);
+    }
+    // Batches of similar lengths: a batch is padded to its longest source.
+    std::vector<size_t> order(mine.size());
+    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+    const auto length = [&](size_t k) { const auto& o = files[mine[k].file].source.offsets; return o[mine[k].row + 1] - o[mine[k].row]; };
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return length(a) > length(b); });
+    {
+      std::vector<Item> sorted_items;
+      std::vector<uint64_t> sorted_places;
+      for (size_t k : order) sorted_items.push_back(mine[k]), sorted_places.push_back(place[k]);
+      mine = std::move(sorted_items);
+      place = std::move(sorted_places);
     }
     std::vector<Clip> clips;
     const auto started = std::chrono::steady_clock::now();
@@ -197,7 +235,7 @@ class EditStage : public StageExecutor {
         plugin::GenerateRequest r;
         r.texts = {c.texts[static_cast<size_t>(mine[k].row)]};
         r.source = &sources[k - at];
-        r.seed = ctx.spec.seed() + static_cast<uint64_t>(at);
+        r.seed = MixSeed(ctx.spec.seed(), place[k]);
         r.sampler = p.value("sampler", std::string("ddpm"));
         r.steps = p.value("steps", 0);
         requests.push_back(r);
@@ -243,6 +281,39 @@ struct Tracked {
   bool higher_is_better;
 };
 
+// Pushes this evaluation's headline metrics and its regressions to a Prometheus Pushgateway
+// ("http://host:port"), grouped by job name and stage: motionpipe_eval_metric{method, metric},
+// motionpipe_eval_regression{method, metric} (1 when it regressed) and motionpipe_eval_regressions.
+// A gateway that cannot be reached is logged and recorded, not fatal: the metrics are on disk.
+json PushToGateway(const TaskContext& ctx, const std::string& url, const std::string& method, const std::vector<Tracked>& tracked,
+                   const std::vector<Regression>& regressions) {
+  const size_t colon = url.rfind(':');
+  if (url.empty() || colon == std::string::npos || colon + 1 >= url.size() || url.find("//") == std::string::npos) {
+    MP_LOG(kWarn, "eval") << "pushgateway '" << url << "': expected http://host:port; not pushed";
+    return {{"url", url}, {"error", "expected http://host:port"}};
+  }
+  auto registry = std::make_shared<prometheus::Registry>();
+  auto& value = prometheus::BuildGauge().Name("motionpipe_eval_metric").Help("Headline evaluation metrics of the last run").Register(*registry);
+  auto& regressed = prometheus::BuildGauge().Name("motionpipe_eval_regression").Help("1 when the metric regressed against its best").Register(*registry);
+  auto& count = prometheus::BuildGauge().Name("motionpipe_eval_regressions").Help("Regressions found by the last evaluation run").Register(*registry);
+  for (const Tracked& t : tracked) {
+    value.Add({{"method", method}, {"metric", t.name}}).Set(t.value);
+    const bool bad = std::any_of(regressions.begin(), regressions.end(), [&](const Regression& r) { return r.metric == t.name; });
+    regressed.Add({{"method", method}, {"metric", t.name}}).Set(bad ? 1 : 0);
+  }
+  count.Add({{"method", method}}).Set(static_cast<double>(regressions.size()));
+  prometheus::Gateway gateway(url.substr(0, colon), url.substr(colon + 1), "motionpipe_eval",
+                              {{"pipeline", ctx.spec.job_name()}, {"stage", ctx.spec.stage()}});
+  gateway.RegisterCollectable(registry);
+  const int status = gateway.Push();
+  if (status < 200 || status >= 300) {
+    MP_LOG(kWarn, "eval") << "pushgateway " << url << ": push failed (HTTP status " << status << ")";
+  } else {
+    MP_LOG(kInfo, "eval") << "pushed " << tracked.size() << " metric(s) and " << regressions.size() << " regression(s) to " << url;
+  }
+  return {{"url", url}, {"status", status}};
+}
+
 std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics, const std::string& method, const std::string& checkpoint,
                                         const std::vector<std::string>& ids, const std::vector<Tracked>& tracked) {
   const json& p = ctx.params;
@@ -273,12 +344,22 @@ std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics, c
     (*metrics)["regressions"].push_back({{"metric", r.metric}, {"value", r.value}, {"best", r.best}, {"best_checkpoint", r.best_checkpoint}});
     MP_LOG(kWarn, "eval") << "regression: " << r.Describe();
   }
+  if (p.contains("pushgateway")) (*metrics)["pushgateway"] = PushToGateway(ctx, p.value("pushgateway", std::string()), method, tracked, *regressions);
   if (!regressions->empty() && p.value("fail_on_regression", false)) {
     (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics->dump(1) + "\n");  // for the record; the task fails
     return TaskReport::BadInput("regression: " + regressions->front().Describe() +
                                 (regressions->size() > 1 ? " (and " + std::to_string(regressions->size() - 1) + " more)" : ""));
   }
   return std::nullopt;
+}
+
+// The scoring's wall time (loading the evaluators, encoding, metrics) and its throughput in motions
+// scored (generated and reference motions alike) per second: the evaluation benchmark reads these.
+void AddTiming(json* metrics, std::chrono::steady_clock::time_point started, size_t motions_scored) {
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  (*metrics)["seconds"] = seconds;
+  (*metrics)["motions_scored"] = motions_scored;
+  (*metrics)["motions_scored_per_second"] = seconds > 0 ? static_cast<double>(motions_scored) / seconds : 0.0;
 }
 
 // Writes metrics.json; the task's report carries the number of regressions.
@@ -300,6 +381,7 @@ class EvalEditStage : public StageExecutor {
     const json& p = ctx.params;
     if (!plugins_) return TaskReport::Error("eval_edit: this worker has no plugin host");
     fs::create_directories(ctx.output_dir());
+    const auto started = std::chrono::steady_clock::now();
     const std::string evaluator_stage = p.value("evaluator", std::string("evaluator"));
     const std::string evaluator = FindCheckpoint(ctx, evaluator_stage);
     if (evaluator.empty()) return TaskReport::BadInput("eval_edit: input stage '" + evaluator_stage + "' holds no evaluator checkpoint");
@@ -322,7 +404,7 @@ class EvalEditStage : public StageExecutor {
     if (edited.size() < 2) return TaskReport::BadInput("eval_edit: fewer than 2 edited motions in the inputs (an edit stage)");
     // Their triplets' sources and targets.
     std::vector<Motion> generated, targets, sources;
-    std::vector<std::string> ids;
+    std::vector<std::string> ids, edit_texts;
     std::set<std::string> seen;
     for (const std::string& path : TripletFiles(ctx)) {
       auto c = ReadTripletColumns(path, {0, -1, true, false});
@@ -331,6 +413,7 @@ class EvalEditStage : public StageExecutor {
         const auto it = edited.find(c->ids[static_cast<size_t>(r)]);
         if (it == edited.end() || !seen.insert(it->first).second) continue;
         ids.push_back(it->first);
+        edit_texts.push_back(c->texts.empty() ? std::string() : c->texts[static_cast<size_t>(r)]);
         generated.push_back(it->second);
         targets.push_back(SideMotion(*c, r, false));
         sources.push_back(SideMotion(*c, r, true));
@@ -358,6 +441,10 @@ class EvalEditStage : public StageExecutor {
                                      {"generated_to_target.all.AvgR", g2t["AvgR"].get<double>(), false}})) {
       return *failed;
     }
+    if (Status st = WritePreview(ctx, {{"source", &sources[0]}, {"edited", &generated[0]}, {"target", &targets[0]}}, edit_texts[0], ids[0]); !st.ok()) {
+      return TaskReport::Error("eval_edit: " + st.message());
+    }
+    AddTiming(&metrics, started, generated.size() * 3);
     TaskReport out = WriteMetrics(ctx, metrics);
     out.metrics["R1_generated_to_target"] = metrics["generated_to_target"]["batches"]["R@1"].get<double>();
     out.metrics["AvgR_generated_to_target"] = metrics["generated_to_target"]["batches"]["AvgR"].get<double>();
@@ -467,6 +554,7 @@ class EvalGenerateStage : public StageExecutor {
     const json& p = ctx.params;
     if (!plugins_) return TaskReport::Error("eval_generate: this worker has no plugin host");
     fs::create_directories(ctx.output_dir());
+    const auto started = std::chrono::steady_clock::now();
     const auto load = [&](const std::string& stage) -> Result<GeneratorPtr> {
       const std::string dir = FindCheckpoint(ctx, stage);
       if (dir.empty()) return NotFound("input stage '" + stage + "' holds no checkpoint");
@@ -524,7 +612,7 @@ class EvalGenerateStage : public StageExecutor {
     eval::PositionErrors ape, ave;
     for (size_t i = 0; i < generated.size(); ++i) {
       const auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
-      const auto a = eval::AveragePositionalError(gj, tj, kNumJoints), v = eval::AverageVarianceError(gj, tj, kNumJoints);
+      const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips), v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
       ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local, ape.mean_global += a.mean_global;
       ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local, ave.mean_global += v.mean_global;
     }
@@ -550,6 +638,10 @@ class EvalGenerateStage : public StageExecutor {
                                      {"text_to_generated.all.R@1", metrics["text_to_generated"]["all"]["R@1"].get<double>(), true}})) {
       return *failed;
     }
+    if (Status st = WritePreview(ctx, {{"generated", &generated[0]}, {"truth", &truth[0]}}, texts[0], ids[0]); !st.ok()) {
+      return TaskReport::Error("eval_generate: " + st.message());
+    }
+    AddTiming(&metrics, started, generated.size() * 2);
     TaskReport out = WriteMetrics(ctx, metrics);
     out.metrics["temos_score"] = temos_score;
     return out;
@@ -561,11 +653,222 @@ class EvalGenerateStage : public StageExecutor {
 
 }  // namespace
 
+// The real CMU clips through the trained system, for the report: each clip imported (BVH, 120 fps,
+// 31 joints -> SMPL-22 at 30 fps); the first clip composed with a corpus action by body parts
+// (SINC sec. 3.1: the clip keeps legs, trajectory and torso, the corpus action brings its arm) and the
+// composition's text generated by the SINC model; the first clip edited by the MDT editor; the
+// plausibility of every motion and the TMR evaluator's cosine similarity to the CMU source; GIFs.
+// params: clips (BVH files or a directory; default data/mocap/cmu), max_frames (150), editor,
+// generator, evaluator (input stages with the checkpoints), edit_text, clip_text (the first clip's
+// action, labelled for its body parts), steps (DDIM, 50), panel_size (200).
+// Outputs: showcase.json (read by the report), *.gif, cmu.npz (the imported clips), composed.npz, edited.npz.
+class ShowcaseStage : public StageExecutor {
+ public:
+  explicit ShowcaseStage(const PluginHost* plugins) : plugins_(plugins) {}
+  std::string Description() const override { return "the CMU clips through import, SINC composition, MDT editing, metrics and rendering"; }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    if (!plugins_) return TaskReport::Error("showcase: this worker has no plugin host");
+    fs::create_directories(ctx.output_dir());
+    const std::string out = ctx.output_dir();
+    // 1. Import.
+    std::vector<std::string> files;
+    const auto add = [&](const std::string& path) {
+      if (fs::is_directory(path)) {
+        for (const auto& e : fs::directory_iterator(path)) {
+          if (e.path().extension() == ".bvh") files.push_back(e.path().string());
+        }
+      } else {
+        files.push_back(path);
+      }
+    };
+    const json clips_param = p.value("clips", json("data/mocap/cmu"));
+    if (clips_param.is_array()) {
+      for (const json& c : clips_param) add(c.get<std::string>());
+    } else {
+      add(clips_param.get<std::string>());
+    }
+    std::sort(files.begin(), files.end());
+    if (files.empty()) return TaskReport::BadInput("showcase: no BVH files in " + clips_param.dump());
+    const int64_t max_frames = p.value("max_frames", int64_t{150});
+    std::vector<Clip> cmu;
+    for (const std::string& f : files) {
+      auto loaded = LoadMotionFile(f, 30);
+      if (!loaded.ok()) return TaskReport::BadInput("showcase: " + loaded.status().message());
+      Clip clip = std::move(loaded->front());
+      clip.id = fs::path(f).stem().string();
+      clip.source = "cmu:" + fs::path(f).filename().string();
+      if (clip.motion.num_frames() > max_frames) {  // the models' training length
+        clip.motion.poses.resize(static_cast<size_t>(max_frames) * kNumJoints * 3);
+        clip.motion.trans.resize(static_cast<size_t>(max_frames) * 3);
+      }
+      clip.joints.clear();
+      clip.segments.clear();
+      cmu.push_back(std::move(clip));
+    }
+    if (Status st = WriteClips(out + "/cmu.npz", cmu); !st.ok()) return TaskReport::Error(st.message());
+    const Motion& source = cmu.front().motion;
+    const std::string clip_text = p.value("clip_text", std::string("walk forward"));
+    const std::string edit_text = p.value("edit_text", std::string("raise the right arm higher"));
+    const auto load = [&](const char* key) -> Result<GeneratorPtr> {
+      const std::string stage = p.value(key, std::string(key));
+      const std::string dir = FindCheckpoint(ctx, stage);
+      if (dir.empty()) return NotFound(std::string("showcase: params.") + key + ": input stage '" + stage + "' holds no checkpoint");
+      return LoadGenerator(*plugins_, dir);
+    };
+    auto evaluator = load("evaluator");
+    auto editor = load("editor");
+    auto generator = load("generator");
+    for (const auto* g : {&evaluator, &editor, &generator}) {
+      if (!g->ok()) return TaskReport::BadInput(g->status().message());
+    }
+    // 2. Composition with a corpus action whose parts are disjoint from the clip's (test split, arms).
+    auto table = InputSpans(ctx);
+    if (!table.ok()) return TaskReport::BadInput("showcase: " + table.status().message());
+    const PartSet clip_parts = labels::LexiconParts(clip_text);
+    int64_t partner = -1;
+    for (int64_t i = 0; i < table->size() && partner < 0; ++i) {
+      if (!table->single(i) || table->splits[static_cast<size_t>(i)] != "test") continue;
+      const PartSet parts = table->parts_a[static_cast<size_t>(i)];
+      if (sinc::Compatible(clip_parts, parts) && table->frames(i) >= 30) partner = i;
+    }
+    if (partner < 0) return TaskReport::BadInput("showcase: no test single in the spans table is compatible with '" + clip_text + "'");
+    const Motion corpus_motion = table->MotionOf(partner);
+    const std::string partner_text = table->text_a[static_cast<size_t>(partner)];
+    const PartSet partner_parts = table->parts_a[static_cast<size_t>(partner)];
+    const Motion composed = sinc::Compose(source, clip_parts, corpus_motion, partner_parts, sinc::CropMode::kFirst);
+    const std::string pair_text = sinc::EvalPairText(clip_text, partner_text);
+    // 3. The SINC model's own motion for the pair's text, and the MDT's edit of the clip.
+    plugin::GenerateRequest gen_request;
+    gen_request.texts = {pair_text};
+    gen_request.frames = composed.num_frames();
+    gen_request.seed = ctx.spec.seed();
+    auto generated = (*generator)->Generate(gen_request);
+    if (!generated.ok()) return TaskReport::Error("showcase: generation: " + generated.status().message());
+    plugin::GenerateRequest edit_request;
+    edit_request.texts = {edit_text};
+    edit_request.source = &source;
+    edit_request.seed = ctx.spec.seed();
+    edit_request.sampler = "ddim";
+    edit_request.steps = static_cast<int>(p.value("steps", int64_t{50}));
+    auto edited = (*editor)->Generate(edit_request);
+    if (!edited.ok()) return TaskReport::Error("showcase: editing: " + edited.status().message());
+    using Output = std::tuple<std::string, const Motion*, std::string>;
+    for (const auto& [name, motion, text] : {Output{"composed.npz", &composed, pair_text}, Output{"generated.npz", &*generated, pair_text},
+                                            Output{"edited.npz", &*edited, edit_text}}) {
+      Clip clip;
+      clip.id = fs::path(name).stem().string();
+      clip.source = cmu.front().source;
+      clip.motion = *motion;
+      clip.texts = {text};
+      if (Status st = WriteClips(out + "/" + name, {clip}); !st.ok()) return TaskReport::Error(st.message());
+    }
+    // 4. Metrics: plausibility, and the evaluator's cosine similarity to the CMU source.
+    std::vector<std::pair<std::string, const Motion*>> rows = {};
+    for (const Clip& c : cmu) rows.push_back({"CMU " + c.id + " (imported)", &c.motion});
+    rows.push_back({"corpus: " + partner_text, &corpus_motion});
+    rows.push_back({"composition: " + pair_text, &composed});
+    rows.push_back({"SINC generated: " + pair_text, &*generated});
+    rows.push_back({"MDT edit: " + edit_text, &*edited});
+    std::vector<Motion> motions;
+    for (const auto& r : rows) motions.push_back(*r.second);
+    auto embeddings = (*evaluator)->EncodeMotions(motions);
+    if (!embeddings.ok()) return TaskReport::Error("showcase: " + embeddings.status().message());
+    const auto cosine = [](const std::vector<float>& a, const std::vector<float>& b) {
+      double dot = 0, na = 0, nb = 0;
+      for (size_t k = 0; k < a.size(); ++k) dot += a[k] * b[k], na += a[k] * a[k], nb += b[k] * b[k];
+      return dot / std::max(1e-12, std::sqrt(na * nb));
+    };
+    json table_rows = json::array();
+    for (size_t i = 0; i < rows.size(); ++i) {
+      const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), *rows[i].second);
+      table_rows.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio, r.penetration_mean, r.float_ratio, r.jerk_mean,
+                            cosine((*embeddings)[i], (*embeddings)[0])});
+    }
+    // 5. Renders.
+    render::RenderOptions options;
+    options.panel_width = options.panel_height = static_cast<int>(p.value("panel_size", int64_t{200}));
+    options.fps = 10;
+    std::vector<render::MotionPanel> import_panels;
+    for (const Clip& c : cmu) import_panels.push_back({c.motion, "CMU " + c.id, c.source});
+    const std::vector<std::pair<std::string, std::vector<render::MotionPanel>>> gifs = {
+        {"cmu_import.gif", import_panels},
+        {"cmu_composition.gif",
+         {{source, "CMU " + cmu.front().id, clip_text}, {corpus_motion, "corpus", partner_text}, {composed, "SINC composition", pair_text},
+          {*generated, "SINC model", pair_text}}},
+        {"cmu_edit.gif", {{source, "CMU " + cmu.front().id, "source"}, {*edited, "MDT edit", edit_text}}}};
+    for (const auto& [name, panels] : gifs) {
+      if (Status st = render::RenderMotionFile(out + "/" + name, panels, options); !st.ok()) return TaskReport::Error(st.message());
+    }
+    const json showcase = {
+        {"title", "Real data: the CMU clips through the system"},
+        {"text", "The CMU clips (BVH, 120 fps, 31 joints) imported onto SMPL-22 at 30 fps and cut to " + std::to_string(max_frames) +
+                     " frames; " + cmu.front().id + " (\"" + clip_text + "\", parts " + PartSetToString(clip_parts) +
+                     ") composed by body parts with the corpus's test action \"" + partner_text + "\" (parts " + PartSetToString(partner_parts) +
+                     "), next to the SINC model's own motion for the pair's text; and edited by the MDT with \"" + edit_text +
+                     "\" (DDIM " + std::to_string(edit_request.steps) + " steps)."},
+        {"items",
+         {{{"image", "cmu_import.gif"}, {"caption", "The imported CMU clips"}},
+          {{"image", "cmu_composition.gif"}, {"caption", "SINC composition: " + pair_text}},
+          {{"image", "cmu_edit.gif"}, {"caption", "MDT edit of " + cmu.front().id + ": " + edit_text}}}},
+        {"table",
+         {{"caption", "Plausibility of the real, composed, generated and edited motions, and the TMR evaluator's cosine similarity to CMU " + cmu.front().id},
+          {"columns", {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk", "cos to " + cmu.front().id}},
+          {"rows", table_rows}}}};
+    if (Status st = WriteFileAtomic(out + "/showcase.json", showcase.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    return TaskReport::Ok();
+  }
+
+ private:
+  const PluginHost* plugins_;
+};
+
+// The job's HTML report (report.h) once its inputs (the evaluation stages) are done:
+// report.html in this task's directory. params: history (an evaluation history to plot), title,
+// previews (true), panel_size (200).
+class ReportStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "writes the job's HTML report: tables, claims, curves, previews"; }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    fs::create_directories(ctx.output_dir());
+    std::string job;
+    for (const auto& input : ctx.spec.inputs()) {
+      if (input.dirs_size() > 0) job = fs::path(input.dirs(0)).parent_path().parent_path().string();
+    }
+    if (job.empty()) return TaskReport::BadInput("report: needs inputs (the job's evaluation stages)");
+    ReportOptions options;
+    options.job_dir = job;
+    options.out_path = ctx.output_dir() + "/report.html";
+    options.history = p.value("history", std::string());
+    if (!options.history.empty() && !fs::exists(options.history)) options.history.clear();  // nothing recorded yet
+    options.title = p.value("title", ctx.spec.job_name() + "-" + std::to_string(ctx.spec.job_id()));
+    options.previews = p.value("previews", true);
+    options.panel_size = static_cast<int>(p.value("panel_size", int64_t{200}));
+    auto summary = WriteReport(options);
+    if (!summary.ok()) return TaskReport::Error("report: " + summary.status().message());
+    json claims = json::array();
+    for (const ClaimCheck& c : summary->claims) claims.push_back({{"paper", c.paper}, {"claim", c.claim}, {"verdict", c.verdict}, {"detail", c.detail}});
+    const json out = {{"report", "report.html"}, {"tables", summary->tables}, {"images", summary->images}, {"claims", claims},
+                      {"edit_methods", summary->edit_methods}, {"generation_methods", summary->generation_methods}};
+    if (Status st = WriteFileAtomic(ctx.output_dir() + "/report.json", out.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    MP_LOG(kInfo, "report") << "report of " << job << ": " << summary->tables << " tables, " << summary->images << " images";
+    TaskReport report = TaskReport::Ok();
+    report.metrics["tables"] = summary->tables;
+    report.metrics["images"] = summary->images;
+    return report;
+  }
+};
+
 void RegisterModelExecutors(ExecutorRegistry* registry, const PluginHost* plugins) {
   registry->Register("edit", std::make_unique<EditStage>(plugins));
   registry->Register("eval_edit", std::make_unique<EvalEditStage>(plugins));
   registry->Register("generate", std::make_unique<GenerateStage>(plugins));
   registry->Register("eval_generate", std::make_unique<EvalGenerateStage>(plugins));
+  registry->Register("report", std::make_unique<ReportStage>());
+  registry->Register("showcase", std::make_unique<ShowcaseStage>(plugins));
 }
 
 }  // namespace motionpipe::worker

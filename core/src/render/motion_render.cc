@@ -44,7 +44,7 @@ struct Camera {
   }
 };
 
-void DrawPanelAt(Image* image, int x0, int y0, const Panel& panel, const std::vector<float>& joints, double seconds,
+void DrawPanelAt(Image* image, int x0, int y0, const MotionPanel& panel, const std::vector<float>& joints, double seconds,
                  const RenderOptions& o) {
   const int w = o.panel_width, h = o.panel_height;
   const int64_t frames = panel.motion.num_frames();
@@ -125,7 +125,7 @@ void DrawPanelAt(Image* image, int x0, int y0, const Panel& panel, const std::ve
 }
 
 // Draws a panel clipped to its rectangle: into an image of its own, then copied into place.
-void DrawPanel(Image* image, int x0, int y0, const Panel& panel, const std::vector<float>& joints, double seconds,
+void DrawPanel(Image* image, int x0, int y0, const MotionPanel& panel, const std::vector<float>& joints, double seconds,
                const RenderOptions& o) {
   Image own(o.panel_width, o.panel_height);
   DrawPanelAt(&own, 0, 0, panel, joints, seconds, o);
@@ -134,13 +134,13 @@ void DrawPanel(Image* image, int x0, int y0, const Panel& panel, const std::vect
   }
 }
 
-std::vector<std::vector<float>> JointsOf(const std::vector<Panel>& panels) {
+std::vector<std::vector<float>> JointsOf(const std::vector<MotionPanel>& panels) {
   std::vector<std::vector<float>> joints;
   for (const auto& p : panels) joints.push_back(ComputeJoints(Skeleton::Smpl22(), p.motion));
   return joints;
 }
 
-double LongestSeconds(const std::vector<Panel>& panels) {
+double LongestSeconds(const std::vector<MotionPanel>& panels) {
   double longest = 0;
   for (const auto& p : panels) longest = std::max(longest, p.motion.duration_seconds());
   return longest;
@@ -222,7 +222,7 @@ uint8_t Quantise(uint8_t r, uint8_t g, uint8_t b) {
 
 }  // namespace
 
-Image RenderFrame(const std::vector<Panel>& panels, double seconds, const RenderOptions& options) {
+Image RenderFrame(const std::vector<MotionPanel>& panels, double seconds, const RenderOptions& options) {
   const auto joints = JointsOf(panels);
   Image image(options.panel_width * static_cast<int>(std::max<size_t>(1, panels.size())), options.panel_height);
   for (size_t k = 0; k < panels.size(); ++k) DrawPanel(&image, static_cast<int>(k) * options.panel_width, 0, panels[k], joints[k], seconds, options);
@@ -270,7 +270,7 @@ std::string EncodeGif(const std::vector<Image>& frames, int delay_cs) {
   return out;
 }
 
-Status RenderMotionFile(const std::string& path, const std::vector<Panel>& panels, const RenderOptions& options) {
+Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>& panels, const RenderOptions& options) {
   if (panels.empty()) return InvalidArgument(path + ": nothing to render");
   for (const auto& p : panels) {
     if (p.motion.num_frames() == 0) return InvalidArgument(path + ": '" + p.title + "' has no frames");

@@ -13,7 +13,7 @@
 
 namespace motionpipe::render {
 
-struct Panel {
+struct MotionPanel {
   Motion motion;
   std::string title;    // first caption line (e.g. "source", "edited", "SINC")
   std::string caption;  // second line (e.g. the text; composed motions: "walk forward + wave")
@@ -28,10 +28,10 @@ struct RenderOptions {
 };
 
 // One frame: every panel at time `seconds` (a panel past its end shows its last frame).
-Image RenderFrame(const std::vector<Panel>& panels, double seconds, const RenderOptions& options);
+Image RenderFrame(const std::vector<MotionPanel>& panels, double seconds, const RenderOptions& options);
 
 // An animated GIF (looping) or, for a path ending in .png, a film strip (panels as rows). Atomic.
-Status RenderMotionFile(const std::string& path, const std::vector<Panel>& panels, const RenderOptions& options = {});
+Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>& panels, const RenderOptions& options = {});
 
 // GIF89a bytes of frames of equal size, `delay_cs` hundredths of a second each, looping forever.
 // Colours are quantised to a 6x6x6 cube plus 40 greys.

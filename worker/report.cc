@@ -1,0 +1,710 @@
+#include "report.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "metric_history.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/render/chart.h"
+#include "motionpipe/render/motion_render.h"
+
+namespace motionpipe::worker {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// ---- the papers' numbers (REFERENCE.md 3.4 and 4.6) -----------------------------------------------
+
+struct PaperEditRow {
+  const char* row;                       // as the paper names it
+  std::vector<std::string> methods;      // the `method` strings of our eval stages that are this row
+  double r1, r2, r3, avg_rank;           // generated-to-target, batches of 32
+};
+
+const std::vector<PaperEditRow>& PaperTable1() {
+  static const std::vector<PaperEditRow> rows = {
+      {"MDM", {"mdm", "mdt_editor/mdm"}, 4.03, 7.56, 10.48, 15.55},
+      {"MDM-BP", {"mdm-bp"}, 39.10, 50.09, 54.84, 6.46},
+      {"TMED", {"tmed", "mdt_editor/tmed"}, 62.90, 76.51, 83.06, 2.71},
+      {"SimMotionEdit (MDT)", {"mdt (simmotionedit)", "mdt", "simmotionedit", "mdt_editor/mdt"}, 70.62, 82.92, 88.12, 2.38},
+      {"w/o auxiliary loss", {"w/o aux loss", "mdt_no_aux"}, 67.21, 78.75, 86.33, 2.49},
+      {"w/o SNR filtering", {"w/o snr filtering", "mdt_no_filter"}, 66.88, 80.42, 85.83, 2.46},
+  };
+  return rows;
+}
+
+struct PaperGenRow {
+  const char* row;
+  std::vector<std::string> methods;
+  double temos_score;
+};
+
+const std::vector<PaperGenRow>& PaperTables23() {
+  static const std::vector<PaperGenRow> rows = {
+      {"Single-action", {"single-action", "single"}, 0.601},
+      {"Single-action + GPT compositing", {"single-action + gpt compositing", "compositing"}, 0.618},
+      {"SINC-STE", {"sinc-ste", "ste"}, 0.614},
+      {"SINC, real singles + pairs", {"sinc (real singles + pairs)", "sinc_real"}, 0.640},
+      {"SINC + synthetic pairs (GPT labels)", {"sinc (+ synthetic, labels)", "sinc"}, 0.644},
+      {"SINC + random compositions", {"sinc (+ synthetic, random parts)", "sinc_random"}, 0.617},
+  };
+  return rows;
+}
+
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return s;
+}
+
+// ---- what the job directory holds -----------------------------------------------------------------
+
+struct Run {
+  std::string stage;  // e.g. eval_edit_mdt-s2
+  std::string dir;    // its task-00000
+  json metrics;
+};
+
+struct Method {
+  std::string name;       // the `method` string
+  std::string paper_row;  // empty when the papers have no such row
+  int paper_index = 1000;
+  std::vector<Run> runs;  // seed replicates, replicate 1 first
+};
+
+struct TrainCurve {
+  std::string stage;
+  std::vector<double> steps, losses;
+  double seconds = 0;
+};
+
+std::string BaseStage(const std::string& stage) {
+  static const std::regex kReplicate("(.*)-s[0-9]+");
+  std::smatch match;
+  return std::regex_match(stage, match, kReplicate) ? match[1].str() : stage;
+}
+
+std::optional<json> ReadJson(const std::string& path) {
+  auto text = ReadFile(path);
+  if (!text.ok()) return std::nullopt;
+  json value = json::parse(*text, nullptr, false);
+  if (value.is_discarded()) return std::nullopt;
+  return value;
+}
+
+// losses.csv: a header with `step` and `loss` columns.
+std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  if (!in || !std::getline(in, line)) return std::nullopt;
+  std::vector<std::string> header;
+  std::stringstream hs(line);
+  for (std::string cell; std::getline(hs, cell, ',');) header.push_back(cell);
+  const auto column = [&](const char* name) {
+    const auto it = std::find(header.begin(), header.end(), name);
+    return it == header.end() ? -1 : static_cast<int>(it - header.begin());
+  };
+  const int step_col = column("step"), loss_col = column("loss");
+  if (step_col < 0 || loss_col < 0) return std::nullopt;
+  TrainCurve curve;
+  curve.stage = stage;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ls(line);
+    for (std::string cell; std::getline(ls, cell, ',');) cells.push_back(cell);
+    if (static_cast<int>(cells.size()) <= std::max(step_col, loss_col)) continue;
+    char* end = nullptr;
+    const double step = std::strtod(cells[static_cast<size_t>(step_col)].c_str(), &end);
+    const double loss = std::strtod(cells[static_cast<size_t>(loss_col)].c_str(), &end);
+    if (!std::isfinite(step) || !std::isfinite(loss)) continue;
+    curve.steps.push_back(step), curve.losses.push_back(loss);
+  }
+  if (curve.steps.empty()) return std::nullopt;
+  return curve;
+}
+
+// ---- statistics over seeds ------------------------------------------------------------------------
+
+struct Stat {
+  double mean = 0, sd = 0;
+  int n = 0;
+};
+
+Stat Summarise(const std::vector<double>& values) {
+  Stat s;
+  s.n = static_cast<int>(values.size());
+  if (s.n == 0) return s;
+  for (double v : values) s.mean += v;
+  s.mean /= s.n;
+  if (s.n > 1) {
+    double ss = 0;
+    for (double v : values) ss += (v - s.mean) * (v - s.mean);
+    s.sd = std::sqrt(ss / (s.n - 1));  // sample standard deviation
+  }
+  return s;
+}
+
+// A metric by JSON pointer ("/generated_to_target/batches/R@1") over the method's runs.
+Stat Collect(const Method& m, const std::string& pointer) {
+  std::vector<double> values;
+  for (const Run& r : m.runs) {
+    const json::json_pointer p(pointer);
+    if (r.metrics.contains(p) && r.metrics[p].is_number()) values.push_back(r.metrics[p].get<double>());
+  }
+  return Summarise(values);
+}
+
+std::string Format(double value, int decimals) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.*f", decimals, value);
+  return text;
+}
+
+std::string Escape(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+// ---- HTML tables ----------------------------------------------------------------------------------
+
+struct Column {
+  std::string group, name, pointer;
+  int decimals = 2;
+  bool higher_is_better = true;
+  bool bold_best = true;
+};
+
+struct PaperCell {
+  std::vector<std::optional<double>> values;  // per paper column
+};
+
+// Methods as rows; each cell "mean ± sd" over the seeds; the best mean of each column in bold.
+std::string MetricTable(const std::string& caption, const std::vector<const Method*>& methods, const std::vector<Column>& columns,
+                        const std::vector<std::string>& paper_columns, const std::vector<PaperCell>& paper, int paper_decimals) {
+  std::vector<std::vector<Stat>> stats(methods.size());
+  for (size_t m = 0; m < methods.size(); ++m) {
+    for (const Column& c : columns) stats[m].push_back(Collect(*methods[m], c.pointer));
+  }
+  std::vector<int> best(columns.size(), -1);
+  for (size_t c = 0; c < columns.size(); ++c) {
+    for (size_t m = 0; m < methods.size(); ++m) {
+      if (stats[m][c].n == 0) continue;
+      const int b = best[c];
+      if (b < 0 || (columns[c].higher_is_better ? stats[m][c].mean > stats[static_cast<size_t>(b)][c].mean
+                                                : stats[m][c].mean < stats[static_cast<size_t>(b)][c].mean)) {
+        best[c] = static_cast<int>(m);
+      }
+    }
+  }
+  std::ostringstream html;
+  html << "<table>\n<caption>" << caption << "</caption>\n<thead><tr><th rowspan=\"2\">Method</th><th rowspan=\"2\">seeds</th>";
+  // Group header.
+  for (size_t c = 0; c < columns.size();) {
+    size_t span = 1;
+    while (c + span < columns.size() && columns[c + span].group == columns[c].group) ++span;
+    html << "<th colspan=\"" << span << "\">" << Escape(columns[c].group) << "</th>";
+    c += span;
+  }
+  if (!paper_columns.empty()) html << "<th class=\"paper\" colspan=\"" << paper_columns.size() << "\">paper</th>";
+  html << "</tr>\n<tr>";
+  for (const Column& c : columns) html << "<th>" << Escape(c.name) << (c.higher_is_better ? " &uarr;" : " &darr;") << "</th>";
+  for (const std::string& p : paper_columns) html << "<th class=\"paper\">" << Escape(p) << "</th>";
+  html << "</tr></thead>\n<tbody>\n";
+  for (size_t m = 0; m < methods.size(); ++m) {
+    const Method& method = *methods[m];
+    html << "<tr><td>" << Escape(method.paper_row.empty() ? method.name : method.paper_row) << "</td><td>" << method.runs.size() << "</td>";
+    for (size_t c = 0; c < columns.size(); ++c) {
+      const Stat& s = stats[m][c];
+      if (s.n == 0) {
+        html << "<td>&ndash;</td>";
+        continue;
+      }
+      std::string cell = Format(s.mean, columns[c].decimals);
+      if (s.n > 1) cell += " <span class=\"sd\">&plusmn; " + Format(s.sd, columns[c].decimals) + "</span>";
+      const bool bold = columns[c].bold_best && best[c] == static_cast<int>(m) && methods.size() > 1;
+      html << "<td>" << (bold ? "<b>" + cell + "</b>" : cell) << "</td>";
+    }
+    for (size_t p = 0; p < paper_columns.size(); ++p) {
+      const auto& value = m < paper.size() && p < paper[m].values.size() ? paper[m].values[p] : std::nullopt;
+      html << "<td class=\"paper\">" << (value ? Format(*value, paper_decimals) : "&ndash;") << "</td>";
+    }
+    html << "</tr>\n";
+  }
+  html << "</tbody></table>\n";
+  return html.str();
+}
+
+// ---- claims ---------------------------------------------------------------------------------------
+
+ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better, const Method* worse, const std::string& pointer,
+                   const std::string& metric_name, bool higher_is_better, int decimals) {
+  ClaimCheck out{paper, claim, "not measured", ""};
+  if (!better || !worse) {
+    out.detail = "a method of the comparison is not in this job";
+    return out;
+  }
+  const Stat a = Collect(*better, pointer), b = Collect(*worse, pointer);
+  if (a.n == 0 || b.n == 0) {
+    out.detail = "no " + metric_name + " for one of the methods";
+    return out;
+  }
+  const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
+  // Standard error of the difference of the means (seeds as samples); needs 2+ seeds each.
+  const bool spread_known = a.n > 1 && b.n > 1;
+  const double se = spread_known ? std::sqrt(a.sd * a.sd / a.n + b.sd * b.sd / b.n) : 0;
+  if (diff > 0) {
+    out.verdict = !spread_known ? "holds (one seed: spread unknown)" : diff > 2 * se ? "holds" : "holds (within the seeds' spread)";
+  } else {
+    out.verdict = !spread_known ? "does not hold (one seed: spread unknown)" : -diff > 2 * se ? "does not hold" : "does not hold (within the seeds' spread)";
+  }
+  out.detail = metric_name + ": " + Format(a.mean, decimals) + (a.n > 1 ? " ± " + Format(a.sd, decimals) : "") + " (n=" + std::to_string(a.n) +
+               ") vs " + Format(b.mean, decimals) + (b.n > 1 ? " ± " + Format(b.sd, decimals) : "") + " (n=" + std::to_string(b.n) + ")" +
+               (spread_known ? "; difference " + Format(diff, decimals) + ", 2 standard errors " + Format(2 * se, decimals) : "");
+  return out;
+}
+
+// ---- pictures -------------------------------------------------------------------------------------
+
+std::string DataUri(const std::string& mime, const std::string& bytes) { return "data:" + mime + ";base64," + Base64(bytes); }
+
+std::string ImgTag(const std::string& mime, const std::string& bytes, const std::string& alt, int* images) {
+  ++*images;
+  return "<img alt=\"" + Escape(alt) + "\" src=\"" + DataUri(mime, bytes) + "\">";
+}
+
+// One loss panel per training (replicates overlaid).
+std::string CurvesPng(const std::string& title, const std::vector<const TrainCurve*>& curves) {
+  render::Image image(420, 260);
+  render::Panel panel(&image, 0, 0, 420, 260);
+  double x_max = 1, y_min = 1e300, y_max = -1e300;
+  for (const TrainCurve* c : curves) {
+    x_max = std::max(x_max, c->steps.back());
+    for (double v : c->losses) y_min = std::min(y_min, v), y_max = std::max(y_max, v);
+  }
+  if (y_max <= y_min) y_max = y_min + 1;
+  panel.SetTitle(title);
+  panel.SetLabels("step", "loss");
+  panel.SetLimits(0, x_max, std::min(0.0, y_min), y_max * 1.05);
+  panel.DrawAxes();
+  std::vector<std::pair<std::string, render::Color>> legend;
+  for (size_t k = 0; k < curves.size(); ++k) {
+    const render::Color colour = render::kPalette[k % 8];
+    panel.LinePlot(curves[k]->steps, curves[k]->losses, colour, 1.5);
+    legend.push_back({curves[k]->stage, colour});
+  }
+  if (curves.size() > 1) panel.Legend(legend);
+  return image.EncodePng();
+}
+
+std::string HistoryPng(const std::string& metric, const std::map<std::string, std::vector<double>>& by_method) {
+  render::Image image(520, 280);
+  render::Panel panel(&image, 0, 0, 520, 280);
+  double x_max = 1, y_min = 1e300, y_max = -1e300;
+  for (const auto& [method, values] : by_method) {
+    x_max = std::max(x_max, static_cast<double>(values.size()));
+    for (double v : values) y_min = std::min(y_min, v), y_max = std::max(y_max, v);
+  }
+  if (y_max <= y_min) y_max = y_min + 1, y_min -= 1;
+  const double pad = 0.08 * (y_max - y_min);
+  panel.SetTitle(metric);
+  panel.SetLabels("evaluation run", metric);
+  panel.SetLimits(1, std::max(2.0, x_max), y_min - pad, y_max + pad);
+  panel.DrawAxes();
+  std::vector<std::pair<std::string, render::Color>> legend;
+  size_t k = 0;
+  for (const auto& [method, values] : by_method) {
+    const render::Color colour = render::kPalette[k++ % 8];
+    std::vector<double> xs;
+    for (size_t i = 0; i < values.size(); ++i) xs.push_back(static_cast<double>(i + 1));
+    if (values.size() == 1) {
+      panel.LinePlot({0.9, 1.1}, {values[0], values[0]}, colour, 3);
+    } else {
+      panel.LinePlot(xs, values, colour, 2);
+    }
+    legend.push_back({method, colour});
+  }
+  panel.Legend(legend);
+  return image.EncodePng();
+}
+
+// A GIF of the panels, through a temporary file next to the report.
+Result<std::string> PreviewGif(const std::vector<render::MotionPanel>& panels, int size, const std::string& scratch) {
+  render::RenderOptions options;
+  options.panel_width = options.panel_height = size;
+  options.fps = 10;
+  MP_RETURN_IF_ERROR(render::RenderMotionFile(scratch, panels, options));
+  auto bytes = ReadFile(scratch);
+  std::error_code ec;
+  fs::remove(scratch, ec);
+  return bytes;
+}
+
+std::optional<Motion> PreviewMotion(const std::string& dir, const std::string& role, std::string* text) {
+  const std::string path = dir + "/preview.npz";
+  if (!fs::exists(path)) return std::nullopt;
+  auto clips = ReadClips(path);
+  if (!clips.ok()) return std::nullopt;
+  for (Clip& clip : *clips) {
+    if (clip.id != role) continue;
+    if (text && !clip.texts.empty()) *text = clip.texts[0];
+    return std::move(clip.motion);
+  }
+  return std::nullopt;
+}
+
+constexpr char kStyle[] = R"(<style>
+body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
+h1 { font-size: 1.6em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
+caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.4em; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
+th { background: #f3f3f3; } td:first-child { text-align: left; }
+.paper { color: #666; background: #fafafa; } .sd { color: #777; font-size: 0.85em; }
+.holds { color: #0a6b2d; } .fails { color: #a11; } .unknown { color: #666; }
+.grid { display: flex; flex-wrap: wrap; gap: 8px; } figure { margin: 0.5em 0; } figcaption { font-size: 0.85em; color: #555; }
+code { background: #f3f3f3; padding: 0 3px; }
+</style>)";
+
+}  // namespace
+
+std::string Base64(std::string_view bytes) {
+  static const char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  size_t i = 0;
+  for (; i + 2 < bytes.size(); i += 3) {
+    const uint32_t v = (static_cast<uint8_t>(bytes[i]) << 16) | (static_cast<uint8_t>(bytes[i + 1]) << 8) | static_cast<uint8_t>(bytes[i + 2]);
+    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += kAlphabet[(v >> 6) & 63], out += kAlphabet[v & 63];
+  }
+  if (i + 1 == bytes.size()) {
+    const uint32_t v = static_cast<uint8_t>(bytes[i]) << 16;
+    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += "==";
+  } else if (i + 2 == bytes.size()) {
+    const uint32_t v = (static_cast<uint8_t>(bytes[i]) << 16) | (static_cast<uint8_t>(bytes[i + 1]) << 8);
+    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += kAlphabet[(v >> 6) & 63], out += '=';
+  }
+  return out;
+}
+
+Result<ReportSummary> WriteReport(const ReportOptions& options) {
+  const std::string job = options.job_dir;
+  if (!fs::is_directory(job)) return NotFound(job + ": not a job directory");
+  ReportSummary summary;
+  summary.path = options.out_path.empty() ? job + "/report.html" : options.out_path;
+
+  // Every stage directory: evaluation metrics, training curves, showcases.
+  std::vector<std::string> stages;
+  for (const auto& entry : fs::directory_iterator(job)) {
+    if (entry.is_directory() && entry.path().filename().string()[0] != '.') stages.push_back(entry.path().filename().string());
+  }
+  std::sort(stages.begin(), stages.end());
+  std::map<std::string, Method> edit_methods, gen_methods;
+  std::vector<TrainCurve> curves;
+  std::vector<std::pair<std::string, json>> showcases;  // stage, showcase.json
+  for (const std::string& stage : stages) {
+    const std::string task = job + "/" + stage + "/task-00000";
+    if (auto metrics = ReadJson(task + "/metrics.json")) {
+      const std::string method = metrics->value("method", stage);
+      const bool edit = metrics->contains("generated_to_target"), gen = metrics->contains("temos_score");
+      if (edit || gen) {
+        Method& m = (edit ? edit_methods : gen_methods)[method];
+        m.name = method;
+        m.runs.push_back({stage, task, *metrics});
+      }
+    }
+    if (auto curve = ReadCurve(stage, task + "/losses.csv")) {
+      if (auto rank = ReadJson(task + "/rank-0.json")) curve->seconds = rank->value("seconds", 0.0);
+      curves.push_back(std::move(*curve));
+    }
+    if (auto showcase = ReadJson(task + "/showcase.json")) showcases.push_back({stage, *showcase});
+  }
+  // Paper rows, in the paper's order; other methods after them.
+  const auto order = [](std::map<std::string, Method>& methods, const auto& paper_rows) {
+    std::vector<const Method*> out;
+    for (auto& [name, m] : methods) {
+      for (size_t r = 0; r < paper_rows.size(); ++r) {
+        const auto& aliases = paper_rows[r].methods;
+        if (std::find(aliases.begin(), aliases.end(), Lower(name)) != aliases.end()) {
+          m.paper_row = paper_rows[r].row;
+          m.paper_index = static_cast<int>(r);
+        }
+      }
+      std::sort(m.runs.begin(), m.runs.end(), [](const Run& a, const Run& b) { return a.stage < b.stage; });
+      out.push_back(&m);
+    }
+    std::stable_sort(out.begin(), out.end(), [](const Method* a, const Method* b) { return a->paper_index < b->paper_index; });
+    return out;
+  };
+  const std::vector<const Method*> edits = order(edit_methods, PaperTable1());
+  const std::vector<const Method*> gens = order(gen_methods, PaperTables23());
+  summary.edit_methods = static_cast<int>(edits.size());
+  summary.generation_methods = static_cast<int>(gens.size());
+  const auto by_row = [](const std::vector<const Method*>& methods, const std::string& row) -> const Method* {
+    for (const Method* m : methods) {
+      if (m->paper_row == row) return m;
+    }
+    return nullptr;
+  };
+
+  std::ostringstream body;
+  const std::string title = options.title.empty() ? fs::path(job).lexically_normal().filename().string() : options.title;
+  const std::time_t now = std::time(nullptr);
+  char stamp[64];
+  std::strftime(stamp, sizeof stamp, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
+  body << "<h1>motionpipe report: " << Escape(title) << "</h1>\n<p>Job directory <code>" << Escape(fs::absolute(job).string())
+       << "</code>, written " << stamp << ". Every number below comes from this job's stages; cells are the mean &plusmn; the "
+       << "standard deviation over seed replicates (the <i>seeds</i> column), the best of each column is bold, and the papers' own "
+       << "numbers stand in grey beside them for reference. They were measured on different data (MotionFix / BABEL with AMASS, "
+       << "models trained for days); compare orderings, not values.</p>\n";
+
+  // ---- SimMotionEdit Table 1.
+  if (!edits.empty()) {
+    // The batch protocol needs 32 or more test motions; with fewer, every column uses the whole set.
+    bool batches = true;
+    for (const Method* m : edits) {
+      for (const Run& r : m->runs) batches = batches && r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) > 0;
+    }
+    const std::string protocol = batches ? "batches" : "all";
+    const auto retrieval = [&](const std::string& group, const std::string& key, const std::string& proto) {
+      std::vector<Column> out;
+      for (const char* k : {"R@1", "R@2", "R@3"}) out.push_back({group, k, "/" + key + "/" + proto + "/" + k, 2, true});
+      out.push_back({group, "AvgR", "/" + key + "/" + proto + "/AvgR", 2, false});
+      return out;
+    };
+    std::vector<Column> columns = retrieval("generated-to-target", "generated_to_target", protocol);
+    for (const Column& c : retrieval("generated-to-source", "generated_to_source", protocol)) columns.push_back(c);
+    columns.push_back({"", "motions", "/motions", 0, true, false});
+    std::vector<PaperCell> paper;
+    for (const Method* m : edits) {
+      PaperCell cell;
+      for (const auto& row : PaperTable1()) {
+        if (m->paper_row == row.row) cell.values = {row.r1, row.r2, row.r3, row.avg_rank};
+      }
+      paper.push_back(cell);
+    }
+    const int64_t batch = edits.front()->runs.front().metrics.value("batch", int64_t{32});
+    body << "<h2>Text-based motion editing (SimMotionEdit, Table 1)</h2>\n<p>Motion-to-motion retrieval with the TMR evaluator: "
+         << "each edited motion's rank among the targets (and sources) by cosine similarity, ties averaged; R@k in percent, AvgR the "
+         << "mean rank. Protocol: "
+         << (batches ? "seeded batches of " + std::to_string(batch) + ", remainder dropped (the paper's, with 32)"
+                     : "the whole test set (fewer motions than a batch of " + std::to_string(batch) + ")")
+         << ". The paper's GT row is 100 / 100 / 100 / 1.00 by construction.</p>\n";
+    body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", edits, columns, {"R@1", "R@2", "R@3", "AvgR"}, paper, 2);
+    ++summary.tables;
+    if (batches) {
+      std::vector<Column> all = retrieval("generated-to-target, whole test set", "generated_to_target", "all");
+      body << MetricTable("Editing: retrieval over the whole test set", edits, all, {}, {}, 2);
+      ++summary.tables;
+    }
+  }
+
+  // ---- SINC Tables 2-3.
+  if (!gens.empty()) {
+    std::vector<Column> columns = {{"", "TEMOS score", "/temos_score", 3, true}};
+    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"}) columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
+    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"}) columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
+    columns.push_back({"TMR retrieval", "text→gen R@1", "/text_to_generated/all/R@1", 1, true});
+    columns.push_back({"TMR retrieval", "gen→GT R@1", "/generated_to_truth/all/R@1", 1, true});
+    columns.push_back({"", "motions", "/motions", 0, true, false});
+    std::vector<PaperCell> paper;
+    for (const Method* m : gens) {
+      PaperCell cell;
+      for (const auto& row : PaperTables23()) {
+        if (m->paper_row == row.row) cell.values = {row.temos_score};
+      }
+      paper.push_back(cell);
+    }
+    body << "<h2>Spatial composition of actions (SINC, Tables 2-3)</h2>\n<p>Two-action descriptions of the held-out test split "
+         << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) / 2 between the motion-encoder "
+         << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the ground-plane trajectory, root-relative "
+         << "heading-aligned joints (local) and all joints (global); retrieval by the TMR evaluator over the whole test set.</p>\n";
+    body << MetricTable("Composition: generated motions against the ground truth", gens, columns, {"TEMOS score"}, paper, 3);
+    ++summary.tables;
+    std::vector<Column> more = {{"diversity", "generated", "/diversity/generated", 3, true, false},
+                                {"diversity", "ground truth", "/diversity/truth", 3, true, false},
+                                {"", "FID", "/fid", 3, false}};
+    body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more, {}, {}, 3);
+    ++summary.tables;
+  }
+
+  // ---- plausibility of everything, ground truth included.
+  if (!edits.empty() || !gens.empty()) {
+    body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; these are the measurable "
+         << "proxies, for the generated motions and for their ground truth alike: the fraction of contact frames whose foot slides, "
+         << "the mean floor penetration, the fraction of frames floating above the floor, and the mean jerk.</p>\n<table>\n"
+         << "<caption>Plausibility (lower is better; mean over the methods' seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
+         << "<th>foot skate</th><th>penetration (m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
+    const auto row = [&](const std::string& name, const Method& m, const std::string& side) {
+      body << "<tr><td>" << Escape(name) << "</td><td>" << Format(Collect(m, "/motions").mean, 0) << "</td>";
+      for (const char* k : {"foot_skate_ratio", "penetration_mean_m", "float_ratio", "jerk_mean"}) {
+        const Stat s = Collect(m, "/plausibility/" + side + "/" + k);
+        body << "<td>" << (s.n ? Format(s.mean, 3) : "&ndash;") << "</td>";
+      }
+      body << "</tr>\n";
+    };
+    if (!edits.empty()) row("editing targets (ground truth)", *edits.front(), "target");
+    for (const Method* m : edits) row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
+    if (!gens.empty()) row("composition ground truth", *gens.front(), "truth");
+    for (const Method* m : gens) row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
+    body << "</tbody></table>\n";
+    ++summary.tables;
+  }
+
+  // ---- the papers' claims against these runs.
+  {
+    const std::string r1 = "/generated_to_target/batches/R@1";
+    bool batches = true;
+    for (const Method* m : edits) {
+      for (const Run& r : m->runs) batches = batches && r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) > 0;
+    }
+    const std::string edit_pointer = batches ? r1 : "/generated_to_target/all/R@1";
+    const Method* mdt = by_row(edits, "SimMotionEdit (MDT)");
+    const std::string se = "SimMotionEdit";
+    summary.claims.push_back(Compare(se, "MDT beats TMED", mdt, by_row(edits, "TMED"), edit_pointer, "generated-to-target R@1", true, 2));
+    summary.claims.push_back(Compare(se, "MDT beats MDM-BP", mdt, by_row(edits, "MDM-BP"), edit_pointer, "generated-to-target R@1", true, 2));
+    summary.claims.push_back(Compare(se, "MDT beats MDM", mdt, by_row(edits, "MDM"), edit_pointer, "generated-to-target R@1", true, 2));
+    summary.claims.push_back(Compare(se, "removing the auxiliary similarity loss hurts", mdt, by_row(edits, "w/o auxiliary loss"), edit_pointer,
+                                     "generated-to-target R@1", true, 2));
+    summary.claims.push_back(Compare(se, "removing MotionSNR filtering hurts", mdt, by_row(edits, "w/o SNR filtering"), edit_pointer,
+                                     "generated-to-target R@1", true, 2));
+    const Method* sinc = by_row(gens, "SINC + synthetic pairs (GPT labels)");
+    summary.claims.push_back(Compare("SINC", "synthetic pairs help SINC", sinc, by_row(gens, "SINC, real singles + pairs"), "/temos_score",
+                                     "TEMOS score", true, 3));
+    summary.claims.push_back(Compare("SINC", "label-guided compositions beat random ones", sinc, by_row(gens, "SINC + random compositions"),
+                                     "/temos_score", "TEMOS score", true, 3));
+    summary.claims.push_back(Compare("SINC", "GPT compositing improves the single-action model", by_row(gens, "Single-action + GPT compositing"),
+                                     by_row(gens, "Single-action"), "/temos_score", "TEMOS score", true, 3));
+    body << "<h2>The papers' claims, checked on this job</h2>\n<p>\"holds\" means the difference of the means is in the claimed "
+         << "direction and larger than two standard errors over the seeds; \"within the seeds' spread\" means it is not.</p>\n"
+         << "<table>\n<caption>Claims</caption>\n<thead><tr><th>paper</th><th>claim</th><th>verdict</th><th>numbers</th></tr></thead>\n<tbody>\n";
+    for (const ClaimCheck& c : summary.claims) {
+      const std::string cls = c.verdict.rfind("holds", 0) == 0 ? "holds" : c.verdict.rfind("does not", 0) == 0 ? "fails" : "unknown";
+      body << "<tr><td>" << Escape(c.paper) << "</td><td>" << Escape(c.claim) << "</td><td class=\"" << cls << "\">" << Escape(c.verdict)
+           << "</td><td>" << Escape(c.detail) << "</td></tr>\n";
+    }
+    body << "</tbody></table>\n";
+    ++summary.tables;
+  }
+
+  // ---- previews.
+  if (options.previews) {
+    const std::string scratch = summary.path + ".preview.tmp.gif";
+    if (!edits.empty()) {
+      std::vector<render::MotionPanel> panels;
+      std::string text;
+      const std::string first = edits.front()->runs.front().dir;
+      if (auto source = PreviewMotion(first, "source", &text)) panels.push_back({*source, "source", text});
+      if (auto target = PreviewMotion(first, "target", nullptr)) panels.push_back({*target, "target", ""});
+      for (const Method* m : edits) {
+        if (auto edited = PreviewMotion(m->runs.front().dir, "edited", nullptr)) panels.push_back({*edited, m->paper_row.empty() ? m->name : m->paper_row, ""});
+      }
+      if (panels.size() > 2) {
+        auto gif = PreviewGif(panels, options.panel_size, scratch);
+        if (!gif.ok()) return gif.status();
+        body << "<h2>Previews</h2>\n<figure>" << ImgTag("image/gif", *gif, "editing preview", &summary.images)
+             << "<figcaption>The first test triplet: source, target and each method's edit (seed 1), instruction \"" << Escape(text)
+             << "\".</figcaption></figure>\n";
+      }
+    }
+    if (!gens.empty()) {
+      std::vector<render::MotionPanel> panels;
+      std::string text;
+      if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text)) panels.push_back({*truth, "ground truth", text});
+      for (const Method* m : gens) {
+        if (auto g = PreviewMotion(m->runs.front().dir, "generated", nullptr)) panels.push_back({*g, m->paper_row.empty() ? m->name : m->paper_row, ""});
+      }
+      if (panels.size() > 1) {
+        auto gif = PreviewGif(panels, options.panel_size, scratch);
+        if (!gif.ok()) return gif.status();
+        body << "<figure>" << ImgTag("image/gif", *gif, "composition preview", &summary.images)
+             << "<figcaption>The first test pair, \"" << Escape(text) << "\": ground truth and each method's generation (seed 1).</figcaption></figure>\n";
+      }
+    }
+  }
+
+  // ---- showcases (the CMU clips).
+  for (const auto& [stage, showcase] : showcases) {
+    body << "<h2>" << Escape(showcase.value("title", stage)) << "</h2>\n";
+    if (showcase.contains("text")) body << "<p>" << Escape(showcase.value("text", "")) << "</p>\n";
+    const std::string dir = job + "/" + stage + "/task-00000";
+    for (const json& item : showcase.value("items", json::array())) {
+      const std::string file = item.value("image", std::string());
+      auto bytes = ReadFile(dir + "/" + file);
+      if (file.empty() || !bytes.ok()) continue;
+      const std::string mime = file.size() > 4 && file.substr(file.size() - 4) == ".png" ? "image/png" : "image/gif";
+      body << "<figure>" << ImgTag(mime, *bytes, item.value("caption", file), &summary.images) << "<figcaption>"
+           << Escape(item.value("caption", file)) << "</figcaption></figure>\n";
+    }
+    if (showcase.contains("table") && showcase["table"].contains("columns")) {
+      const json& table = showcase["table"];
+      body << "<table>\n<caption>" << Escape(table.value("caption", stage)) << "</caption>\n<thead><tr>";
+      for (const json& c : table["columns"]) body << "<th>" << Escape(c.get<std::string>()) << "</th>";
+      body << "</tr></thead>\n<tbody>\n";
+      for (const json& row : table.value("rows", json::array())) {
+        body << "<tr>";
+        for (const json& v : row) body << "<td>" << Escape(v.is_string() ? v.get<std::string>() : v.is_number_float() ? Format(v.get<double>(), 3) : v.dump()) << "</td>";
+        body << "</tr>\n";
+      }
+      body << "</tbody></table>\n";
+      ++summary.tables;
+    }
+  }
+
+  // ---- training curves.
+  if (!curves.empty()) {
+    std::map<std::string, std::vector<const TrainCurve*>> groups;
+    for (const TrainCurve& c : curves) groups[BaseStage(c.stage)].push_back(&c);
+    summary.train_stages = static_cast<int>(curves.size());
+    body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), seed replicates overlaid.</p>\n"
+         << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</th><th>first loss</th><th>last loss</th><th>seconds</th></tr></thead>\n<tbody>\n";
+    for (const TrainCurve& c : curves) {
+      body << "<tr><td>" << Escape(c.stage) << "</td><td>" << Format(c.steps.back() + 1, 0) << "</td><td>" << Format(c.losses.front(), 4)
+           << "</td><td>" << Format(c.losses.back(), 4) << "</td><td>" << Format(c.seconds, 1) << "</td></tr>\n";
+    }
+    body << "</tbody></table>\n<div class=\"grid\">\n";
+    ++summary.tables;
+    for (const auto& [name, group] : groups) body << ImgTag("image/png", CurvesPng(name, group), "training curve " + name, &summary.images) << "\n";
+    body << "</div>\n";
+  }
+
+  // ---- metric history.
+  if (!options.history.empty()) {
+    auto history = ReadHistory(options.history);
+    if (!history.ok()) return history.status();
+    std::map<std::string, std::map<std::string, std::vector<double>>> series;  // metric -> method -> values
+    for (const MetricRecord& r : *history) series[r.metric][r.method].push_back(r.value);
+    body << "<h2>Evaluation history</h2>\n<p><code>" << Escape(options.history) << "</code>: " << history->size()
+         << " records; each evaluation run appends its headline metrics with the checkpoint and the config and data hashes.</p>\n<div class=\"grid\">\n";
+    for (const auto& [metric, by_method] : series) body << ImgTag("image/png", HistoryPng(metric, by_method), "history " + metric, &summary.images) << "\n";
+    body << "</div>\n";
+  }
+
+  const std::string html = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>motionpipe report: " + Escape(title) +
+                           "</title>\n" + kStyle + "\n</head>\n<body>\n" + body.str() + "</body>\n</html>\n";
+  MP_RETURN_IF_ERROR(WriteFileAtomic(summary.path, html));
+  return summary;
+}
+
+}  // namespace motionpipe::worker

@@ -1,0 +1,44 @@
+// The HTML report of a job (`motionpipe report JOB_DIR`, the `report` stage): one self-contained
+// file with the evaluation stages' metrics laid out as SimMotionEdit's Table 1 (editing: motion-to-
+// motion retrieval) and SINC's Tables 2-3 (composition: TEMOS score, APE/AVE, retrieval), methods as
+// rows, mean ± standard deviation over seed replicates, the best of each column in bold and the
+// papers' own numbers beside them; the claims each paper makes, checked against these runs; physical
+// plausibility; training curves and the metric history as plots; rendered previews (GIFs) of the
+// edits and generations; the CMU showcase when the job has one. Images are embedded as data: URIs.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+
+namespace motionpipe::worker {
+
+struct ReportOptions {
+  std::string job_dir;   // a job's output directory (out/<name>-<id>)
+  std::string out_path;  // default: <job_dir>/report.html
+  std::string history;   // optional evaluation history (SQLite) to plot
+  std::string title;     // default: the job directory's name
+  bool previews = true;  // render GIF previews (the slow part: about a second per method)
+  int panel_size = 200;  // preview panel width and height in pixels
+};
+
+struct ClaimCheck {
+  std::string paper, claim;
+  std::string verdict;  // "holds", "holds (within the seeds' spread)", "does not hold", "not measured"
+  std::string detail;   // the numbers behind the verdict
+};
+
+struct ReportSummary {
+  std::string path;
+  int tables = 0, images = 0;
+  int edit_methods = 0, generation_methods = 0, train_stages = 0;
+  std::vector<ClaimCheck> claims;
+};
+
+Result<ReportSummary> WriteReport(const ReportOptions& options);
+
+// Base64 (RFC 4648, with padding): the report's data: URIs.
+std::string Base64(std::string_view bytes);
+
+}  // namespace motionpipe::worker
