@@ -101,6 +101,18 @@ TEST(PositionErrors, LocalErrorsRemoveEachFramesHeading) {
   EXPECT_NEAR(aligned.mean_global, (2 + std::hypot(2 - 0.1, 0.1) + std::hypot(2 + 0.1, 0.1)) / 3, 1e-6);
 }
 
+TEST(PositionErrors, CanonicalMotionsCompareWhereverTheyStarted) {
+  // The same two-frame walk of root + hips, once at the origin facing +x (hips along +x) and once
+  // 5 m away, turned 90 degrees: canonical, they are identical.
+  std::vector<float> here = {0, 0, 1, 0.1f, 0, 1, -0.1f, 0, 1, 0, 0.5f, 1, 0.1f, 0.5f, 1, -0.1f, 0.5f, 1};
+  std::vector<float> there = {5, 5, 1, 5, 5.1f, 1, 5, 4.9f, 1, 4.5f, 5, 1, 4.5f, 5.1f, 1, 4.5f, 4.9f, 1};
+  EXPECT_GT(AveragePositionalError(there, here, 3).root, 5);
+  Canonicalize(&here, 3, HeadingJoints{1, 2});
+  Canonicalize(&there, 3, HeadingJoints{1, 2});
+  for (size_t k = 0; k < here.size(); ++k) EXPECT_NEAR(here[k], there[k], 1e-5) << k;
+  EXPECT_NEAR(AveragePositionalError(there, here, 3).mean_global, 0, 1e-5);
+}
+
 TEST(Fid, IsZeroForIdenticalSetsAndTheClosedFormOtherwise) {
   const Embeddings x = Random(400, 6, 4);
   EXPECT_NEAR(FrechetDistance(x, x), 0, 1e-6);

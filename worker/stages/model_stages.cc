@@ -611,7 +611,10 @@ class EvalGenerateStage : public StageExecutor {
     // APE / AVE on joint positions.
     eval::PositionErrors ape, ave;
     for (size_t i = 0; i < generated.size(); ++i) {
-      const auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
+      // Both in their first frame's body frame (REFERENCE 4.5): the ground truth starts anywhere.
+      auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
+      eval::Canonicalize(&gj, kNumJoints, eval::kSmpl22Hips);
+      eval::Canonicalize(&tj, kNumJoints, eval::kSmpl22Hips);
       const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips), v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
       ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local, ape.mean_global += a.mean_global;
       ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local, ave.mean_global += v.mean_global;
@@ -660,7 +663,8 @@ class EvalGenerateStage : public StageExecutor {
 // plausibility of every motion and the TMR evaluator's cosine similarity to the CMU source; GIFs.
 // params: clips (BVH files or a directory; default data/mocap/cmu), max_frames (150), editor,
 // generator, evaluator (input stages with the checkpoints), edit_text, clip_text (the first clip's
-// action, labelled for its body parts), steps (DDIM, 50), panel_size (200).
+// action, labelled for its body parts), partner_text (the corpus action to compose with; default: the
+// first test single moving only the arms), steps (DDIM, 50), panel_size (200).
 // Outputs: showcase.json (read by the report), *.gif, cmu.npz (the imported clips), composed.npz, edited.npz.
 class ShowcaseStage : public StageExecutor {
  public:
@@ -727,12 +731,24 @@ class ShowcaseStage : public StageExecutor {
     auto table = InputSpans(ctx);
     if (!table.ok()) return TaskReport::BadInput("showcase: " + table.status().message());
     const PartSet clip_parts = labels::LexiconParts(clip_text);
-    int64_t partner = -1;
+    // The partner: params.partner_text if given, else the first test single that moves only the arms
+    // (what SINC composes with a walk), else the first compatible one.
+    const std::string wanted = p.value("partner_text", std::string());
+    const PartSet arms = static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm));
+    int64_t partner = -1, fallback = -1;
     for (int64_t i = 0; i < table->size() && partner < 0; ++i) {
-      if (!table->single(i) || table->splits[static_cast<size_t>(i)] != "test") continue;
+      if (!table->single(i) || table->splits[static_cast<size_t>(i)] != "test" || table->frames(i) < 30) continue;
       const PartSet parts = table->parts_a[static_cast<size_t>(i)];
-      if (sinc::Compatible(clip_parts, parts) && table->frames(i) >= 30) partner = i;
+      if (!sinc::Compatible(clip_parts, parts)) continue;
+      if (!wanted.empty()) {
+        if (table->text_a[static_cast<size_t>(i)] == wanted) partner = i;
+      } else if ((parts & ~arms) == 0) {
+        partner = i;
+      } else if (fallback < 0) {
+        fallback = i;
+      }
     }
+    if (partner < 0 && wanted.empty()) partner = fallback;
     if (partner < 0) return TaskReport::BadInput("showcase: no test single in the spans table is compatible with '" + clip_text + "'");
     const Motion corpus_motion = table->MotionOf(partner);
     const std::string partner_text = table->text_a[static_cast<size_t>(partner)];

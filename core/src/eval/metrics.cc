@@ -149,6 +149,23 @@ double VarianceError(const std::vector<float>& a, const std::vector<float>& b, i
 
 }  // namespace
 
+void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& heading) {
+  if (joints->size() < static_cast<size_t>(count) * 3) return;
+  float* x = joints->data();
+  const double ox = x[0], oy = x[1];
+  double c = 1, s = 0;
+  if (heading.left >= 0 && heading.right >= 0 && heading.left < count && heading.right < count) {
+    const double ax = x[heading.left * 3] - x[heading.right * 3], ay = x[heading.left * 3 + 1] - x[heading.right * 3 + 1];
+    const double norm = std::hypot(ax, ay);
+    if (norm > 1e-9) c = ax / norm, s = ay / norm;
+  }
+  for (size_t k = 0; k + 2 < joints->size(); k += 3) {
+    const double px = x[k] - ox, py = x[k + 1] - oy;
+    x[k] = static_cast<float>(c * px + s * py);
+    x[k + 1] = static_cast<float>(-s * px + c * py);
+  }
+}
+
 PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
                                       const HeadingJoints& heading) {
   const int64_t frames = Frames(generated, truth, joints);

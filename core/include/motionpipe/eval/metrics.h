@@ -46,6 +46,11 @@ struct HeadingJoints {
   int left = -1, right = -1;
 };
 inline constexpr HeadingJoints kSmpl22Hips{1, 2};
+// Puts a motion's joints [frames, count, 3] in its first frame's body frame on the ground plane: the
+// first root at x = y = 0 and, with hips given, the first hips' axis along +x. TEMOS compares
+// motions so (its features drop the first frame's position and heading); generated motions start
+// canonical and the ground truth starts anywhere in its world.
+void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& heading);
 // APE and AVE between generated and ground-truth joints [frames, joints, 3] (z up; joint 0 the root)
 // (REFERENCE 4.6): root joint, ground-plane trajectory, mean global (all joints) and mean local
 // (joints relative to the root, each frame's heading removed when `heading` names the hips).
