@@ -7,7 +7,7 @@ Prints the wall time of each run and their ratio, and from the stages' own recor
 per second by the eval stages (evaluator loading, encoding and metrics; generated and reference
 motions both count), edits per second and generations per second.
 
-  bench/eval_bench.py [--job 'out/demo-*'] [--edit-limit 32] [--ddpm-limit 4] [--gen-limit 64]
+  bench/eval_bench.py [--job 'out/demo-*'] [--edit-limit 32] [--ddpm-limit 4] [--gen-limit 64] [--threads 1]
 
 Needs a trained job (scripts/demo or `motionpipe run configs/demo.yaml`); --job names it by pattern.
 """
@@ -30,7 +30,8 @@ def run(motionpipe, workers, args, root):
                  f"vars.edit_steps={args.edit_steps}", f"vars.ddpm_limit={args.ddpm_limit}", f"vars.gen_limit={args.gen_limit}",
                  f"vars.history={root}/history.sqlite"]
     started = time.monotonic()
-    result = subprocess.run([motionpipe, "run", os.path.join(ROOT, "configs", "eval.yaml"), "--workers", str(workers), "--quiet"] + overrides,
+    threads = ["--threads", str(args.threads)] if args.threads else []
+    result = subprocess.run([motionpipe, "run", os.path.join(ROOT, "configs", "eval.yaml"), "--workers", str(workers), "--quiet"] + threads + overrides,
                             capture_output=True, text=True, cwd=ROOT)
     seconds = time.monotonic() - started
     if result.returncode != 0:
@@ -61,6 +62,7 @@ def main():
     parser.add_argument("--edit-steps", type=int, default=20)
     parser.add_argument("--ddpm-limit", type=int, default=4)
     parser.add_argument("--gen-limit", type=int, default=64)
+    parser.add_argument("--threads", type=int, default=0, help="threads per worker (default: motionpipe run's, cores / workers)")
     parser.add_argument("--motionpipe", default=os.path.join(ROOT, "build", "cli", "motionpipe"))
     args = parser.parse_args()
     if not glob.glob(os.path.join(ROOT, args.job, "mdt")):
@@ -76,7 +78,8 @@ def main():
     print(f"{'workers':>8} {'wall s':>8} {'scored motions/s':>17} {'edits/s':>8} {'generations/s':>14}")
     for workers, r in ((1, one), (2, two)):
         print(f"{workers:>8} {r['seconds']:>8.1f} {r['scored_per_s']:>17.1f} {r['edits_per_s']:>8.3f} {r['generated_per_s']:>14.1f}")
-    print(f"speed-up of 2 workers over 1: {one['seconds'] / two['seconds']:.2f}x (wall time of the whole evaluation)")
+    print(f"speed-up of 2 workers over 1: {one['seconds'] / two['seconds']:.2f}x (wall time of the whole evaluation; "
+          f"threads per worker: {args.threads or 'cores / workers'})")
 
 
 if __name__ == "__main__":
