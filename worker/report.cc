@@ -256,6 +256,17 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
   return html.str();
 }
 
+// Whether every editing run was scored in batches (the batch protocol needs at least one full
+// batch of test motions; with fewer, the tables and claims use the whole set).
+bool AllBatched(const std::vector<const Method*>& edits) {
+  for (const Method* m : edits) {
+    for (const Run& r : m->runs) {
+      if (r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) <= 0) return false;
+    }
+  }
+  return true;
+}
+
 // ---- claims ---------------------------------------------------------------------------------------
 
 ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better, const Method* worse, const std::string& pointer,
@@ -481,11 +492,7 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
 
   // ---- SimMotionEdit Table 1.
   if (!edits.empty()) {
-    // The batch protocol needs 32 or more test motions; with fewer, every column uses the whole set.
-    bool batches = true;
-    for (const Method* m : edits) {
-      for (const Run& r : m->runs) batches = batches && r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) > 0;
-    }
+    const bool batches = AllBatched(edits);
     const std::string protocol = batches ? "batches" : "all";
     const auto retrieval = [&](const std::string& group, const std::string& key, const std::string& proto) {
       std::vector<Column> out;
@@ -575,10 +582,7 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   // ---- the papers' claims against these runs.
   {
     const std::string r1 = "/generated_to_target/batches/R@1";
-    bool batches = true;
-    for (const Method* m : edits) {
-      for (const Run& r : m->runs) batches = batches && r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) > 0;
-    }
+    const bool batches = AllBatched(edits);
     const std::string edit_pointer = batches ? r1 : "/generated_to_target/all/R@1";
     const Method* mdt = by_row(edits, "SimMotionEdit (MDT)");
     const std::string se = "SimMotionEdit";

@@ -153,6 +153,13 @@ Status WritePreview(const TaskContext& ctx, const std::vector<std::pair<std::str
   return WriteClips(ctx.output_dir() + "/preview.npz", clips);
 }
 
+// Cosine similarity of two embeddings (0 for a zero vector).
+double Cosine(const std::vector<float>& a, const std::vector<float>& b) {
+  double dot = 0, na = 0, nb = 0;
+  for (size_t k = 0; k < a.size(); ++k) dot += a[k] * b[k], na += a[k] * a[k], nb += b[k] * b[k];
+  return dot / std::max(1e-12, std::sqrt(na * nb));
+}
+
 // Embeddings from an encoder's rows.
 eval::Embeddings ToEmbeddings(const std::vector<std::vector<float>>& rows) {
   eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
@@ -601,11 +608,7 @@ class EvalGenerateStage : public StageExecutor {
     // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
     double temos_score = 0;
     for (size_t i = 0; i < generated.size(); ++i) {
-      const auto& a = (*g_temos)[i];
-      const auto& b = (*t_temos)[i];
-      double dot = 0, na = 0, nb = 0;
-      for (size_t k = 0; k < a.size(); ++k) dot += a[k] * b[k], na += a[k] * a[k], nb += b[k] * b[k];
-      temos_score += (1 + dot / std::max(1e-12, std::sqrt(na * nb))) / 2;
+      temos_score += (1 + Cosine((*g_temos)[i], (*t_temos)[i])) / 2;
     }
     temos_score /= static_cast<double>(generated.size());
     // APE / AVE on joint positions.
@@ -791,16 +794,11 @@ class ShowcaseStage : public StageExecutor {
     for (const auto& r : rows) motions.push_back(*r.second);
     auto embeddings = (*evaluator)->EncodeMotions(motions);
     if (!embeddings.ok()) return TaskReport::Error("showcase: " + embeddings.status().message());
-    const auto cosine = [](const std::vector<float>& a, const std::vector<float>& b) {
-      double dot = 0, na = 0, nb = 0;
-      for (size_t k = 0; k < a.size(); ++k) dot += a[k] * b[k], na += a[k] * a[k], nb += b[k] * b[k];
-      return dot / std::max(1e-12, std::sqrt(na * nb));
-    };
     json table_rows = json::array();
     for (size_t i = 0; i < rows.size(); ++i) {
       const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), *rows[i].second);
       table_rows.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio, r.penetration_mean, r.float_ratio, r.jerk_mean,
-                            cosine((*embeddings)[i], (*embeddings)[0])});
+                            Cosine((*embeddings)[i], (*embeddings)[0])});
     }
     // 5. Renders.
     render::RenderOptions options;

@@ -90,21 +90,25 @@ double Norm3(const float* a, const float* b, bool horizontal_only = false) {
   return std::sqrt(dx * dx + dy * dy + dz * dz);
 }
 
-// Joints relative to the root, per frame.
+// cos and sin of a frame's heading: the angle of its hips' axis (left minus right) on the ground
+// plane; (1, 0) when `heading` names no hips or they coincide. Rotating by -angle removes it.
+void HeadingOf(const float* frame, int joints, const HeadingJoints& heading, double* c, double* s) {
+  *c = 1, *s = 0;
+  if (heading.left < 0 || heading.right < 0 || heading.left >= joints || heading.right >= joints) return;
+  const double ax = frame[heading.left * 3] - frame[heading.right * 3], ay = frame[heading.left * 3 + 1] - frame[heading.right * 3 + 1];
+  const double norm = std::hypot(ax, ay);
+  if (norm > 1e-9) *c = ax / norm, *s = ay / norm;
+}
+
 // Root-relative joints; with hips given, each frame is also turned about z so that its hips' axis
 // (left minus right, on the ground plane) points along +x: the heading is removed.
 std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints, const HeadingJoints& heading) {
   std::vector<float> out(x.begin(), x.begin() + frames * joints * 3);
-  const bool align = heading.left >= 0 && heading.right >= 0 && heading.left < joints && heading.right < joints;
   for (int64_t t = 0; t < frames; ++t) {
     float* frame = out.data() + t * joints * 3;
     const float* root = x.data() + t * joints * 3;
-    double c = 1, s = 0;
-    if (align) {
-      const double ax = frame[heading.left * 3] - frame[heading.right * 3], ay = frame[heading.left * 3 + 1] - frame[heading.right * 3 + 1];
-      const double norm = std::hypot(ax, ay);
-      if (norm > 1e-9) c = ax / norm, s = ay / norm;  // rotate by -angle(ax, ay)
-    }
+    double c, s;
+    HeadingOf(frame, joints, heading, &c, &s);
     for (int j = 0; j < joints; ++j) {
       const double px = frame[j * 3] - root[0], py = frame[j * 3 + 1] - root[1];
       frame[j * 3] = static_cast<float>(c * px + s * py);
@@ -153,12 +157,8 @@ void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& he
   if (joints->size() < static_cast<size_t>(count) * 3) return;
   float* x = joints->data();
   const double ox = x[0], oy = x[1];
-  double c = 1, s = 0;
-  if (heading.left >= 0 && heading.right >= 0 && heading.left < count && heading.right < count) {
-    const double ax = x[heading.left * 3] - x[heading.right * 3], ay = x[heading.left * 3 + 1] - x[heading.right * 3 + 1];
-    const double norm = std::hypot(ax, ay);
-    if (norm > 1e-9) c = ax / norm, s = ay / norm;
-  }
+  double c, s;
+  HeadingOf(x, count, heading, &c, &s);
   for (size_t k = 0; k + 2 < joints->size(); k += 3) {
     const double px = x[k] - ox, py = x[k + 1] - oy;
     x[k] = static_cast<float>(c * px + s * py);
