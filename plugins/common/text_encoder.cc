@@ -185,6 +185,13 @@ torch::Tensor PositionalEncoding(int64_t length, int64_t dim) {
 TextEncoderImpl::TextEncoderImpl(const TextEncoderOptions& options) : options_(options) {
   if (options_.kind == "learned") {
     embed_ = register_module("embed", torch::nn::Embedding(torch::nn::EmbeddingOptions(options_.vocab + 2, options_.dim).padding_idx(0)));
+    // Vaswani et al.'s scale: entries N(0, 1/dim), multiplied by sqrt(dim) in forward(), give token
+    // features of unit spread like the positional encodings. torch's default N(0, 1) would reach a
+    // spread of sqrt(dim) (11 at 128) and saturate the first layer's softmax, so that its query and
+    // key projections get no gradient.
+    torch::NoGradGuard no_grad;
+    embed_->weight.normal_(0.0, 1.0 / std::sqrt(static_cast<double>(options_.dim)));
+    embed_->weight[0].zero_();
   }
   encoder_ = register_module("encoder", Encoder(TransformerOptions{options_.dim, options_.heads, options_.ff, options_.layers, options_.dropout}));
   separator_ = register_parameter("separator", torch::randn({options_.dim}) * 0.02);

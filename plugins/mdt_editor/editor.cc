@@ -1,5 +1,7 @@
 #include "editor.h"
 
+#include <cmath>
+
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -102,6 +104,7 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o) : o_(o) {
     source_in_ = register_module("source_in", torch::nn::Linear(kEditFeatureDim, o.dim));
     separator_ = register_parameter("separator", torch::randn({o.dim}) * 0.02);
   }
+  segments_ = register_parameter("segments", torch::randn({kSegments, o.dim}) * 0.02);
   if (o.variant == "mdt") {
     condition_ = register_module("condition", nn::Encoder(nn::TransformerOptions{o.dim, o.heads, o.ff, o.cond_layers, o.dropout}));
     sim_head_ = register_module("sim_head", torch::nn::Sequential(torch::nn::Linear(o.dim, o.sim_hidden), torch::nn::SiLU(),
@@ -110,9 +113,16 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o) : o_(o) {
     blocks_ = register_module("blocks", torch::nn::ModuleList());
     for (int64_t k = 0; k < o.layers; ++k) blocks_->push_back(DiTBlock(o.dim, o.heads, o.ff));
     final_modulation_ = register_module("final_modulation", torch::nn::Linear(o.dim, 2 * o.dim));
+    // The text token is post-LayerNorm (entries of unit spread, norm about sqrt(d)); the timestep
+    // embedding's norm is a unit or two. DiT's class embeddings start at N(0, 0.02): text_cond's
+    // weights N(0, 0.02 / sqrt(d)) give the text term that same start (entries of spread 0.02), so
+    // it adds to the timestep instead of drowning it, and grows as training asks.
+    text_cond_ = register_module("text_cond", torch::nn::Linear(o.dim, o.dim));
     torch::NoGradGuard no_grad;
     final_modulation_->weight.zero_();
     final_modulation_->bias.zero_();
+    text_cond_->weight.normal_(0.0, 0.02 / std::sqrt(static_cast<double>(o.dim)));
+    text_cond_->bias.zero_();
   } else {
     encoder_ = register_module("encoder", nn::Encoder(layer));
   }
@@ -132,6 +142,15 @@ std::pair<torch::Tensor, nn::TextFeatures> EditorNetImpl::EncodeText(const Condi
 }
 
 torch::Tensor EditorNetImpl::TimeEmbedding(const torch::Tensor& t) { return time_mlp_->forward(TimestepEmbedding(t, 256)); }
+
+torch::Tensor EditorNetImpl::TextCondition(const torch::Tensor& text) {
+  if (!text_cond_) throw std::logic_error("TextCondition: only the mdt variant conditions adaLN on text");
+  return text_cond_->forward(text);
+}
+
+torch::Tensor EditorNetImpl::Place(const torch::Tensor& x, Segment segment) const {
+  return x + nn::PositionalEncoding(x.size(0), o_.dim) + segments_[segment].view({1, 1, -1});
+}
 
 Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c) {
   return o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c) : ForwardEncoder(xt, t, target_padding, c);
@@ -166,10 +185,10 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   }
   // DiT over [source; separator; noisy target], conditioned on timestep (+ text).
   auto cond = TimeEmbedding(t);
-  if (o_.adaln_text) cond = cond + (o_.enhanced_text ? enhanced_text : text);
+  if (o_.adaln_text) cond = cond + TextCondition(o_.enhanced_text ? enhanced_text : text);
   const auto src = o_.enhanced_motion ? enhanced_source : source;
-  auto x = torch::cat({src, separator_.view({1, 1, -1}).expand({1, n, o_.dim}), target_in_->forward(xt)}, 0) +
-           nn::PositionalEncoding(ts + 1 + tt, o_.dim);
+  auto x = torch::cat({Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
+                       Place(target_in_->forward(xt), kTarget)}, 0);
   const auto padding = torch::cat({source_padding, AnyPadding(n, 1), target_padding}, 1);
   for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, cond, padding);
   const auto m = final_modulation_->forward(torch::silu(cond)).unsqueeze(0).chunk(2, 2);
@@ -184,19 +203,20 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
   const auto time = TimeEmbedding(t).unsqueeze(0);  // [1, N, d]
   std::vector<torch::Tensor> parts, masks;
   if (o_.variant == "mdm") {
-    parts = {time + text.unsqueeze(0)};  // MDM: one condition token
+    parts = {Place(time + text.unsqueeze(0), kTime)};  // MDM: one condition token
     masks = {AnyPadding(n, 1)};
   } else {  // TMED: [timestep; text tokens; source; separator; noisy target]
     auto source = source_in_->forward(c.source);
     if (c.drop_source.defined()) source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
-    parts = {time, tokens.tokens, source, separator_.view({1, 1, -1}).expand({1, n, o_.dim})};
+    parts = {Place(time, kTime), Place(tokens.tokens, kText), Place(source, kSource),
+             Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator)};
     masks = {AnyPadding(n, 1), tokens.padding, SourcePadding(c), AnyPadding(n, 1)};
   }
   int64_t prefix = 0;
   for (const auto& part : parts) prefix += part.size(0);
-  parts.push_back(target_in_->forward(xt));
+  parts.push_back(Place(target_in_->forward(xt), kTarget));
   masks.push_back(target_padding);
-  auto x = torch::cat(parts, 0) + nn::PositionalEncoding(prefix + tt, o_.dim);
+  auto x = torch::cat(parts, 0);
   x = encoder_->forward(x, torch::cat(masks, 1));
   return {out_->forward(x.narrow(0, prefix, tt)), {}};
 }

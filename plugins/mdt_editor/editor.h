@@ -78,11 +78,21 @@ class EditorNetImpl : public torch::nn::Module {
   Prediction forward(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
   nn::TextEncoder text_encoder() const { return text_encoder_; }
   const EditorOptions& options() const { return o_; }
+  // The two terms of the MDT's adaLN condition (DiT: timestep embedding + class embedding): the
+  // timestep embedding [N, d] and the text token's contribution [N, d] (text_cond of the text token).
+  torch::Tensor TimeEmbedding(const torch::Tensor& t);
+  torch::Tensor TextCondition(const torch::Tensor& text);
+
+  // The pieces of a denoiser's input sequence, each with its own learned segment embedding.
+  enum Segment : int64_t { kTime = 0, kText, kSource, kSeparator, kTarget, kSegments };
 
  private:
   // Pooled text [N, dim] (zeros where dropped) and token features [L, N, dim] with padding.
   std::pair<torch::Tensor, nn::TextFeatures> EncodeText(const Condition& c);
-  torch::Tensor TimeEmbedding(const torch::Tensor& t);
+  // x [L, N, d] + the sinusoid of each token's index within its own segment + the segment's
+  // embedding: positions that do not depend on the other examples of the batch (source frame i and
+  // target frame i share the sinusoid of i, which also makes copying a frame an easy alignment).
+  torch::Tensor Place(const torch::Tensor& x, Segment segment) const;
   Prediction ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
   Prediction ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
 
@@ -92,8 +102,8 @@ class EditorNetImpl : public torch::nn::Module {
   torch::nn::Sequential time_mlp_{nullptr}, sim_head_{nullptr};
   nn::Encoder condition_{nullptr}, encoder_{nullptr};
   torch::nn::ModuleList blocks_{nullptr};
-  torch::nn::Linear final_modulation_{nullptr};
-  torch::Tensor separator_;
+  torch::nn::Linear final_modulation_{nullptr}, text_cond_{nullptr};
+  torch::Tensor separator_, segments_;
 };
 TORCH_MODULE(EditorNet);
 

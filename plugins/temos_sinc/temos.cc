@@ -199,7 +199,9 @@ torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tenso
 torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p) {
   // 0.5 * sum(logvar_p - logvar_q + (exp(logvar_q) + (mu_q - mu_p)^2) / exp(logvar_p) - 1)
   const auto kl = 0.5 * (logvar_p - logvar_q + (torch::exp(logvar_q) + (mu_q - mu_p).pow(2)) / torch::exp(logvar_p) - 1.0);
-  return kl.sum(1).mean();
+  // The mean over every element, as TEMOS, TMR and SINC's `kl_divergence(q, p).mean()`: their KL
+  // weight 1e-5 is per latent dimension (a sum over the dimensions would weigh it `latent` times).
+  return kl.mean();
 }
 
 torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature, const torch::Tensor& duplicate) {

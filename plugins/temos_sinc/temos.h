@@ -93,7 +93,7 @@ TORCH_MODULE(Temos);
 torch::Tensor ExampleNoise(const torch::Tensor& seeds, int64_t rows, int64_t latent);
 // Smooth-L1 averaged over each example's unpadded frames, then over the examples. prediction/target [T, N, D], padding [N, T].
 torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding);
-// KL(q || p) of diagonal Gaussians, mean over the batch.
+// KL(q || p) of diagonal Gaussians, averaged over the batch and the latent dimensions.
 torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p);
 // Symmetric InfoNCE on cosine similarities / temperature; pairs whose texts are near-duplicates
 // (duplicate[i][j] true, i != j) are removed from the negatives.

@@ -138,6 +138,54 @@ TEST(Editor, EveryVariantOverfitsAFewTriplets) {
   }
 }
 
+// Issue 15: target positions were offset by the batch's longest source (and TMED's by its longest
+// text), so an example met offsets at edit time (batches sorted by length) that training (batches
+// nearly always holding a max_frames source) never showed it. A prediction must not depend on the
+// other examples of its batch.
+TEST(Editor, AnExamplesPredictionDoesNotDependOnItsBatch) {
+  for (const std::string variant : {"mdt", "tmed", "mdm"}) {
+    torch::manual_seed(4);
+    EditorNet net(Tiny(variant));
+    net->text_encoder()->Fit({"raise the right arm", "walk faster and then turn around to the left twice"});
+    net->eval();
+    torch::NoGradGuard no_grad;
+    // Example 0: 9-frame source and target, a short text. Example 1: 20 frames, a long text.
+    const auto source = torch::randn({20, 2, kEditFeatureDim});
+    const auto xt = torch::randn({20, 2, kEditFeatureDim});
+    auto source_padding = torch::zeros({2, 20}, torch::kBool);
+    source_padding[0].narrow(0, 9, 11).fill_(true);
+    const auto target_padding = source_padding.clone();
+    const auto t = torch::tensor({120, 40}, torch::kInt64);
+    const std::vector<std::string> texts = {"raise the right arm", "walk faster and then turn around to the left twice"};
+    const bool with_source = variant != "mdm";
+    Condition both{texts, with_source ? source : torch::Tensor(), source_padding, {}, {}};
+    const auto batched = net->forward(xt, t, target_padding, both).x0.select(1, 0).narrow(0, 0, 9);
+    Condition alone{{texts[0]}, with_source ? source.narrow(0, 0, 9).narrow(1, 0, 1) : torch::Tensor(),
+                    torch::zeros({1, 9}, torch::kBool), {}, {}};
+    const auto single = net->forward(xt.narrow(0, 0, 9).narrow(1, 0, 1), t.narrow(0, 0, 1), torch::zeros({1, 9}, torch::kBool), alone)
+                            .x0.select(1, 0);
+    EXPECT_LT((batched - single).abs().max().item<double>(), 1e-4) << variant;
+  }
+}
+
+// Issue 15: the adaLN condition added the post-LayerNorm text token (norm about sqrt(d)) to the
+// timestep embedding (norm a few units), drowning the timestep. At initialisation the text's term
+// must be no larger than the timestep's (DiT starts its class embeddings at N(0, 0.02)).
+TEST(Editor, TheTextDoesNotDrownTheTimestepInAdaLn) {
+  torch::manual_seed(5);
+  nlohmann::json j = {{"variant", "mdt"}, {"model", {{"dim", 128}, {"cond_layers", 1}, {"layers", 1}, {"heads", 4}, {"ff", 64}, {"sim_hidden", 32}}}};
+  EditorNet net(EditorOptions::FromJson(j));
+  torch::NoGradGuard no_grad;
+  const auto t = torch::randint(300, {64}, torch::kInt64);
+  // A post-LayerNorm token: entries of unit spread, norm about sqrt(d).
+  const auto text = torch::layer_norm(torch::randn({64, 128}), {128});
+  const double time_norm = net->TimeEmbedding(t).norm(2, 1).mean().item<double>();
+  const double text_norm = net->TextCondition(text).norm(2, 1).mean().item<double>();
+  EXPECT_GT(time_norm, 0.0);
+  EXPECT_LE(text_norm, time_norm) << "text " << text_norm << " timestep " << time_norm;
+  EXPECT_GT(text_norm, 0.0);  // small, not absent: the text still reaches adaLN and gets gradient
+}
+
 TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
   torch::manual_seed(3);
   EditorNet net(Tiny("mdt"));

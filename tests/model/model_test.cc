@@ -152,8 +152,26 @@ TEST(Temos, KlOfIdenticalGaussiansIsZeroAndMatchesTheClosedForm) {
   EXPECT_NEAR(temos::KlDivergence(mu, logvar, mu, logvar).item<double>(), 0.0, 1e-7);
   const auto zeros = torch::zeros({1, 2});
   // KL(N(mu, s^2) || N(0, 1)) = 0.5 * sum(s^2 + mu^2 - 1 - log s^2)
-  const double expected = 0.5 * ((std::exp(0.2) + 0.25 - 1 - 0.2) + (std::exp(-0.3) + 1.0 - 1 + 0.3));
+  // ... averaged over the dimensions, as the reference's kl_divergence(q, p).mean().
+  const double expected = 0.5 * ((std::exp(0.2) + 0.25 - 1 - 0.2) + (std::exp(-0.3) + 1.0 - 1 + 0.3)) / 2;
   EXPECT_NEAR(temos::KlDivergence(mu, logvar, zeros, zeros).item<double>(), expected, 1e-6);
+}
+
+// Issue 15: the KL terms were summed over the latent dimensions, so the effective KL weight was
+// `latent` times TEMOS/TMR/SINC's (their div.mean() averages over every element).
+TEST(Temos, KlIsTheMeanOverEveryElementLikeTheReference) {
+  torch::manual_seed(6);
+  const auto mu_q = torch::randn({5, 64}), logvar_q = 0.3 * torch::randn({5, 64});
+  const auto mu_p = torch::randn({5, 64}), logvar_p = 0.3 * torch::randn({5, 64});
+  // torch.distributions.kl_divergence(Normal(mu_q, s_q), Normal(mu_p, s_p)) element by element
+  const auto var_ratio = torch::exp(logvar_q - logvar_p);
+  const auto t1 = (mu_q - mu_p).pow(2) / torch::exp(logvar_p);
+  const auto elementwise = 0.5 * (var_ratio + t1 - 1 - (logvar_q - logvar_p));
+  EXPECT_NEAR(temos::KlDivergence(mu_q, logvar_q, mu_p, logvar_p).item<double>(), elementwise.mean().item<double>(), 1e-5);
+  // Doubling the latent size with copies of the same dimensions leaves the KL unchanged.
+  EXPECT_NEAR(temos::KlDivergence(torch::cat({mu_q, mu_q}, 1), torch::cat({logvar_q, logvar_q}, 1), torch::cat({mu_p, mu_p}, 1),
+                                  torch::cat({logvar_p, logvar_p}, 1)).item<double>(),
+              elementwise.mean().item<double>(), 1e-5);
 }
 
 TEST(Temos, OverfitsASmallBatch) {
@@ -271,6 +289,31 @@ TEST(TextEncoder, PrecomputedTableGivesItsEmbeddingsAndNamesUnknownTexts) {
   }
   nn::TextEncoder missing(nn::TextEncoderOptions::FromJson({{"kind", "precomputed"}, {"dim", 8}, {"heads", 2}}));
   EXPECT_THROW(missing->Fit({}), std::invalid_argument);
+}
+
+// Issue 15: token embeddings started N(0, 1) and were multiplied by sqrt(d), so the first layer's
+// softmax was saturated (hard attention) and its query/key projections got almost no gradient.
+TEST(TextEncoder, FirstLayerAttentionIsSoftAndItsQueriesAndKeysLearn) {
+  torch::manual_seed(7);
+  const int64_t dim = 128;
+  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson({{"dim", dim}, {"heads", 4}, {"layers", 1}, {"dropout", 0.0}, {"vocab", 200}}));
+  const std::vector<std::string> texts = {"walk forward slowly", "wave the right hand", "jump in place twice",
+                                          "turn around to the left", "kick with the right leg", "sit down on the floor"};
+  encoder->Fit(texts);
+  // The embedded tokens (what forward() scales by sqrt(d)) have a spread of about 1, like the positions.
+  const auto ids = encoder->TokenIds(texts);
+  const auto embedded = encoder->named_parameters()["embed.weight"].index_select(0, ids.view({-1})) * std::sqrt(static_cast<double>(dim));
+  EXPECT_LT(embedded.std().item<double>(), 1.5);
+  EXPECT_GT(embedded.std().item<double>(), 0.5);
+  // The query and key rows of the first attention's input projection receive a gradient of the same
+  // order as the value rows (a saturated softmax passes them next to nothing).
+  const auto out = encoder->forward(texts);
+  (out.tokens * torch::randn_like(out.tokens)).sum().backward();
+  const auto grad = encoder->named_parameters()["encoder.layers.0.self_attn.in_proj.weight"].grad();
+  ASSERT_TRUE(grad.defined());
+  const double query_key = grad.narrow(0, 0, 2 * dim).norm().item<double>() / std::sqrt(2.0);
+  const double value = grad.narrow(0, 2 * dim, dim).norm().item<double>();
+  EXPECT_GT(query_key, 0.05 * value) << "query/key gradient " << query_key << " value gradient " << value;
 }
 
 TEST(TextEncoder, TokenizerIsDeterministicAndRoundTrips) {
