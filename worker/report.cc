@@ -83,11 +83,46 @@ struct Method {
   std::string paper_row;  // empty when the papers have no such row
   int paper_index = 1000;
   std::vector<Run> runs;  // seed replicates, replicate 1 first
+  bool yardstick = false;  // a reference row (copy, ground truth, shuffled, untrained): never "best"
+  bool untrained = false;  // the untrained model's row (eval param yardstick: untrained)
 };
+
+// The yardstick rows an evaluation computed beside its method (metrics "yardsticks": key -> the
+// same metrics as a method's), taken from the first method that has them: every evaluation of a job
+// scores the same test split, and its seed replicates give the rows' spread.
+std::vector<Method> YardstickRows(const std::vector<const Method*>& methods, const std::vector<std::pair<std::string, std::string>>& keys) {
+  for (const Method* m : methods) {
+    if (m->untrained || m->runs.empty() || !m->runs.front().metrics.contains("yardsticks")) continue;
+    std::vector<Method> out;
+    for (const auto& [key, label] : keys) {
+      Method row;
+      row.name = label;
+      row.yardstick = true;
+      for (const Run& r : m->runs) {
+        json metrics = r.metrics["yardsticks"].value(key, json::object());
+        metrics["motions"] = r.metrics.value("motions", 0);
+        row.runs.push_back({r.stage, r.dir, metrics});
+      }
+      out.push_back(std::move(row));
+    }
+    return out;
+  }
+  return {};
+}
+
+const Method* UntrainedRow(const std::vector<const Method*>& methods) {
+  for (const Method* m : methods) {
+    if (m->untrained) return m;
+  }
+  return nullptr;
+}
+
+std::string RowName(const Method& m) { return m.paper_row.empty() ? m.name : m.paper_row; }
 
 struct TrainCurve {
   std::string stage;
   std::vector<double> steps, losses;
+  std::vector<double> val_steps, val_losses;  // the held-out split's loss (val_losses.csv), if validated
   double seconds = 0;
 };
 
@@ -105,8 +140,8 @@ std::optional<json> ReadJson(const std::string& path) {
   return value;
 }
 
-// losses.csv: a header with `step` and `loss` columns.
-std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string& path) {
+// losses.csv (or val_losses.csv): a header with `step` and `column` columns.
+std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string& path, const char* loss_column = "loss") {
   std::ifstream in(path);
   std::string line;
   if (!in || !std::getline(in, line)) return std::nullopt;
@@ -117,7 +152,7 @@ std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string&
     const auto it = std::find(header.begin(), header.end(), name);
     return it == header.end() ? -1 : static_cast<int>(it - header.begin());
   };
-  const int step_col = column("step"), loss_col = column("loss");
+  const int step_col = column("step"), loss_col = column(loss_column);
   if (step_col < 0 || loss_col < 0) return std::nullopt;
   TrainCurve curve;
   curve.stage = stage;
@@ -158,14 +193,16 @@ Stat Summarise(const std::vector<double>& values) {
 }
 
 // A metric by JSON pointer ("/generated_to_target/batches/R@1") over the method's runs.
-Stat Collect(const Method& m, const std::string& pointer) {
+std::vector<double> Values(const Method& m, const std::string& pointer) {
   std::vector<double> values;
   for (const Run& r : m.runs) {
     const json::json_pointer p(pointer);
     if (r.metrics.contains(p) && r.metrics[p].is_number()) values.push_back(r.metrics[p].get<double>());
   }
-  return Summarise(values);
+  return values;
 }
+
+Stat Collect(const Method& m, const std::string& pointer) { return Summarise(Values(m, pointer)); }
 
 std::string Format(double value, int decimals) {
   char text[64];
@@ -210,7 +247,7 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
   std::vector<int> best(columns.size(), -1);
   for (size_t c = 0; c < columns.size(); ++c) {
     for (size_t m = 0; m < methods.size(); ++m) {
-      if (stats[m][c].n == 0) continue;
+      if (stats[m][c].n == 0 || methods[m]->yardstick) continue;
       const int b = best[c];
       if (b < 0 || (columns[c].higher_is_better ? stats[m][c].mean > stats[static_cast<size_t>(b)][c].mean
                                                 : stats[m][c].mean < stats[static_cast<size_t>(b)][c].mean)) {
@@ -234,7 +271,9 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
   html << "</tr></thead>\n<tbody>\n";
   for (size_t m = 0; m < methods.size(); ++m) {
     const Method& method = *methods[m];
-    html << "<tr><td>" << Escape(method.paper_row.empty() ? method.name : method.paper_row) << "</td><td>" << method.runs.size() << "</td>";
+    const std::string name = Escape(RowName(method));
+    html << "<tr" << (method.yardstick ? " class=\"yardstick\"" : "") << "><td>" << (method.yardstick ? "<i>" + name + "</i>" : name) << "</td><td>"
+         << method.runs.size() << "</td>";
     for (size_t c = 0; c < columns.size(); ++c) {
       const Stat& s = stats[m][c];
       if (s.n == 0) {
@@ -269,31 +308,92 @@ bool AllBatched(const std::vector<const Method*>& edits) {
 
 // ---- claims ---------------------------------------------------------------------------------------
 
-ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better, const Method* worse, const std::string& pointer,
-                   const std::string& metric_name, bool higher_is_better, int decimals) {
+std::string StatText(const Stat& s, int decimals) {
+  return Format(s.mean, decimals) + (s.n > 1 ? " ± " + Format(s.sd, decimals) : "") + " (n=" + std::to_string(s.n) + ")";
+}
+
+// A paper's claim "better beats worse" on `pointer` (issue 15's calibration): not decidable while a
+// compared model does not beat the untrained row, or with fewer than 3 seeds a side; it holds when
+// the difference of the means beats two standard errors, does not hold when the reverse does.
+ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better, const Method* worse, const Method* untrained,
+                   const std::string& pointer, const std::string& metric_name, bool higher_is_better, int decimals) {
   ClaimCheck out{paper, claim, "not measured", ""};
   if (!better || !worse) {
     out.detail = "a method of the comparison is not in this job";
     return out;
   }
-  const Stat a = Collect(*better, pointer), b = Collect(*worse, pointer);
-  if (a.n == 0 || b.n == 0) {
+  const std::vector<double> a_values = Values(*better, pointer), b_values = Values(*worse, pointer);
+  const std::vector<double> u_values = untrained ? Values(*untrained, pointer) : std::vector<double>{};
+  if (a_values.empty() || b_values.empty()) {
     out.detail = "no " + metric_name + " for one of the methods";
     return out;
   }
+  const Stat a = Summarise(a_values), b = Summarise(b_values);
   const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
-  // Standard error of the difference of the means (seeds as samples); needs 2+ seeds each.
-  const bool spread_known = a.n > 1 && b.n > 1;
-  const double se = spread_known ? std::sqrt(a.sd * a.sd / a.n + b.sd * b.sd / b.n) : 0;
-  if (diff > 0) {
-    out.verdict = !spread_known ? "holds (one seed: spread unknown)" : diff > 2 * se ? "holds" : "holds (within the seeds' spread)";
-  } else {
-    out.verdict = !spread_known ? "does not hold (one seed: spread unknown)" : -diff > 2 * se ? "does not hold" : "does not hold (within the seeds' spread)";
+  const double se = std::sqrt((a.n > 1 ? a.sd * a.sd / a.n : 0) + (b.n > 1 ? b.sd * b.sd / b.n : 0));
+  out.detail = metric_name + ": " + StatText(a, decimals) + " vs " + StatText(b, decimals) + "; difference " + Format(diff, decimals) +
+               ", 2 standard errors " + Format(2 * se, decimals);
+  if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarise(u_values), decimals);
+  switch (DecideClaim(a_values, b_values, u_values, higher_is_better)) {
+    case ClaimVerdict::kHolds: out.verdict = "holds"; break;
+    case ClaimVerdict::kDoesNotHold: out.verdict = "does not hold"; break;
+    case ClaimVerdict::kWithinErrors: out.verdict = "not decided: the difference is within two standard errors"; break;
+    case ClaimVerdict::kFewSeeds:
+      out.verdict = std::string("not decidable: fewer than 3 seeds (the means go ") + (diff > 0 ? "the claimed way)" : "the other way)");
+      break;
+    case ClaimVerdict::kBetterNotTrained: out.verdict = "not decidable: " + RowName(*better) + " does not beat its untrained row"; break;
+    case ClaimVerdict::kWorseNotTrained: out.verdict = "not decidable: " + RowName(*worse) + " does not beat its untrained row"; break;
   }
-  out.detail = metric_name + ": " + Format(a.mean, decimals) + (a.n > 1 ? " ± " + Format(a.sd, decimals) : "") + " (n=" + std::to_string(a.n) +
-               ") vs " + Format(b.mean, decimals) + (b.n > 1 ? " ± " + Format(b.sd, decimals) : "") + " (n=" + std::to_string(b.n) + ")" +
-               (spread_known ? "; difference " + Format(diff, decimals) + ", 2 standard errors " + Format(2 * se, decimals) : "");
   return out;
+}
+
+// ---- the evaluators' own quality -------------------------------------------------------------------
+
+// The first run of `methods` (the untrained row last) whose metrics hold `pointer`.
+const json* FirstWith(const std::vector<const Method*>& methods, const std::string& pointer) {
+  for (const bool untrained : {false, true}) {
+    for (const Method* m : methods) {
+      if (m->untrained != untrained) continue;
+      for (const Run& r : m->runs) {
+        if (r.metrics.contains(json::json_pointer(pointer))) return &r.metrics;
+      }
+    }
+  }
+  return nullptr;
+}
+
+// What the evaluators can tell apart (issue 15): the TMR's text-to-motion and motion-to-text
+// retrieval of the held-out single actions and two-action spans, its retrieval of each test target's
+// own source, and the TEMOS evaluator's score of a motion with itself and with a shuffled partner.
+std::string EvaluatorSection(const std::vector<const Method*>& edits, const std::vector<const Method*>& gens, int* tables) {
+  std::ostringstream rows;
+  const auto cell = [](const json& j, const char* key) { return j.contains(key) && j[key].is_number() ? Format(j[key].get<double>(), 1) : "&ndash;"; };
+  if (const json* m = FirstWith(gens, "/evaluator_quality")) {
+    for (const auto& [kind, label] : {std::pair{"singles", "TMR: test single actions"}, std::pair{"pairs", "TMR: test two-action spans (\"A while B\")"}}) {
+      if (!(*m)["evaluator_quality"].contains(kind)) continue;
+      const json& q = (*m)["evaluator_quality"][kind];
+      rows << "<tr><td>" << label << "</td><td>" << q.value("motions", 0) << "</td><td>" << cell(q["text_to_motion"], "R@1") << "</td><td>"
+           << cell(q["text_to_motion"], "R@3") << "</td><td>" << cell(q["motion_to_text"], "R@1") << "</td><td>" << cell(q["motion_to_text"], "R@3")
+           << "</td><td>" << q["text_to_motion"].value("queries", 0) << " queries in batches</td></tr>\n";
+    }
+  }
+  if (const json* m = FirstWith(edits, "/target_to_source/batches")) {
+    const json& q = (*m)["target_to_source"]["batches"];
+    rows << "<tr><td>TMR: each test target retrieves its own source (motion-to-motion)</td><td>" << m->value("motions", 0) << "</td><td>"
+         << cell(q, "R@1") << "</td><td>" << cell(q, "R@3") << "</td><td>&ndash;</td><td>&ndash;</td><td>AvgR " << cell(q, "AvgR") << "</td></tr>\n";
+  }
+  if (const json* m = FirstWith(gens, "/yardsticks/shuffled/temos_score")) {
+    const auto score = [&](const char* key) { return Format((*m)["yardsticks"][key]["temos_score"].get<double>(), 3); };
+    rows << "<tr><td>TEMOS evaluator: score of a test motion with itself / with a shuffled test motion of its length class</td><td>"
+         << m->value("motions", 0) << "</td><td colspan=\"4\">" << score("truth") << " / " << score("shuffled")
+         << "</td><td>a generated motion's score means something only between these two</td></tr>\n";
+  }
+  if (rows.str().empty()) return "";
+  ++*tables;
+  return "<h2>The evaluators</h2>\n<p>A score is only as good as the evaluator behind it: what the evaluators tell apart on the "
+         "held-out test split, measured in this job (R@k in percent).</p>\n<table>\n<caption>Evaluator quality</caption>\n<thead><tr>"
+         "<th>evaluator and test set</th><th>motions</th><th>text→motion R@1</th><th>text→motion R@3</th><th>motion→text R@1</th>"
+         "<th>motion→text R@3</th><th></th></tr></thead>\n<tbody>\n" + rows.str() + "</tbody></table>\n";
 }
 
 // ---- pictures -------------------------------------------------------------------------------------
@@ -313,6 +413,7 @@ std::string CurvesPng(const std::string& title, const std::vector<const TrainCur
   for (const TrainCurve* c : curves) {
     x_max = std::max(x_max, c->steps.back());
     for (double v : c->losses) y_min = std::min(y_min, v), y_max = std::max(y_max, v);
+    for (double v : c->val_losses) y_min = std::min(y_min, v), y_max = std::max(y_max, v);
   }
   if (y_max <= y_min) y_max = y_min + 1;
   panel.SetTitle(title);
@@ -324,8 +425,13 @@ std::string CurvesPng(const std::string& title, const std::vector<const TrainCur
     const render::Color colour = render::kPalette[k % 8];
     panel.LinePlot(curves[k]->steps, curves[k]->losses, colour, 1.5);
     legend.push_back({curves[k]->stage, colour});
+    if (!curves[k]->val_steps.empty()) {  // the held-out loss, thick, in the next colour
+      const render::Color val_colour = render::kPalette[(k + curves.size()) % 8];
+      panel.LinePlot(curves[k]->val_steps, curves[k]->val_losses, val_colour, 3);
+      legend.push_back({curves[k]->stage + " (held-out)", val_colour});
+    }
   }
-  if (curves.size() > 1) panel.Legend(legend);
+  if (legend.size() > 1) panel.Legend(legend);
   return image.EncodePng();
 }
 
@@ -393,6 +499,7 @@ caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom:
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
 th { background: #f3f3f3; } td:first-child { text-align: left; }
 .paper { color: #666; background: #fafafa; } .sd { color: #777; font-size: 0.85em; }
+tr.yardstick td { background: #f7f7fb; }
 .holds { color: #0a6b2d; } .fails { color: #a11; } .unknown { color: #666; }
 .grid { display: flex; flex-wrap: wrap; gap: 8px; } figure { margin: 0.5em 0; } figcaption { font-size: 0.85em; color: #555; }
 code { background: #f3f3f3; padding: 0 3px; }
@@ -419,6 +526,34 @@ std::string Base64(std::string_view bytes) {
   return out;
 }
 
+namespace {
+
+// Whether the mean of `model` beats the mean of `untrained` by more than two standard errors (the
+// spreads of whichever side has 2+ values; with one value each, by any margin).
+bool BeatsUntrained(const Stat& model, const Stat& untrained, bool higher_is_better) {
+  const double diff = higher_is_better ? model.mean - untrained.mean : untrained.mean - model.mean;
+  const double se = std::sqrt((model.n > 1 ? model.sd * model.sd / model.n : 0) + (untrained.n > 1 ? untrained.sd * untrained.sd / untrained.n : 0));
+  return diff > 0 && diff > 2 * se;
+}
+
+}  // namespace
+
+ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse, const std::vector<double>& untrained,
+                         bool higher_is_better) {
+  const Stat a = Summarise(better), b = Summarise(worse);
+  if (!untrained.empty()) {
+    const Stat u = Summarise(untrained);
+    if (!BeatsUntrained(a, u, higher_is_better)) return ClaimVerdict::kBetterNotTrained;
+    if (!BeatsUntrained(b, u, higher_is_better)) return ClaimVerdict::kWorseNotTrained;
+  }
+  if (a.n < 3 || b.n < 3) return ClaimVerdict::kFewSeeds;
+  const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
+  const double se = std::sqrt(a.sd * a.sd / a.n + b.sd * b.sd / b.n);
+  if (diff > 2 * se) return ClaimVerdict::kHolds;
+  if (-diff > 2 * se) return ClaimVerdict::kDoesNotHold;
+  return ClaimVerdict::kWithinErrors;
+}
+
 Result<ReportSummary> WriteReport(const ReportOptions& options) {
   const std::string job = options.job_dir;
   if (!fs::is_directory(job)) return NotFound(job + ": not a job directory");
@@ -442,11 +577,13 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       if (edit || gen) {
         Method& m = (edit ? edit_methods : gen_methods)[method];
         m.name = method;
+        if (metrics->value("yardstick", std::string()) == "untrained") m.untrained = m.yardstick = true;
         m.runs.push_back({stage, task, *metrics});
       }
     }
     if (auto curve = ReadCurve(stage, task + "/losses.csv")) {
       if (auto rank = ReadJson(task + "/rank-0.json")) curve->seconds = rank->value("seconds", 0.0);
+      if (auto val = ReadCurve(stage, task + "/val_losses.csv", "val_loss")) curve->val_steps = val->steps, curve->val_losses = val->losses;
       curves.push_back(std::move(*curve));
     }
     if (auto showcase = ReadJson(task + "/showcase.json")) showcases.push_back({stage, *showcase});
@@ -470,6 +607,20 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   };
   const std::vector<const Method*> edits = order(edit_methods, PaperTable1());
   const std::vector<const Method*> gens = order(gen_methods, PaperTables23());
+  // The tables' rows: the yardsticks first (issue 15), then the methods.
+  const std::vector<Method> edit_yardsticks = YardstickRows(edits, {{"copy", "source as the edit (copy)"}, {"target", "target as the edit (upper bound)"}});
+  const std::vector<Method> gen_yardsticks = YardstickRows(gens, {{"truth", "ground truth"}, {"shuffled", "shuffled ground truth (same length class)"}});
+  const auto with_yardsticks = [](const std::vector<Method>& yardsticks, const std::vector<const Method*>& methods) {
+    std::vector<const Method*> rows;
+    for (const Method& y : yardsticks) rows.push_back(&y);
+    if (const Method* u = UntrainedRow(methods)) rows.push_back(u);
+    for (const Method* m : methods) {
+      if (!m->untrained) rows.push_back(m);
+    }
+    return rows;
+  };
+  const std::vector<const Method*> edit_rows = with_yardsticks(edit_yardsticks, edits);
+  const std::vector<const Method*> gen_rows = with_yardsticks(gen_yardsticks, gens);
   summary.edit_methods = static_cast<int>(edits.size());
   summary.generation_methods = static_cast<int>(gens.size());
   const auto by_row = [](const std::vector<const Method*>& methods, const std::string& row) -> const Method* {
@@ -502,9 +653,10 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     };
     std::vector<Column> columns = retrieval("generated-to-target", "generated_to_target", protocol);
     for (const Column& c : retrieval("generated-to-source", "generated_to_source", protocol)) columns.push_back(c);
+    columns.push_back({"towards the target", "R@1 to target − to source", "/towards_target/" + protocol + "/R@1", 2, true});
     columns.push_back({"", "motions", "/motions", 0, true, false});
     std::vector<PaperCell> paper;
-    for (const Method* m : edits) {
+    for (const Method* m : edit_rows) {
       PaperCell cell;
       for (const auto& row : PaperTable1()) {
         if (m->paper_row == row.row) cell.values = {row.r1, row.r2, row.r3, row.avg_rank};
@@ -517,12 +669,15 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
          << "mean rank. Protocol: "
          << (batches ? "seeded batches of " + std::to_string(batch) + ", remainder dropped (the paper's, with 32)"
                      : "the whole test set (fewer motions than a batch of " + std::to_string(batch) + ")")
-         << ". The paper's GT row is 100 / 100 / 100 / 1.00 by construction.</p>\n";
-    body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", edits, columns, {"R@1", "R@2", "R@3", "AvgR"}, paper, 2);
+         << ". The paper's GT row is 100 / 100 / 100 / 1.00 by construction. The rows in italics are yardsticks scored in the same "
+         << "evaluation: the source as the edit (a copy moves nowhere), the target as the edit (the upper bound) and the untrained "
+         << "editor (initial weights, same sampler). <i>Towards the target</i> is generated-to-target minus generated-to-source R@1: "
+         << "an edit that moves towards its target scores above 0, a copy of the source far below.</p>\n";
+    body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", edit_rows, columns, {"R@1", "R@2", "R@3", "AvgR"}, paper, 2);
     ++summary.tables;
     if (batches) {
       std::vector<Column> all = retrieval("generated-to-target, whole test set", "generated_to_target", "all");
-      body << MetricTable("Editing: retrieval over the whole test set", edits, all, {}, {}, 2);
+      body << MetricTable("Editing: retrieval over the whole test set", edit_rows, all, {}, {}, 2);
       ++summary.tables;
     }
   }
@@ -532,11 +687,12 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     std::vector<Column> columns = {{"", "TEMOS score", "/temos_score", 3, true}};
     for (const char* k : {"root", "trajectory", "mean_local", "mean_global"}) columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
     for (const char* k : {"root", "trajectory", "mean_local", "mean_global"}) columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
-    columns.push_back({"TMR retrieval", "text→gen R@1", "/text_to_generated/all/R@1", 1, true});
-    columns.push_back({"TMR retrieval", "gen→GT R@1", "/generated_to_truth/all/R@1", 1, true});
+    columns.push_back({"TMR retrieval", "text→gen R@1 (batches)", "/text_to_generated/batches/R@1", 1, true});
+    columns.push_back({"TMR retrieval", "text→gen R@1 (all)", "/text_to_generated/all/R@1", 1, true});
+    columns.push_back({"TMR retrieval", "gen→GT R@1 (all)", "/generated_to_truth/all/R@1", 1, true});
     columns.push_back({"", "motions", "/motions", 0, true, false});
     std::vector<PaperCell> paper;
-    for (const Method* m : gens) {
+    for (const Method* m : gen_rows) {
       PaperCell cell;
       for (const auto& row : PaperTables23()) {
         if (m->paper_row == row.row) cell.values = {row.temos_score};
@@ -546,8 +702,10 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     body << "<h2>Spatial composition of actions (SINC, Tables 2-3)</h2>\n<p>Two-action descriptions of the held-out test split "
          << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) / 2 between the motion-encoder "
          << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the ground-plane trajectory, root-relative "
-         << "heading-aligned joints (local) and all joints (global); retrieval by the TMR evaluator over the whole test set.</p>\n";
-    body << MetricTable("Composition: generated motions against the ground truth", gens, columns, {"TEMOS score"}, paper, 3);
+         << "heading-aligned joints (local) and all joints (global); retrieval by the TMR evaluator in seeded batches and over the "
+         << "whole test set. The rows in italics are yardsticks scored in the same evaluation: the ground truth itself, shuffled "
+         << "ground truth (each motion replaced by the test motion nearest to it in length) and the untrained generator.</p>\n";
+    body << MetricTable("Composition: generated motions against the ground truth", gen_rows, columns, {"TEMOS score"}, paper, 3);
     ++summary.tables;
     std::vector<Column> more = {{"diversity", "generated", "/diversity/generated", 3, true, false},
                                 {"diversity", "ground truth", "/diversity/truth", 3, true, false},
@@ -555,6 +713,8 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more, {}, {}, 3);
     ++summary.tables;
   }
+
+  body << EvaluatorSection(edits, gens, &summary.tables);
 
   // ---- plausibility of everything, ground truth included.
   if (!edits.empty() || !gens.empty()) {
@@ -585,23 +745,27 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     const bool batches = AllBatched(edits);
     const std::string edit_pointer = batches ? r1 : "/generated_to_target/all/R@1";
     const Method* mdt = by_row(edits, "SimMotionEdit (MDT)");
-    const std::string se = "SimMotionEdit";
-    summary.claims.push_back(Compare(se, "MDT beats TMED", mdt, by_row(edits, "TMED"), edit_pointer, "generated-to-target R@1", true, 2));
-    summary.claims.push_back(Compare(se, "MDT beats MDM-BP", mdt, by_row(edits, "MDM-BP"), edit_pointer, "generated-to-target R@1", true, 2));
-    summary.claims.push_back(Compare(se, "MDT beats MDM", mdt, by_row(edits, "MDM"), edit_pointer, "generated-to-target R@1", true, 2));
-    summary.claims.push_back(Compare(se, "removing the auxiliary similarity loss hurts", mdt, by_row(edits, "w/o auxiliary loss"), edit_pointer,
-                                     "generated-to-target R@1", true, 2));
-    summary.claims.push_back(Compare(se, "removing MotionSNR filtering hurts", mdt, by_row(edits, "w/o SNR filtering"), edit_pointer,
-                                     "generated-to-target R@1", true, 2));
+    const Method* edit_untrained = UntrainedRow(edits);
+    const std::string se = "SimMotionEdit", r1_name = "generated-to-target R@1";
+    summary.claims.push_back(Compare(se, "MDT beats TMED", mdt, by_row(edits, "TMED"), edit_untrained, edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "MDT beats MDM-BP", mdt, by_row(edits, "MDM-BP"), edit_untrained, edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "MDT beats MDM", mdt, by_row(edits, "MDM"), edit_untrained, edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "removing the auxiliary similarity loss hurts", mdt, by_row(edits, "w/o auxiliary loss"), edit_untrained,
+                                     edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "removing MotionSNR filtering hurts", mdt, by_row(edits, "w/o SNR filtering"), edit_untrained, edit_pointer,
+                                     r1_name, true, 2));
     const Method* sinc = by_row(gens, "SINC + synthetic pairs (GPT labels)");
-    summary.claims.push_back(Compare("SINC", "synthetic pairs help SINC", sinc, by_row(gens, "SINC, real singles + pairs"), "/temos_score",
-                                     "TEMOS score", true, 3));
-    summary.claims.push_back(Compare("SINC", "label-guided compositions beat random ones", sinc, by_row(gens, "SINC + random compositions"),
+    const Method* gen_untrained = UntrainedRow(gens);
+    summary.claims.push_back(Compare("SINC", "synthetic pairs help SINC", sinc, by_row(gens, "SINC, real singles + pairs"), gen_untrained,
                                      "/temos_score", "TEMOS score", true, 3));
+    summary.claims.push_back(Compare("SINC", "label-guided compositions beat random ones", sinc, by_row(gens, "SINC + random compositions"),
+                                     gen_untrained, "/temos_score", "TEMOS score", true, 3));
     summary.claims.push_back(Compare("SINC", "GPT compositing improves the single-action model", by_row(gens, "Single-action + GPT compositing"),
-                                     by_row(gens, "Single-action"), "/temos_score", "TEMOS score", true, 3));
-    body << "<h2>The papers' claims, checked on this job</h2>\n<p>\"holds\" means the difference of the means is in the claimed "
-         << "direction and larger than two standard errors over the seeds; \"within the seeds' spread\" means it is not.</p>\n"
+                                     by_row(gens, "Single-action"), gen_untrained, "/temos_score", "TEMOS score", true, 3));
+    body << "<h2>The papers' claims, checked on this job</h2>\n<p>A claim is <i>not decidable</i> while a compared model does not "
+         << "beat its untrained row (by more than two standard errors), or with fewer than 3 seeds a side. Otherwise it "
+         << "<i>holds</i> when the difference of the means goes the claimed way by more than two standard errors over the seeds, "
+         << "<i>does not hold</i> when it goes the other way by as much, and is <i>not decided</i> in between.</p>\n"
          << "<table>\n<caption>Claims</caption>\n<thead><tr><th>paper</th><th>claim</th><th>verdict</th><th>numbers</th></tr></thead>\n<tbody>\n";
     for (const ClaimCheck& c : summary.claims) {
       const std::string cls = c.verdict.rfind("holds", 0) == 0 ? "holds" : c.verdict.rfind("does not", 0) == 0 ? "fails" : "unknown";
@@ -681,11 +845,20 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     std::map<std::string, std::vector<const TrainCurve*>> groups;
     for (const TrainCurve& c : curves) groups[BaseStage(c.stage)].push_back(&c);
     summary.train_stages = static_cast<int>(curves.size());
-    body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), seed replicates overlaid.</p>\n"
-         << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</th><th>first loss</th><th>last loss</th><th>seconds</th></tr></thead>\n<tbody>\n";
+    body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), seed replicates overlaid, and the "
+         << "loss on fixed batches of the held-out split where the stage validates (val_losses.csv).</p>\n"
+         << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</th><th>first loss</th><th>last loss</th>"
+         << "<th>held-out loss: last</th><th>held-out loss: best (step)</th><th>seconds</th></tr></thead>\n<tbody>\n";
     for (const TrainCurve& c : curves) {
+      std::string last_val = "&ndash;", best_val = "&ndash;";
+      if (!c.val_losses.empty()) {
+        const size_t best = static_cast<size_t>(std::min_element(c.val_losses.begin(), c.val_losses.end()) - c.val_losses.begin());
+        last_val = Format(c.val_losses.back(), 4);
+        best_val = Format(c.val_losses[best], 4) + " (" + Format(c.val_steps[best] + 1, 0) + ")";
+      }
       body << "<tr><td>" << Escape(c.stage) << "</td><td>" << Format(c.steps.back() + 1, 0) << "</td><td>" << Format(c.losses.front(), 4)
-           << "</td><td>" << Format(c.losses.back(), 4) << "</td><td>" << Format(c.seconds, 1) << "</td></tr>\n";
+           << "</td><td>" << Format(c.losses.back(), 4) << "</td><td>" << last_val << "</td><td>" << best_val << "</td><td>"
+           << Format(c.seconds, 1) << "</td></tr>\n";
     }
     body << "</tbody></table>\n<div class=\"grid\">\n";
     ++summary.tables;

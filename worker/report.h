@@ -25,7 +25,7 @@ struct ReportOptions {
 
 struct ClaimCheck {
   std::string paper, claim;
-  std::string verdict;  // "holds", "holds (within the seeds' spread)", "does not hold", "not measured"
+  std::string verdict;  // "holds", "does not hold", "not decided: ...", "not decidable: ...", "not measured"
   std::string detail;   // the numbers behind the verdict
 };
 
@@ -37,6 +37,15 @@ struct ReportSummary {
 };
 
 Result<ReportSummary> WriteReport(const ReportOptions& options);
+
+// A paper's claim "better beats worse" on a metric, from each side's values over seeds (issue 15):
+// not decidable while a compared model does not beat the untrained row (`untrained` empty: no such
+// row) by more than two standard errors, or with fewer than 3 seeds a side; otherwise it holds when
+// the difference of the means goes the claimed way by more than two standard errors of the
+// difference, does not hold when it goes the other way by as much, and is within them in between.
+enum class ClaimVerdict { kHolds, kDoesNotHold, kWithinErrors, kFewSeeds, kBetterNotTrained, kWorseNotTrained };
+ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse, const std::vector<double>& untrained,
+                         bool higher_is_better);
 
 // Base64 (RFC 4648, with padding): the report's data: URIs.
 std::string Base64(std::string_view bytes);

@@ -224,6 +224,16 @@ class EditTest(EngineTest):
             self.assertTrue(0 <= everything["R@1"] <= everything["R@2"] <= everything["R@3"] == 100)
         for who in ("generated", "target"):
             self.assertIn("foot_skate_ratio", metrics["plausibility"][who])
+        # The yardsticks in the same batches: the source as the edit retrieves its own source, the
+        # target as the edit its own target; "towards the target" is to-target minus to-source R@1.
+        copy, target = metrics["yardsticks"]["copy"], metrics["yardsticks"]["target"]
+        self.assertEqual(copy["generated_to_source"]["all"]["R@1"], 100)
+        self.assertEqual(target["generated_to_target"]["all"]["R@1"], 100)
+        self.assertLessEqual(copy["towards_target"]["all"]["R@1"], 0)
+        self.assertGreaterEqual(target["towards_target"]["all"]["R@1"], 0)
+        for row in (metrics, copy, target):
+            self.assertAlmostEqual(row["towards_target"]["all"]["R@1"],
+                                   row["generated_to_target"]["all"]["R@1"] - row["generated_to_source"]["all"]["R@1"])
         # The history got this run's metrics with the hashes, and the AvgR regression is reported.
         self.assertEqual([r["metric"] for r in metrics["regressions"]], ["generated_to_target.all.AvgR"])
         self.assertEqual(metrics["regressions"][0]["best_checkpoint"], "an-old-checkpoint")
@@ -246,9 +256,11 @@ class EditTest(EngineTest):
         # The report stage: the tables, every image embedded and decodable, the showcase included.
         tables, images = check_report(self, os.path.join(job, "report", "task-00000", "report.html"))
         table1 = tables["Editing: retrieval of the edits (batches)"]  # batches of 2 here
-        self.assertEqual(table1[2][0], "SimMotionEdit (MDT)")  # mdt_editor/mdt is the paper's row
-        self.assertEqual(table1[2][-4:], ["70.62", "82.92", "88.12", "2.38"])  # the paper's numbers beside ours
-        self.assertAlmostEqual(float(table1[2][2]), metrics["generated_to_target"]["batches"]["R@1"], delta=0.006)
+        # The yardstick rows first, then the method: mdt_editor/mdt is the paper's MDT row.
+        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)", "SimMotionEdit (MDT)"])
+        self.assertEqual(float(table1[3][2]), 100.0)  # the target as the edit: R@1 100
+        self.assertEqual(table1[4][-4:], ["70.62", "82.92", "88.12", "2.38"])  # the paper's numbers beside ours
+        self.assertAlmostEqual(float(table1[4][2]), metrics["generated_to_target"]["batches"]["R@1"], delta=0.006)
         self.assertIn("Claims", tables)
         self.assertTrue(any(r[1] == "MDT beats TMED" and r[2] == "not measured" for r in tables["Claims"][1:]))
         alts = [i["alt"] for i in images]

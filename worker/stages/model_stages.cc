@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <ctime>
 #include <map>
+#include <numeric>
 #include <optional>
 #include <set>
 
@@ -377,8 +378,24 @@ TaskReport WriteMetrics(const TaskContext& ctx, const json& metrics) {
   return out;
 }
 
+// Retrieval of edits `g` among the targets and among the sources (batches and all), and how far the
+// edits move towards their targets: generated-to-target minus generated-to-source R@1 (the copy of
+// the source scores about -(target-to-source R@1), the target itself about +that).
+json EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t, const eval::Embeddings& s, int64_t batch, uint64_t seed) {
+  json out;
+  for (const char* protocol : {"batches", "all"}) {
+    const int64_t b = std::string(protocol) == "batches" ? batch : 0;
+    const auto to_target = eval::Retrieval(g, t, b, seed), to_source = eval::Retrieval(g, s, b, seed);
+    out["generated_to_target"][protocol] = ScoresJson(to_target);
+    out["generated_to_source"][protocol] = ScoresJson(to_source);
+    out["towards_target"][protocol] = {{"R@1", to_target.r1 - to_source.r1}};
+  }
+  return out;
+}
+
 // params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
-// batch (32), seed, method (a name for the report; default: the edit stage's model).
+// batch (32), seed, method (a name for the report; default: the edit stage's model), yardstick
+// ("untrained": this row is the report's untrained editor, initial weights, same sampler).
 class EvalEditStage : public StageExecutor {
  public:
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
@@ -436,10 +453,12 @@ class EvalEditStage : public StageExecutor {
     const auto g = ToEmbeddings(*g_rows), t = ToEmbeddings(*t_rows), s = ToEmbeddings(*s_rows);
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
-    json metrics = {{"method", method}, {"evaluator", evaluator}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}};
-    for (const auto& [name, gallery] : {std::pair{"generated_to_target", &t}, std::pair{"generated_to_source", &s}}) {
-      metrics[name] = {{"batches", ScoresJson(eval::Retrieval(g, *gallery, batch, seed))}, {"all", ScoresJson(eval::Retrieval(g, *gallery, 0, seed))}};
-    }
+    json metrics = EditRetrieval(g, t, s, batch, seed);
+    metrics.update({{"method", method}, {"evaluator", evaluator}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
+    if (p.contains("yardstick")) metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+    // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere)
+    // and the target as the edit (the upper bound).
+    metrics["yardsticks"] = {{"copy", EditRetrieval(s, t, s, batch, seed)}, {"target", EditRetrieval(t, t, s, batch, seed)}};
     metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(t, s, batch, seed))}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"target", MeanPlausibility(targets)}};
     const json& g2t = metrics["generated_to_target"]["all"];
@@ -550,8 +569,71 @@ class GenerateStage : public StageExecutor {
   const PluginHost* plugins_;
 };
 
+// What eval_generate measures of motions against their ground truth (SINC Tables 2-3), from their
+// TEMOS-evaluator features and TMR embeddings: the TEMOS score, APE/AVE, and TMR retrieval
+// text-to-generated and generated-to-truth (batches and all).
+json GenerationScores(const std::vector<Motion>& generated, const std::vector<Motion>& truth, const std::vector<std::vector<float>>& g_temos,
+                      const std::vector<std::vector<float>>& t_temos, const eval::Embeddings& gen, const eval::Embeddings& gt,
+                      const eval::Embeddings& txt, int64_t batch, uint64_t seed) {
+  // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
+  double temos_score = 0;
+  for (size_t i = 0; i < generated.size(); ++i) temos_score += (1 + Cosine(g_temos[i], t_temos[i])) / 2;
+  const double n = static_cast<double>(generated.size());
+  // APE / AVE on joint positions, both motions in their first frame's body frame (REFERENCE 4.5).
+  eval::PositionErrors ape, ave;
+  for (size_t i = 0; i < generated.size(); ++i) {
+    auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
+    eval::Canonicalize(&gj, kNumJoints, eval::kSmpl22Hips);
+    eval::Canonicalize(&tj, kNumJoints, eval::kSmpl22Hips);
+    const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips), v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
+    ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local, ape.mean_global += a.mean_global;
+    ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local, ave.mean_global += v.mean_global;
+  }
+  const auto errors_json = [n](const eval::PositionErrors& e) {
+    return json{{"root", e.root / n}, {"trajectory", e.trajectory / n}, {"mean_local", e.mean_local / n}, {"mean_global", e.mean_global / n}};
+  };
+  json out = {{"temos_score", temos_score / n}, {"APE", errors_json(ape)}, {"AVE", errors_json(ave)}};
+  out["text_to_generated"] = {{"batches", ScoresJson(eval::Retrieval(txt, gen, batch, seed))}, {"all", ScoresJson(eval::Retrieval(txt, gen, 0, seed))}};
+  out["generated_to_truth"] = {{"batches", ScoresJson(eval::Retrieval(gen, gt, batch, seed))}, {"all", ScoresJson(eval::Retrieval(gen, gt, 0, seed))}};
+  return out;
+}
+
+// For each motion, another one of the nearest length (its neighbour in length order): the shuffled
+// ground truth yardstick, a real motion of the same length class for the wrong text.
+std::vector<size_t> SameLengthClassPartner(const std::vector<Motion>& motions) {
+  std::vector<size_t> order(motions.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return motions[a].num_frames() < motions[b].num_frames(); });
+  std::vector<size_t> partner(motions.size());
+  for (size_t k = 0; k < order.size(); ++k) partner[order[k]] = order[k + 1 < order.size() ? k + 1 : k - 1];
+  return partner;
+}
+
+// The TMR evaluator's own retrieval on the held-out test split (issue 15): text-to-motion and
+// motion-to-text R@1/R@3 in batches, on single actions and on two-action spans ("A while B").
+Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& table, int64_t batch, uint64_t seed) {
+  json out;
+  for (const char* kind : {"singles", "pairs"}) {
+    const auto spans = SelectSpans(table, {{"split", "test"}, {"spans", kind}});
+    if (spans.size() < 2) continue;
+    std::vector<Motion> motions;
+    std::vector<std::string> texts;
+    for (const int64_t i : spans) motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
+    MP_ASSIGN_OR_RETURN(auto m_rows, tmr.EncodeMotions(motions));
+    MP_ASSIGN_OR_RETURN(auto t_rows, tmr.EncodeTexts(texts));
+    const auto m = ToEmbeddings(m_rows), t = ToEmbeddings(t_rows);
+    const int64_t b = std::min<int64_t>(batch, static_cast<int64_t>(spans.size()));
+    out[kind] = {{"motions", spans.size()},
+                 {"text_to_motion", ScoresJson(eval::Retrieval(t, m, b, seed))},
+                 {"motion_to_text", ScoresJson(eval::Retrieval(m, t, b, seed))}};
+  }
+  return out;
+}
+
 // params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
 // evaluator), generated (the generate stage), batch (32), seed, diversity_pairs (300), method.
+// yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the TMR's
+// own retrieval on the test singles and two-action spans).
 class EvalGenerateStage : public StageExecutor {
  public:
   explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
@@ -605,35 +687,30 @@ class EvalGenerateStage : public StageExecutor {
     for (const auto* r : {&g_tmr, &t_tmr, &text_tmr, &g_temos, &t_temos}) {
       if (!r->ok()) return TaskReport::Error("eval_generate: " + r->status().message());
     }
-    // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
-    double temos_score = 0;
-    for (size_t i = 0; i < generated.size(); ++i) {
-      temos_score += (1 + Cosine((*g_temos)[i], (*t_temos)[i])) / 2;
-    }
-    temos_score /= static_cast<double>(generated.size());
-    // APE / AVE on joint positions.
-    eval::PositionErrors ape, ave;
-    for (size_t i = 0; i < generated.size(); ++i) {
-      // Both in their first frame's body frame (REFERENCE 4.5): the ground truth starts anywhere.
-      auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
-      eval::Canonicalize(&gj, kNumJoints, eval::kSmpl22Hips);
-      eval::Canonicalize(&tj, kNumJoints, eval::kSmpl22Hips);
-      const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips), v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
-      ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local, ape.mean_global += a.mean_global;
-      ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local, ave.mean_global += v.mean_global;
-    }
-    const double n = static_cast<double>(generated.size());
-    const auto errors_json = [n](const eval::PositionErrors& e) {
-      return json{{"root", e.root / n}, {"trajectory", e.trajectory / n}, {"mean_local", e.mean_local / n}, {"mean_global", e.mean_global / n}};
-    };
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
     const auto gen = ToEmbeddings(*g_tmr), gt = ToEmbeddings(*t_tmr), txt = ToEmbeddings(*text_tmr);
-    json metrics = {{"method", method}, {"motions", generated.size()}, {"temos_score", temos_score}, {"APE", errors_json(ape)},
-                    {"AVE", errors_json(ave)}, {"batch", batch}, {"seed", seed}};
-    metrics["text_to_generated"] = {{"batches", ScoresJson(eval::Retrieval(txt, gen, batch, seed))}, {"all", ScoresJson(eval::Retrieval(txt, gen, 0, seed))}};
-    metrics["generated_to_truth"] = {{"batches", ScoresJson(eval::Retrieval(gen, gt, batch, seed))}, {"all", ScoresJson(eval::Retrieval(gen, gt, 0, seed))}};
-    metrics["text_to_truth"] = {{"all", ScoresJson(eval::Retrieval(txt, gt, 0, seed))}};
+    json metrics = GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
+    metrics.update({{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
+    if (p.contains("yardstick")) metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+    // The yardsticks, in the same evaluation (issue 15): the ground truth itself, and shuffled ground
+    // truth (each test motion stands in for the one nearest in length to it).
+    const std::vector<size_t> other = SameLengthClassPartner(truth);
+    std::vector<Motion> shuffled;
+    std::vector<std::vector<float>> shuffled_temos, shuffled_tmr;
+    for (size_t i = 0; i < truth.size(); ++i) {
+      shuffled.push_back(truth[other[i]]);
+      shuffled_temos.push_back((*t_temos)[other[i]]);
+      shuffled_tmr.push_back((*t_tmr)[other[i]]);
+    }
+    metrics["yardsticks"] = {{"truth", GenerationScores(truth, truth, *t_temos, *t_temos, gt, gt, txt, batch, seed)},
+                             {"shuffled", GenerationScores(shuffled, truth, shuffled_temos, *t_temos, ToEmbeddings(shuffled_tmr), gt, txt, batch, seed)}};
+    if (p.value("evaluator_quality", false)) {
+      auto quality = EvaluatorQuality(**tmr, *table, batch, seed);
+      if (!quality.ok()) return TaskReport::Error("eval_generate: " + quality.status().message());
+      metrics["evaluator_quality"] = *quality;
+    }
+    const double temos_score = metrics["temos_score"].get<double>();
     const int64_t pairs = p.value("diversity_pairs", int64_t{300});
     metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)}, {"truth", eval::Diversity(gt, pairs, seed)}};
     metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen)) : json(nullptr);  // needs more motions than dimensions
