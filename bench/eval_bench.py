@@ -7,9 +7,11 @@ Prints the wall time of each run and their ratio, and from the stages' own recor
 per second by the eval stages (evaluator loading, encoding and metrics; generated and reference
 motions both count), edits per second and generations per second.
 
-  bench/eval_bench.py [--job 'out/demo-*'] [--edit-limit 32] [--ddpm-limit 4] [--gen-limit 64] [--threads 1]
+  bench/eval_bench.py [--job-edit 'out/claims_edit-*'] [--job-sinc 'out/claims_sinc-*'] [--edit-limit 32] [--ddpm-limit 4]
+                      [--gen-limit 64] [--threads 1]
 
-Needs a trained job (scripts/demo or `motionpipe run configs/demo.yaml`); --job names it by pattern.
+Needs the trained claims jobs (`scripts/demo claims-edit`, `scripts/demo claims-sinc`); --job-edit and
+--job-sinc name them by pattern.
 """
 import argparse
 import glob
@@ -26,7 +28,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def run(motionpipe, workers, args, root):
-    overrides = [f"output_root={root}", f"vars.job={args.job}", f"vars.clips={args.clips}", f"vars.edit_limit={args.edit_limit}",
+    overrides = [f"output_root={root}", f"vars.job_edit={args.job_edit}", f"vars.job_sinc={args.job_sinc}", f"vars.clips={args.clips}", f"vars.edit_limit={args.edit_limit}",
                  f"vars.edit_steps={args.edit_steps}", f"vars.ddpm_limit={args.ddpm_limit}", f"vars.gen_limit={args.gen_limit}",
                  f"vars.history={root}/history.sqlite"]
     started = time.monotonic()
@@ -56,8 +58,9 @@ def run(motionpipe, workers, args, root):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--job", default="out/demo-*", help="pattern of the trained job whose checkpoints are evaluated")
-    parser.add_argument("--clips", type=int, default=1500, help="the trained job's corpus size (the demo's small scale: 1500)")
+    parser.add_argument("--job-edit", default="out/claims_edit-*", help="pattern of the editors' training job")
+    parser.add_argument("--job-sinc", default="out/claims_sinc-*", help="pattern of the generators' training job")
+    parser.add_argument("--clips", type=int, default=1500, help="the trained jobs' corpus size (the claims runs': 1500)")
     parser.add_argument("--edit-limit", type=int, default=32)
     parser.add_argument("--edit-steps", type=int, default=20)
     parser.add_argument("--ddpm-limit", type=int, default=4)
@@ -65,15 +68,16 @@ def main():
     parser.add_argument("--threads", type=int, default=0, help="threads per worker (default: motionpipe run's, cores / workers)")
     parser.add_argument("--motionpipe", default=os.path.join(ROOT, "build", "cli", "motionpipe"))
     args = parser.parse_args()
-    if not glob.glob(os.path.join(ROOT, args.job, "mdt")):
-        sys.exit(f"eval_bench: no trained job matches {args.job} (run scripts/demo first)")
+    for pattern, stage, command in ((args.job_edit, "mdt", "claims-edit"), (args.job_sinc, "sinc", "claims-sinc")):
+        if not glob.glob(os.path.join(ROOT, pattern, stage)):
+            sys.exit(f"eval_bench: no trained job matches {pattern} (run scripts/demo {command} first)")
     scratch = tempfile.mkdtemp(prefix="eval_bench-")
     try:
         one = run(args.motionpipe, 1, args, os.path.join(scratch, "w1"))
         two = run(args.motionpipe, 2, args, os.path.join(scratch, "w2"))
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    print(f"eval_bench: configs/eval.yaml on {args.job}: {one['edits']} edits (DDIM {args.edit_steps} / DDPM 300), "
+    print(f"eval_bench: configs/eval.yaml on {args.job_edit} and {args.job_sinc}: {one['edits']} edits (DDIM {args.edit_steps} / DDPM 300), "
           f"{one['generated']} generations, {one['eval_stages']} eval stages, the report")
     print(f"{'workers':>8} {'wall s':>8} {'scored motions/s':>17} {'edits/s':>8} {'generations/s':>14}")
     for workers, r in ((1, one), (2, two)):

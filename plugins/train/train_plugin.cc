@@ -5,9 +5,11 @@
 // restarted gang resumes from, and the loss curve in CSV and on the worker's /metrics.
 //
 // params: model (plugin model name), config (the model's config), data (the model's data config),
-//   steps, batch_size (global: split across ranks), lr, weight_decay, betas [b1, b2], warmup,
+//   steps (0: the untrained model), batch_size (global: split across ranks), lr, weight_decay, betas [b1, b2], warmup,
 //   schedule (cosine | constant), min_lr, clip_grad, checkpoint_every, keep_checkpoints, log_every,
-//   seed, gloo_host (the address other ranks reach this one on; default 127.0.0.1),
+//   seed, validate_every (steps between validations on the held-out split; 0 = none), val_batches (4),
+//   keep (last | best: the output model is the one with the lowest validation loss),
+//   gloo_host (the address other ranks reach this one on; default 127.0.0.1),
 //   store (tcp | file; default tcp), collective_timeout (seconds, default 120)
 //
 // Rank r of W takes every W-th example of each global batch, and the gradients are averaged over
@@ -27,6 +29,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -50,6 +53,8 @@ struct Options {
   std::string model;
   json config, data;
   int64_t steps = 1000, batch_size = 32, warmup = 100, checkpoint_every = 200, keep_checkpoints = 2, log_every = 10;
+  int64_t validate_every = 0, val_batches = 4;
+  std::string keep = "last";
   double lr = 3e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.999, min_lr = 0, clip_grad = 1.0;
   std::string schedule = "cosine";
   uint64_t seed = 1;
@@ -68,6 +73,12 @@ struct Options {
     o.checkpoint_every = p.value("checkpoint_every", o.checkpoint_every);
     o.keep_checkpoints = p.value("keep_checkpoints", o.keep_checkpoints);
     o.log_every = p.value("log_every", o.log_every);
+    o.validate_every = p.value("validate_every", o.validate_every);
+    o.val_batches = p.value("val_batches", o.val_batches);
+    o.keep = p.value("keep", o.keep);
+    if (o.keep != "last" && o.keep != "best") throw plugin::BadInput("params.keep must be last or best");
+    if (o.keep == "best" && o.validate_every <= 0) throw plugin::BadInput("params.keep: best needs params.validate_every > 0");
+    if (o.validate_every < 0 || o.val_batches < 1) throw plugin::BadInput("params.validate_every must be >= 0 and params.val_batches positive");
     o.lr = p.value("lr", o.lr);
     o.weight_decay = p.value("weight_decay", o.weight_decay);
     if (p.contains("betas")) {
@@ -82,14 +93,17 @@ struct Options {
     o.store = p.value("store", o.store);
     o.collective_timeout = p.value("collective_timeout", o.collective_timeout);
     if (o.store != "tcp" && o.store != "file") throw plugin::BadInput("params.store must be tcp or file");
-    if (o.steps < 1 || o.batch_size < 1) throw plugin::BadInput("params.steps and params.batch_size must be positive");
+    // steps: 0 writes the initial weights (with the data's statistics and tokenizer): the untrained
+    // yardstick row of an evaluation.
+    if (o.steps < 0 || o.batch_size < 1) throw plugin::BadInput("params.steps must be >= 0 and params.batch_size positive");
     if (o.schedule != "cosine" && o.schedule != "constant") throw plugin::BadInput("params.schedule must be cosine or constant");
     return o;
   }
   json ToJson() const {
     return {{"model", model}, {"steps", steps}, {"batch_size", batch_size}, {"warmup", warmup}, {"lr", lr},
             {"weight_decay", weight_decay}, {"betas", {beta1, beta2}}, {"schedule", schedule}, {"min_lr", min_lr},
-            {"clip_grad", clip_grad}, {"checkpoint_every", checkpoint_every}, {"seed", seed}};
+            {"clip_grad", clip_grad}, {"checkpoint_every", checkpoint_every}, {"seed", seed}, {"validate_every", validate_every},
+            {"val_batches", val_batches}, {"keep", keep}};
   }
 };
 
@@ -209,6 +223,29 @@ c10::intrusive_ptr<c10d::Store> OpenStore(const Options& options, const std::str
   }
 }
 
+// The mean loss over `batches` fixed batches of the held-out split: the same examples and the same
+// per-example draws (diffusion steps, noise, reparameterisation) at every validation, dropout off.
+double Validate(plugin::Model& model, plugin::Dataset& val, const Options& options) {
+  torch::NoGradGuard no_grad;
+  model.Module().eval();
+  double total = 0;
+  const int64_t n = val.size();
+  for (int64_t b = 0; b < options.val_batches; ++b) {
+    std::vector<int64_t> indices;
+    std::vector<int64_t> example_seeds;
+    for (int64_t k = 0; k < options.batch_size; ++k) {
+      indices.push_back((b * options.batch_size + k) % n);
+      example_seeds.push_back(static_cast<int64_t>(MixSeed(MixSeed(options.seed, 0x7661ull), static_cast<uint64_t>(b * options.batch_size + k)) >> 1));
+    }
+    plugin::Batch batch = val.Get(indices, MixSeed(options.seed, 0x76616cull + static_cast<uint64_t>(b)));
+    batch.tensors["example_seed"] = torch::tensor(example_seeds, torch::kInt64);
+    torch::manual_seed(MixSeed(options.seed, 0x76616c00ull + static_cast<uint64_t>(b)));
+    total += model.Losses(batch, 0).at("loss").item<double>();
+  }
+  model.Module().train();
+  return total / static_cast<double>(options.val_batches);
+}
+
 void Train(const Task& task) {
   const Options options = Options::FromTask(task);
   const int rank = task.spec.value("index", 0);
@@ -245,6 +282,17 @@ void Train(const Task& task) {
   } catch (const std::invalid_argument& e) {
     throw plugin::BadInput(e.what());
   }
+  // The held-out split for the validation loss (rank 0 validates; the others do not wait for it).
+  std::unique_ptr<plugin::Dataset> val_dataset;
+  if (options.validate_every > 0 && rank == 0) {
+    plugin::DataContext val = data;
+    val.split = "val";
+    try {
+      val_dataset = model.MakeDataset(val);
+    } catch (const std::invalid_argument& e) {
+      throw plugin::BadInput(std::string("validate_every: the held-out split: ") + e.what());
+    }
+  }
   if (options.batch_size % world != 0) {
     throw plugin::BadInput("batch_size " + std::to_string(options.batch_size) + " must be divisible by world_size " + std::to_string(world));
   }
@@ -259,15 +307,26 @@ void Train(const Task& task) {
 
   // Resume from the newest checkpoint of an earlier attempt of this gang.
   int64_t start = 0;
-  const std::string csv = state_dir + "/losses.csv";
+  const std::string csv = state_dir + "/losses.csv", val_csv = state_dir + "/val_losses.csv", best_dir = state_dir + "/best";
+  double best_val = std::numeric_limits<double>::infinity();
+  int64_t best_step = -1;
   if (const auto latest = LatestCheckpoint(state_dir)) {
     LoadModule(model.Module(), latest->dir + "/model.pt");
     torch::load(optimizer, latest->dir + "/optimizer.pt");
     start = latest->step;
     task.Log(MP_LOG_INFO, "rank " + std::to_string(rank) + " resumes from step " + std::to_string(start));
-    if (rank == 0) TruncateCsv(csv, start);
-  } else if (rank == 0 && fs::exists(csv)) {
-    fs::remove(csv);
+    if (rank == 0) {
+      TruncateCsv(csv, start);
+      TruncateCsv(val_csv, start + 1);  // a validation row is logged at the step it follows
+      // The best model so far, if it was validated before the resumed step.
+      if (auto meta = ReadFile(best_dir + "/best.json"); meta.ok()) {
+        const json best = json::parse(*meta);
+        if (best.value("step", int64_t{-1}) <= start) best_val = best.value("val_loss", best_val), best_step = best.value("step", best_step);
+      }
+    }
+  } else if (rank == 0) {
+    for (const std::string& file : {csv, val_csv}) fs::remove(file);
+    fs::remove_all(best_dir);
   }
 
   c10::intrusive_ptr<c10d::ProcessGroupGloo> group;
@@ -373,6 +432,23 @@ void Train(const Task& task) {
         task.Metric("step", static_cast<double>(step + 1));
         task.Metric("lr", lr);
       }
+      if (val_dataset && ((step + 1) % options.validate_every == 0 || step + 1 == options.steps)) {
+        const double val_loss = Validate(model, *val_dataset, options);
+        const bool fresh = !fs::exists(val_csv);
+        std::ofstream val_log(val_csv, std::ios::app);
+        if (fresh) val_log << "step,val_loss\n";
+        val_log << step << "," << val_loss << "\n";
+        task.Metric("val_loss", val_loss);
+        if (val_loss < best_val) {
+          best_val = val_loss, best_step = step + 1;
+          fs::remove_all(best_dir + ".tmp");
+          WriteModelDir(model, options, best_step, best_dir + ".tmp");
+          const Status s = WriteFileAtomic(best_dir + ".tmp/best.json", json({{"step", best_step}, {"val_loss", best_val}}).dump() + "\n");
+          if (!s.ok()) throw std::runtime_error(s.message());
+          fs::remove_all(best_dir);
+          fs::rename(best_dir + ".tmp", best_dir);
+        }
+      }
       if ((step + 1) % options.checkpoint_every == 0 && step + 1 < options.steps) {
         log.flush();
         const std::string name = "ckpt-" + std::to_string(100000000 + step + 1).substr(1);
@@ -402,14 +478,23 @@ void Train(const Task& task) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   if (rank == 0) {
     model.Module().eval();
-    WriteModelDir(model, options, options.steps, out_dir + "/model");
+    if (options.keep == "best" && best_step >= 0 && best_step < options.steps) {
+      // The lowest validation loss: that model is the output (its weights, extras and step).
+      LoadModule(model.Module(), best_dir + "/model.pt");
+      WriteModelDir(model, options, best_step, out_dir + "/model");
+    } else {
+      WriteModelDir(model, options, options.steps, out_dir + "/model");
+    }
     ExportStateDict(model.Module(), out_dir + "/state_dict.pt");
-    if (fs::exists(csv)) fs::copy_file(csv, out_dir + "/losses.csv", fs::copy_options::overwrite_existing);
+    for (const std::string& file : {csv, val_csv}) {
+      if (fs::exists(file)) fs::copy_file(file, out_dir + "/" + fs::path(file).filename().string(), fs::copy_options::overwrite_existing);
+    }
   }
   const int64_t trained = options.steps - start;
-  const json summary = {{"rank", rank}, {"world_size", world}, {"resumed_from", start}, {"steps", trained},
+  json summary = {{"rank", rank}, {"world_size", world}, {"resumed_from", start}, {"steps", trained},
                         {"seconds", seconds}, {"samples_per_second", static_cast<double>(trained * local) / std::max(seconds, 1e-9)},
                         {"final_loss", last_loss}};
+  if (rank == 0 && best_step >= 0) summary["best"] = {{"step", best_step}, {"val_loss", best_val}, {"kept", options.keep}};
   const Status s = WriteFileAtomic(out_dir + "/rank-" + std::to_string(rank) + ".json", summary.dump(1) + "\n");
   if (!s.ok()) throw std::runtime_error(s.message());
   task.Metric("final_loss", last_loss);

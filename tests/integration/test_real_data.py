@@ -1,10 +1,11 @@
 """The demo pipeline (configs/demo.yaml) on real-data files instead of the procedural corpus: the
 `dataset` stage links converted MotionFix triplets and BABEL JSON + AMASS npz from the user's
-directories, and everything after it (filter, labels, synthetic pairs, training of every method,
-editing, generation, evaluation, the CMU showcase, the report) runs unchanged. The files are small
+directories, and everything after it (filter, labels, synthetic pairs, training, editing, generation,
+evaluation with the yardsticks, the CMU showcase, the report) runs unchanged. The files are small
 ones in the real formats (BABEL's JSON, AMASS's npz, MotionFix after tools/motionfix_convert.py),
 written by `motionpipe data synth-corpus`, and moved to places of their own so that nothing depends
-on the corpus's layout. Also a tiny-scale smoke test of the whole demo graph (seeds included)."""
+on the corpus's layout. Also tiny-scale smoke tests of the two claims graphs (every row of both
+papers' tables, seeds included)."""
 import glob
 import json
 import os
@@ -16,12 +17,14 @@ from harness import MOTIONPIPE, EngineTest
 from test_edit import check_report
 
 SOURCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
-DEMO = os.path.join(SOURCE, "configs", "demo.yaml")
+CONFIGS = os.path.join(SOURCE, "configs")
 
 # Tiny sizes: the point is the data path and the graph, not the models.
-TINY = ["vars.steps=2", "vars.seeds=2", "vars.batch=4", "vars.warmup=0", "vars.dim=32", "vars.cond_layers=1", "vars.layers_edit=1",
-        "vars.heads_edit=2", "vars.ff_edit=32", "vars.latent=32", "vars.layers_temos=1", "vars.ff_temos=32", "vars.max_frames=48",
-        "vars.edit_limit=3", "vars.edit_steps=2", "vars.gen_limit=4", "vars.synth_pairs=50", "stages.showcase.params.panel_size=64"]
+MODEL = ["vars.batch=4", "vars.warmup=0", "vars.latent=32", "vars.layers_temos=1", "vars.ff_temos=32", "vars.max_frames=48"]
+EDITOR = ["vars.dim=32", "vars.cond_layers=1", "vars.layers_edit=1", "vars.heads_edit=2", "vars.ff_edit=32", "vars.edit_limit=3",
+          "vars.edit_steps=2", "vars.steps_edit=2"]
+TINY_DEMO = MODEL + EDITOR + ["vars.steps_tmr=2", "vars.steps_sinc=2", "vars.gen_limit=4", "vars.synth_pairs=50",
+                              "stages.showcase.params.panel_size=64"]
 
 
 class RealDataTest(EngineTest):
@@ -43,9 +46,9 @@ class RealDataTest(EngineTest):
         dataset = (f"stages.corpus.params={{motionfix: {os.path.join(user, 'motionfix')}, babel: {os.path.join(user, 'babel')}, "
                    f"amass_root: {amass}}}")
         overrides = [f"output_root={self.path('out')}", "stages.corpus.kind=dataset", dataset,
-                     f"stages.showcase.params.clips={os.path.join(SOURCE, 'data', 'mocap', 'cmu')}"] + TINY
-        result = subprocess.run([MOTIONPIPE, "run", DEMO, "--workers", "2", "--threads", "1"] + overrides, capture_output=True, text=True,
-                                timeout=1500)
+                     f"stages.showcase.params.clips={os.path.join(SOURCE, 'data', 'mocap', 'cmu')}"] + TINY_DEMO
+        result = subprocess.run([MOTIONPIPE, "run", os.path.join(CONFIGS, "demo.yaml"), "--workers", "2", "--credit", "1", "--threads", "1"]
+                                + overrides, capture_output=True, text=True, timeout=1500)
         self.assertEqual(result.returncode, 0, result.stdout[-4000:] + result.stderr[-4000:])
         job = glob.glob(self.path("out", "demo-*"))[0]
 
@@ -61,29 +64,68 @@ class RealDataTest(EngineTest):
         with open(os.path.join(job, "singles", "task-00000", "stats.json")) as f:
             singles = json.load(f)
         self.assertGreater(singles["spans"], 0)
-        # Seeds: every key row has two replicates, each trained with its own seed.
-        for stage in ("mdt", "mdt-s2", "tmed-s2", "sinc-s2", "sinc_random-s2", "eval_edit_mdm_bp-s2", "eval_gen_sinc_real-s2"):
-            self.assertTrue(os.path.isdir(os.path.join(job, stage, "task-00000")), stage)
-        self.assertFalse(os.path.exists(os.path.join(job, "single-s2")))  # single-action: one seed
-        with open(os.path.join(job, "mdt-s2", "task-00000", "rank-0.json")) as f:
-            self.assertEqual(json.load(f)["steps"], 2)
+        with open(os.path.join(job, "mdt", "task-00000", "rank-0.json")) as f:
+            rank0 = json.load(f)
+        self.assertEqual(rank0["steps"], 2)
+        # Validated on the held-out split at the last step: the loss logged, the best model recorded.
+        with open(os.path.join(job, "mdt", "task-00000", "val_losses.csv")) as f:
+            rows = f.read().split()
+        self.assertEqual(rows[0], "step,val_loss")
+        self.assertEqual(rows[1].split(",")[0], "1")
+        self.assertEqual(rank0["best"]["step"], 2)
+        self.assertAlmostEqual(rank0["best"]["val_loss"], float(rows[1].split(",")[1]), places=4)
+        with open(os.path.join(job, "mdt_untrained", "task-00000", "rank-0.json")) as f:
+            self.assertEqual(json.load(f)["steps"], 0)  # the untrained yardstick: initial weights
 
-        # The report: both papers' tables with every method and its seeds, the claims, previews.
+        # The report: each table's yardsticks, the untrained row, the method; the evaluators; previews.
         tables, images = check_report(self, os.path.join(job, "report", "task-00000", "report.html"))
         table1 = tables["Editing: retrieval of the edits (all)"]
-        self.assertEqual([r[0] for r in table1[2:]], ["MDM", "MDM-BP", "TMED", "SimMotionEdit (MDT)", "w/o auxiliary loss", "w/o SNR filtering"])
-        self.assertTrue(all(r[1] == "2" for r in table1[2:]))
+        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)",
+                                                      "untrained MDT (initial weights)", "SimMotionEdit (MDT)"])
         sinc = tables["Composition: generated motions against the ground truth"]
-        self.assertEqual([r[0] for r in sinc[2:]], ["Single-action", "Single-action + GPT compositing", "SINC-STE", "SINC, real singles + pairs",
-                                                    "SINC + synthetic pairs (GPT labels)", "SINC + random compositions"])
-        self.assertEqual([r[1] for r in sinc[2:]], ["1", "1", "1", "2", "2", "2"])
-        self.assertEqual(sinc[2][-1], "0.601")  # the paper's TEMOS score beside ours
-        verdicts = {r[1]: r[2] for r in tables["Claims"][1:]}
-        self.assertEqual(len(verdicts), 8)
-        self.assertFalse(any(v == "not measured" for v in verdicts.values()), verdicts)
+        self.assertEqual([r[0] for r in sinc[2:]], ["ground truth", "shuffled ground truth (same length class)", "untrained SINC (initial weights)",
+                                                    "SINC + synthetic pairs (GPT labels)"])
+        self.assertEqual(sinc[2][2], "1.000")  # the ground truth's TEMOS score with itself
+        evaluators = [r[0] for r in tables["Evaluator quality"][1:]]
+        self.assertIn("TMR: test two-action spans (\"A while B\")", evaluators)
         alts = [i["alt"] for i in images]
         for alt in ("editing preview", "composition preview", "training curve mdt", "The imported CMU clips"):
             self.assertIn(alt, alts)
+
+    def run_claims(self, name, overrides):
+        result = subprocess.run([MOTIONPIPE, "run", os.path.join(CONFIGS, name), "--workers", "2", "--credit", "1", "--threads", "1",
+                                 f"output_root={self.path('out')}", "vars.seeds=2", "vars.clips=120"] + MODEL + overrides,
+                                capture_output=True, text=True, timeout=1500)
+        self.assertEqual(result.returncode, 0, result.stdout[-4000:] + result.stderr[-4000:])
+        job = glob.glob(self.path("out", name.replace(".yaml", "") + "-*"))[0]
+        tables, _ = check_report(self, os.path.join(job, "report", "task-00000", "report.html"))
+        return job, tables
+
+    def test_claims_graphs(self):
+        # SimMotionEdit: every row of Table 1 with its seeds, after the yardsticks.
+        job, tables = self.run_claims("claims_edit.yaml", EDITOR + ["vars.steps_tmr=2"])
+        for stage in ("mdt-s2", "tmed-s2", "mdt_no_filter-s2", "eval_edit_mdm_bp-s2"):
+            self.assertTrue(os.path.isdir(os.path.join(job, stage, "task-00000")), stage)
+        table1 = tables["Editing: retrieval of the edits (all)"]
+        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)", "untrained MDT (initial weights)",
+                                                      "MDM", "MDM-BP", "TMED", "SimMotionEdit (MDT)", "w/o auxiliary loss", "w/o SNR filtering"])
+        self.assertEqual([r[1] for r in table1[5:]], ["2"] * 6)
+        verdicts = {r[1]: r[2] for r in tables["Claims"][1:] if r[0] == "SimMotionEdit"}
+        self.assertEqual(len(verdicts), 5)
+        # Two seeds a side: never "holds"; either a model does not beat the untrained row or too few seeds.
+        self.assertTrue(all(v.startswith("not decidable") for v in verdicts.values()), verdicts)
+        # SINC: every row of Tables 2-3 after the yardsticks, the paper's numbers beside them.
+        job, tables = self.run_claims("claims_sinc.yaml", ["vars.steps_tmr=2", "vars.steps_sinc=2", "vars.gen_limit=4"])
+        self.assertFalse(os.path.exists(os.path.join(job, "single-s2")))  # single-action: one seed
+        sinc = tables["Composition: generated motions against the ground truth"]
+        self.assertEqual([r[0] for r in sinc[2:]], ["ground truth", "shuffled ground truth (same length class)", "untrained SINC (initial weights)",
+                                                    "Single-action", "Single-action + GPT compositing", "SINC-STE", "SINC, real singles + pairs",
+                                                    "SINC + synthetic pairs (GPT labels)", "SINC + random compositions"])
+        self.assertEqual([r[1] for r in sinc[5:]], ["1", "1", "1", "2", "2", "2"])
+        self.assertEqual(sinc[5][-1], "0.601")  # the paper's TEMOS score beside ours
+        verdicts = {r[1]: r[2] for r in tables["Claims"][1:] if r[0] == "SINC"}
+        self.assertEqual(len(verdicts), 3)
+        self.assertFalse(any(v == "not measured" for v in verdicts.values()), verdicts)
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@
 #include "pipeline.h"
 #include "plugin_host.h"
 #include "scheduler.h"
+#include "test_util.h"
 
 namespace motionpipe::coordinator {
 namespace {
@@ -75,6 +76,26 @@ TEST(Pipeline, ParsesPlansAndOrdersStages) {
   ASSERT_TRUE(corpus.ok());
   EXPECT_EQ(corpus->stages[0].shards, 3);
   EXPECT_TRUE(corpus->stages[0].reduce);
+}
+
+// Every shipped pipeline (configs/*.yaml: the demo, the claims runs, the evaluations) parses and
+// plans as it stands, so a README command never meets a YAML error.
+TEST(Pipeline, EveryShippedConfigParsesAndPlans) {
+  KindRegistry kinds = KindRegistry::WithBuiltins();
+  kinds.AddGeneric("labeler.train");  // the labelers plugin's stage kind (a plugin-declared kind plans generically)
+  int count = 0;
+  for (const auto& entry : fs::directory_iterator(motionpipe::testing::SourceDir() + "/configs")) {
+    if (entry.path().extension() != ".yaml") continue;
+    auto text = ReadFile(entry.path().string());
+    ASSERT_TRUE(text.ok()) << entry.path();
+    auto spec = ParsePipeline(*text, {}, entry.path().string(), kinds);
+    EXPECT_TRUE(spec.ok()) << spec.status().ToString();
+    if (spec.ok()) {
+      EXPECT_FALSE(spec->stages.empty()) << entry.path();
+    }
+    ++count;
+  }
+  EXPECT_GE(count, 10);
 }
 
 TEST(Pipeline, OverridesAndInterpolation) {
