@@ -137,6 +137,9 @@ class EditorGenerator : public plugin::Generator {
     body_parts_ = options.value("body_parts", false);
     if (body_parts_ && model_->options().variant != "mdm") throw std::invalid_argument("body_parts (MDM-BP) runs mdm checkpoints");
     labeler_ = options.value("labeler", std::string("lexicon"));
+    // The guidance scales g_m, g_t (three-way) or g_t (MDM): the checkpoint's unless given.
+    guidance_motion_ = options.value("guidance_motion", model_->options().guidance_motion);
+    guidance_text_ = options.value("guidance_text", model_->options().guidance_text);
   }
 
   std::string Name() const override { return "mdt_editor/" + (body_parts_ ? std::string("mdm_bp") : model_->options().variant); }
@@ -222,8 +225,8 @@ class EditorGenerator : public plugin::Generator {
     const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = model_->net()->forward(xt.repeat({1, branches, 1}), torch::full({branches * n}, t, torch::kInt64), padding, c).x0;
       const auto parts = x0.chunk(branches, 1);
-      if (branches == 3) return GuideThreeWay(parts[0], parts[1], parts[2], o.guidance_motion, o.guidance_text);
-      return parts[0] + o.guidance_text * (parts[1] - parts[0]);
+      if (branches == 3) return GuideThreeWay(parts[0], parts[1], parts[2], guidance_motion_, guidance_text_);
+      return parts[0] + guidance_text_ * (parts[1] - parts[0]);
     };
     std::function<torch::Tensor(const torch::Tensor&)> project;
     if (body_parts_) {
@@ -281,6 +284,7 @@ class EditorGenerator : public plugin::Generator {
   std::unique_ptr<EditorModel> model_;
   bool body_parts_ = false;
   std::string labeler_;
+  double guidance_motion_ = 2, guidance_text_ = 2;
 };
 
 const mp_object_factory kFactories[] = {
