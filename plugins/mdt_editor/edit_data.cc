@@ -161,6 +161,8 @@ plugin::Batch EditDataset::Get(const std::vector<int64_t>& indices, uint64_t) {
   return batch;
 }
 
+constexpr double kConstantColumnVariance = 1e-12;
+
 std::pair<torch::Tensor, torch::Tensor> EditDataset::ComputeStats(int64_t limit) const {
   // Over an even spread of the items, sources and targets alike (double sums).
   std::vector<double> sum(kMotionFixFeatureDim, 0.0), squares(kMotionFixFeatureDim, 0.0);
@@ -186,7 +188,11 @@ std::pair<torch::Tensor, torch::Tensor> EditDataset::ComputeStats(int64_t limit)
     const double m = sum[static_cast<size_t>(c)] / static_cast<double>(count);
     const double var = std::max(0.0, (squares[static_cast<size_t>(c)] - static_cast<double>(count) * m * m) / static_cast<double>(std::max<int64_t>(1, count - 1)));
     mean[c] = m;
-    stddev[c] = std::sqrt(var);
+    // A column constant over the training motions (the procedural corpus never turns some joints:
+    // 55 of 207 columns) carries nothing to normalise, and (x - mean) / (2 (0 + 1e-5)) would turn
+    // any deviation of another motion (a real clip that turns those joints) into inputs of order
+    // 1e4. Such a column keeps its scale: std 1 (issue 15, the CMU edit's jerk).
+    stddev[c] = var < kConstantColumnVariance ? 1.0 : std::sqrt(var);
   }
   return {mean, stddev};
 }

@@ -39,7 +39,8 @@ class EditDataset : public plugin::Dataset {
   // tensors: source [Ts, N, 207], source_padding [N, Ts], target [Tt, N, 207], target_padding,
   // classes [N, Ts] int64 (-1 = no curve), similarity [N, Ts] float (-1 = no curve); texts.
   plugin::Batch Get(const std::vector<int64_t>& indices, uint64_t seed) override;
-  // Mean and std (scale 2 sigma) over up to `limit` training motions (sources and targets).
+  // Mean and std (scale 2 sigma) over up to `limit` training motions (sources and targets); a
+  // column constant over them gets std 1.
   std::pair<torch::Tensor, torch::Tensor> ComputeStats(int64_t limit = 400) const;
   void SetStats(torch::Tensor mean, torch::Tensor std) { mean_ = std::move(mean), std_ = std::move(std); }
   std::vector<std::string> AllTexts() const;

@@ -5,8 +5,12 @@
 
 #include <cmath>
 
+#include <filesystem>
+
 #include "../../plugins/mdt_editor/diffusion.h"
+#include "../../plugins/mdt_editor/edit_data.h"
 #include "../../plugins/mdt_editor/editor.h"
+#include "motionpipe/formats/motionfix.h"
 
 namespace motionpipe::mdt {
 namespace {
@@ -211,6 +215,45 @@ TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
     EXPECT_TRUE(torch::equal(a, b));
     EXPECT_FALSE(torch::equal(a, other));
   }
+}
+
+// Issue 15: a feature column constant over the training motions (a joint the corpus never turns)
+// had std 0 and divided any other motion's deviation by 2e-5: the CMU edit's inputs reached 1e4.
+// Such a column keeps std 1; the others get their own.
+TEST(Editor, ConstantFeatureColumnsKeepUnitScale) {
+  const std::string dir = ::testing::TempDir() + "/constant_columns";
+  std::filesystem::create_directories(dir + "/motionfix");
+  std::vector<Triplet> triplets;
+  for (int i = 0; i < 4; ++i) {
+    Triplet t;
+    t.id = "t" + std::to_string(i);
+    t.text = "raise the arm";
+    t.split = "train";
+    for (Motion* m : {&t.source, &t.target}) {
+      *m = Motion::Rest(30, 30, 0.9);
+      for (int64_t f = 0; f < 30; ++f) {
+        m->poses[static_cast<size_t>(f * 66 + 16 * 3 + 2)] = 0.02f * static_cast<float>(f + i);  // the left shoulder turns
+        m->trans[static_cast<size_t>(f * 3)] = 0.03f * static_cast<float>(f);                    // and the body walks
+      }
+    }
+    triplets.push_back(std::move(t));
+  }
+  ASSERT_TRUE(WriteTriplets(dir + "/motionfix/triplets-00000.npz", triplets).ok());
+  EditDataOptions options;
+  options.filter = "none";
+  const EditDataset data(options, {dir});
+  const auto [mean, stddev] = data.ComputeStats();
+  // Local rotation of joint j (1..21): columns 15 + 6 (j - 1) ... ; the right knee (5) never turns.
+  const int64_t knee = 15 + 6 * (5 - 1), shoulder = 15 + 6 * (16 - 1);
+  EXPECT_FLOAT_EQ(stddev[knee].item<float>(), 1.0f);
+  EXPECT_FLOAT_EQ(stddev[knee + 4].item<float>(), 1.0f);
+  // A turn about z moves four of the six 6D entries (cos and sin terms); they get their own spread.
+  int moving = 0;
+  for (int k = 0; k < 6; ++k) {
+    const double sd = stddev[shoulder + k].item<float>();
+    if (sd > 1e-3 && sd < 0.5) ++moving;
+  }
+  EXPECT_EQ(moving, 4);
 }
 
 TEST(Editor, PartColumnsPartitionTheFeature) {
