@@ -1,5 +1,6 @@
 // `motionpipe run | coordinator | worker | submit | status | wait | cancel | plugins | keys`.
 #include <google/protobuf/util/json_util.h>
+#include <sys/prctl.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -60,10 +61,15 @@ Result<wire::ControlReply> StatusOf(const std::string& endpoint, int64_t job) {
   return Control(endpoint, request);
 }
 
-// Spawns `motionpipe worker ...` with this same binary.
+// Spawns `motionpipe worker ...` with this same binary. The worker dies with `run` (which holds the
+// coordinator): a SIGKILLed `run` left its workers reconnecting for ever (issue 17). Called from the
+// main thread, whose exit is the process's (PR_SET_PDEATHSIG fires when the forking thread ends).
 pid_t SpawnWorker(const std::vector<std::string>& args) {
+  const pid_t parent = ::getpid();
   const pid_t pid = ::fork();
   if (pid != 0) return pid;
+  ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (::getppid() != parent) std::_Exit(1);  // `run` died before prctl took effect
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);

@@ -18,20 +18,32 @@ namespace {
 
 using Json = nlohmann::ordered_json;
 
+// A pipeline document expands to at most this many nodes: YAML aliases share nodes, and a 600-byte
+// "billion laughs" file of nested aliases expands to billions of them in JSON (issue 17).
+constexpr int64_t kMaxDocumentNodes = 200000;
+
+struct ExpansionLimit : std::length_error {
+  ExpansionLimit()
+      : std::length_error("the document expands to more than " + std::to_string(kMaxDocumentNodes) +
+                          " values (nested aliases, e.g. a \"billion laughs\" file?)") {}
+};
+
 // YAML -> JSON with scalar types inferred as YAML 1.2's core schema does; quoted scalars stay strings.
-Json ToJson(const YAML::Node& node) {
+// Counts the values made in *budget and throws ExpansionLimit past kMaxDocumentNodes.
+Json ToJson(const YAML::Node& node, int64_t* budget) {
+  if (++*budget > kMaxDocumentNodes) throw ExpansionLimit();
   switch (node.Type()) {
     case YAML::NodeType::Null:
     case YAML::NodeType::Undefined:
       return nullptr;
     case YAML::NodeType::Sequence: {
       Json out = Json::array();
-      for (const auto& item : node) out.push_back(ToJson(item));
+      for (const auto& item : node) out.push_back(ToJson(item, budget));
       return out;
     }
     case YAML::NodeType::Map: {
       Json out = Json::object();
-      for (const auto& item : node) out[item.first.as<std::string>()] = ToJson(item.second);
+      for (const auto& item : node) out[item.first.as<std::string>()] = ToJson(item.second, budget);
       return out;
     }
     case YAML::NodeType::Scalar: {
@@ -67,9 +79,12 @@ Status ApplyOverride(Json* doc, const std::string& override_text) {
   const std::string key = override_text.substr(0, eq);
   Json value;
   try {
-    value = ToJson(YAML::Load(override_text.substr(eq + 1)));
+    int64_t budget = 0;
+    value = ToJson(YAML::Load(override_text.substr(eq + 1)), &budget);
   } catch (const YAML::Exception& error) {
     return InvalidArgument("override '" + override_text + "': value is not YAML: " + error.what());
+  } catch (const ExpansionLimit& error) {
+    return InvalidArgument("override '" + key + "': " + error.what());
   }
   Json* node = doc;
   size_t start = 0;
@@ -444,10 +459,13 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
                                    const std::string& origin, const KindRegistry& kinds) {
   Json doc;
   try {
-    doc = ToJson(YAML::Load(yaml_text));
+    int64_t budget = 0;
+    doc = ToJson(YAML::Load(yaml_text), &budget);
   } catch (const YAML::Exception& error) {
     return InvalidArgument(origin + ":" + std::to_string(error.mark.line + 1) + ":" + std::to_string(error.mark.column + 1) +
                            ": malformed YAML: " + error.msg);
+  } catch (const ExpansionLimit& error) {
+    return InvalidArgument(origin + ": " + error.what());
   }
   if (!doc.is_object()) return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
   std::vector<std::string> errors;
@@ -622,6 +640,20 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
       }
       errors.push_back("stages: the inputs form a cycle among " + cycle);
     }
+  }
+  // A job's tasks live in the coordinator's memory and journal: `shards: 1000000000` (or clips
+  // counted in billions) must be an error here, not an allocation that kills the coordinator.
+  int64_t tasks = 0;
+  std::string largest;
+  int64_t largest_tasks = -1;
+  for (const StageSpec& stage : spec.stages) {
+    const int64_t n = static_cast<int64_t>(stage.shards) + (stage.reduce ? 1 : 0);
+    tasks += n;
+    if (n > largest_tasks) largest_tasks = n, largest = stage.name;
+  }
+  if (tasks > kMaxJobTasks) {
+    errors.push_back("the pipeline plans " + std::to_string(tasks) + " tasks (stage " + largest + ": " + std::to_string(largest_tasks) +
+                     "); a job holds at most " + std::to_string(kMaxJobTasks));
   }
   if (!errors.empty()) {
     std::string message = origin + ": invalid pipeline:";

@@ -28,6 +28,9 @@
 
 namespace motionpipe::coordinator {
 
+// The most tasks one job may plan (the dispatch benchmark runs 200,000 no-op tasks).
+inline constexpr int64_t kMaxJobTasks = 1000000;
+
 struct StageSpec {
   std::string name;
   std::string kind;

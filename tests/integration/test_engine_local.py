@@ -67,6 +67,36 @@ class LocalRun(EngineTest):
         self.assertIn("resuming job 1", result.stdout)
         self.assertEqual(len(output_files(self.path("out", "local-1"), "write")), 300)
 
+    def test_a_killed_run_takes_its_workers_with_it(self):
+        # Issue 17: SIGKILL of `run` (which holds the coordinator) left its workers reconnecting for
+        # more than 10 minutes.
+        pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 50}"))
+        run = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        children = []
+        deadline = time.time() + 30
+        while time.time() < deadline and len(children) < 2:
+            with open(f"/proc/{run.pid}/task/{run.pid}/children") as f:
+                children = [int(p) for p in f.read().split()]
+            time.sleep(0.05)
+        self.assertEqual(len(children), 2, "run did not start 2 workers")
+        run.kill()
+        run.wait(timeout=10)
+
+        def alive(pid):
+            try:
+                with open(f"/proc/{pid}/stat") as f:
+                    return f.read().split()[2] != "Z"
+            except FileNotFoundError:
+                return False
+
+        deadline = time.time() + 10
+        while time.time() < deadline and any(alive(p) for p in children):
+            time.sleep(0.05)
+        left = [p for p in children if alive(p)]
+        for p in left:
+            os.kill(p, signal.SIGKILL)
+        self.assertEqual(left, [], "workers outlived their run")
+
 
 if __name__ == "__main__":
     unittest.main()

@@ -207,6 +207,31 @@ stages:
   EXPECT_NE(cron.status().message().find("schedule: cron"), std::string::npos);
 }
 
+// Issue 17: a 600-byte alias bomb took 2.4 GB and killed a coordinator through `submit`, and so did
+// a valid pipeline with `shards: 1000000000`. Both are errors naming the file.
+TEST(Pipeline, AliasBombsAndBillionsOfTasksAreRejected) {
+  std::string bomb = "name: bomb\nstages: {a: {kind: noop}}\nx0: &x0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n";
+  for (int k = 1; k <= 9; ++k) {
+    const std::string prev = "*x" + std::to_string(k - 1);
+    bomb += "x" + std::to_string(k) + ": &x" + std::to_string(k) + " [" + prev;
+    for (int r = 1; r < 10; ++r) bomb += ", " + prev;
+    bomb += "]\n";
+  }
+  auto spec = ParsePipeline(bomb, {}, "bomb.yaml", Kinds());
+  ASSERT_FALSE(spec.ok());
+  EXPECT_NE(spec.status().message().find("bomb.yaml: the document expands to more than"), std::string::npos) << spec.status().message();
+  auto override_bomb = ParsePipeline("name: o\nstages: {a: {kind: noop}}\n", {"vars.x=" + bomb.substr(bomb.find("x0:"))}, "o.yaml", Kinds());
+  EXPECT_FALSE(override_bomb.ok());
+
+  auto shards = ParsePipeline("name: s\nstages: {a: {kind: noop, shards: 1000000000}}\n", {}, "s.yaml", Kinds());
+  ASSERT_FALSE(shards.ok());
+  EXPECT_NE(shards.status().message().find("s.yaml: the pipeline plans 1000000000 tasks (stage a: 1000000000); a job holds at most 1000000"),
+            std::string::npos)
+      << shards.status().message();
+  // Many legitimate tasks still plan.
+  EXPECT_TRUE(ParsePipeline("name: s\nstages: {a: {kind: noop, shards: 200000}}\n", {}, "s.yaml", Kinds()).ok());
+}
+
 TEST(Pipeline, Durations) {
   double s = 0;
   EXPECT_TRUE(ParseDuration("90", &s));

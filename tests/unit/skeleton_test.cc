@@ -130,6 +130,25 @@ TEST(Motion, RatesThatAgreeToRoundingKeepEveryFrame) {
   EXPECT_EQ(Resample(m, 30).num_frames(), 63);  // frames 0, 4, ..., 248
 }
 
+// Issue 17: `import-bvh --fps 1e9` aborted with std::bad_alloc; `--fps 1e5` took 2.4 GB.
+TEST(Motion, AnAbsurdResamplingRateIsAnErrorNamingTheFile) {
+  const Motion motion = testing::SmoothMotion(100, 3, 120);
+  EXPECT_TRUE(CheckResample(motion, 30, "a.bvh").ok());
+  EXPECT_TRUE(CheckResample(motion, 0, "a.bvh").ok());  // 0 keeps the rate
+  EXPECT_TRUE(CheckResample(motion, kMaxFrameRate, "a.bvh").ok());
+  for (double fps : {1e9, 1e5, 1001.0, std::nan("")}) {
+    const Status s = CheckResample(motion, fps, "a.bvh");
+    ASSERT_FALSE(s.ok()) << fps;
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(s.message().find("a.bvh: a frame rate of"), std::string::npos) << s.message();
+  }
+  // A legal rate that would still make more frames than a motion can sensibly have.
+  Motion slow = testing::SmoothMotion(2000, 3, 0.5);
+  const Status s = CheckResample(slow, 1000, "slow.npz");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("slow.npz: resampling 2000 frames"), std::string::npos) << s.message();
+}
+
 TEST(Motion, ResampleInterpolateIsSmoothAndExactAtSamples) {
   const Motion motion = testing::SmoothMotion(61, 5, 30);
   const Motion up = Resample(motion, 60, ResampleMethod::kInterpolate);

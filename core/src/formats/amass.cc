@@ -36,6 +36,7 @@ Result<Clip> AmassClipFromNpz(const Npz& npz, const std::string& origin) {
 Result<Clip> ReadAmassNpz(const std::string& path, double fps) {
   MP_ASSIGN_OR_RETURN(const Npz npz, ReadNpz(path));
   MP_ASSIGN_OR_RETURN(Clip clip, AmassClipFromNpz(npz, path));
+  MP_RETURN_IF_ERROR(CheckResample(clip.motion, fps, path));
   if (fps > 0) clip.motion = Resample(clip.motion, fps);
   return clip;
 }

@@ -464,6 +464,7 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
     }
     motion.SetTranslation(frame, up * (root_scale * source_pos[static_cast<size_t>(source_of[0])]));
   }
+  MP_RETURN_IF_ERROR(CheckResample(motion, options.fps, origin));
   if (options.fps > 0) motion = Resample(motion, options.fps);
   if (options.place_on_floor) {
     const std::vector<float> joints = ComputeJoints(skeleton, motion);

@@ -210,6 +210,7 @@ Result<std::vector<Clip>> LoadMotionFile(const std::string& path, double fps) {
       if (std::abs(clip.motion.fps - fps) < 1e-9) continue;
       // Output frame f shows source frame floor(f * step): source range [s, e) becomes [ceil(s/step), ceil(e/step)).
       const double step = clip.motion.fps / fps;
+      MP_RETURN_IF_ERROR(CheckResample(clip.motion, fps, path + ": clip " + clip.id));
       clip.motion = Resample(clip.motion, fps);
       clip.joints.clear();
       const auto frames = static_cast<int32_t>(clip.motion.num_frames());

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace motionpipe {
 
@@ -111,6 +112,31 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end) {
                    motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(end) * pose_stride));
   out.trans.assign(motion.trans.begin() + begin * 3, motion.trans.begin() + end * 3);
   return out;
+}
+
+namespace {
+
+std::string Rate(double fps) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%g", fps);
+  return text;
+}
+
+}  // namespace
+
+Status CheckResample(const Motion& motion, double target_fps, const std::string& origin) {
+  if (std::isnan(target_fps) || target_fps > kMaxFrameRate) {
+    return InvalidArgument(origin + ": a frame rate of " + Rate(target_fps) + " fps is out of range (at most " +
+                           std::to_string(static_cast<int>(kMaxFrameRate)) + "; 0 keeps the file's)");
+  }
+  if (target_fps <= 0 || motion.num_frames() == 0 || !(motion.fps > 0)) return Status::Ok();
+  const double frames = static_cast<double>(motion.num_frames() - 1) * target_fps / motion.fps + 1;
+  if (frames > static_cast<double>(kMaxResampledFrames)) {
+    return InvalidArgument(origin + ": resampling " + std::to_string(motion.num_frames()) + " frames from " + Rate(motion.fps) +
+                           " to " + Rate(target_fps) + " fps would make " + std::to_string(static_cast<int64_t>(frames)) +
+                           " frames (at most " + std::to_string(kMaxResampledFrames) + ")");
+  }
+  return Status::Ok();
 }
 
 Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) {

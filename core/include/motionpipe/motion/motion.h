@@ -49,4 +49,13 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end);
 enum class ResampleMethod { kByIndex, kInterpolate };
 Motion Resample(const Motion& motion, double target_fps, ResampleMethod method = ResampleMethod::kByIndex);
 
+// Bounds on a resampling request, so that a mistyped rate (--fps 1e9) is an error, not an
+// allocation of gigabytes: at most 1,000 fps (mocap systems record up to a few hundred) and at most
+// a million output frames (9 hours at 30 fps).
+inline constexpr double kMaxFrameRate = 1000;
+inline constexpr int64_t kMaxResampledFrames = 1000000;
+// OK when Resample(motion, target_fps) stays within those bounds (target_fps <= 0 keeps the rate);
+// else InvalidArgument naming `origin`, the rate and the frames it would make.
+Status CheckResample(const Motion& motion, double target_fps, const std::string& origin);
+
 }  // namespace motionpipe
