@@ -4,8 +4,9 @@
 
 namespace motionpipe::mdt {
 
-CosineSchedule::CosineSchedule(int64_t steps) : steps_(steps) {
+CosineSchedule::CosineSchedule(int64_t steps, double snr_shift) : steps_(steps) {
   if (steps < 2) throw std::invalid_argument("diffusion.steps must be at least 2");
+  if (!(snr_shift >= 1) || snr_shift > 1e3) throw std::invalid_argument("diffusion.snr_shift must be in [1, 1000]");
   constexpr double s = 0.008, half_pi = 1.57079632679489661923;
   const auto f = [&](double t) {
     const double c = std::cos((t / static_cast<double>(steps) + s) / (1 + s) * half_pi);
@@ -14,14 +15,23 @@ CosineSchedule::CosineSchedule(int64_t steps) : steps_(steps) {
   double product = 1;
   for (int64_t t = 0; t < steps; ++t) {
     const double beta = std::min(1 - f(static_cast<double>(t + 1)) / f(static_cast<double>(t)), 0.999);
-    betas_.push_back(beta);
-    const double previous = product;
     product *= 1 - beta;
     alpha_bar_.push_back(product);
+  }
+  if (snr_shift != 1) {
+    const double shift = 2 * std::log(snr_shift);
+    for (double& abar : alpha_bar_) abar = 1 / (1 + std::exp(-(std::log(abar / (1 - abar)) - shift)));
+  }
+  double previous = 1;
+  for (int64_t t = 0; t < steps; ++t) {
+    const double abar = alpha_bar_[static_cast<size_t>(t)];
+    const double beta = 1 - abar / previous;
+    betas_.push_back(beta);
     // q(x_{t-1} | x_t, x0): variance beta (1 - abar_{t-1}) / (1 - abar_t), mean coefficients.
-    posterior_variance_.push_back(beta * (1 - previous) / (1 - product));
-    coef_x0_.push_back(beta * std::sqrt(previous) / (1 - product));
-    coef_xt_.push_back((1 - previous) * std::sqrt(1 - beta) / (1 - product));
+    posterior_variance_.push_back(beta * (1 - previous) / (1 - abar));
+    coef_x0_.push_back(beta * std::sqrt(previous) / (1 - abar));
+    coef_xt_.push_back((1 - previous) * std::sqrt(1 - beta) / (1 - abar));
+    previous = abar;
   }
 }
 
@@ -30,6 +40,15 @@ torch::Tensor CosineSchedule::QSample(const torch::Tensor& x0, const torch::Tens
   const auto a = abar.sqrt().view({1, -1, 1});
   const auto b = (1 - abar).sqrt().view({1, -1, 1});
   return a * x0 + b * noise;
+}
+
+std::pair<torch::Tensor, torch::Tensor> CosineSchedule::Preconditioning(const torch::Tensor& t, double sigma_data) const {
+  const auto abar = torch::tensor(alpha_bar_, torch::kFloat64).index_select(0, t.to(torch::kInt64));  // [N]
+  const double sd2 = sigma_data * sigma_data;
+  const auto denominator = 1 - abar + sd2 * abar;
+  const auto skip = sd2 * abar.sqrt() / denominator;
+  const auto out = sigma_data * (1 - abar).sqrt() / denominator.sqrt();
+  return {skip.to(torch::kFloat32).view({1, -1, 1}), out.to(torch::kFloat32).view({1, -1, 1})};
 }
 
 torch::Tensor CosineSchedule::PosteriorMean(const torch::Tensor& x0, const torch::Tensor& xt, int64_t t) const {

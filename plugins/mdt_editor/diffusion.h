@@ -14,7 +14,11 @@ class CosineSchedule {
  public:
   // alpha_bar(t) = f(t) / f(0), f(t) = cos^2(((t / T) + s) / (1 + s) * pi / 2), s = 0.008;
   // beta_t = min(1 - alpha_bar(t + 1) / alpha_bar(t), 0.999).
-  explicit CosineSchedule(int64_t steps = 300);
+  // snr_shift k > 1 shifts the schedule towards noise, as Hoogeboom et al. 2023 ("simple diffusion",
+  // eq. 4) do for redundant high-resolution data: logSNR'(t) = logSNR(t) - 2 log k, i.e.
+  // alpha_bar'(t) = sigmoid(logit(alpha_bar(t)) - 2 log k); betas follow from the ratios. k = 1 is
+  // the reference schedule.
+  explicit CosineSchedule(int64_t steps = 300, double snr_shift = 1);
   int64_t steps() const { return steps_; }
   const std::vector<double>& betas() const { return betas_; }
   const std::vector<double>& alpha_bar() const { return alpha_bar_; }  // after step t: prod_{k<=t} (1 - beta_k)
@@ -25,6 +29,13 @@ class CosineSchedule {
   double PosteriorVariance(int64_t t) const { return posterior_variance_[static_cast<size_t>(t)]; }
   // The DDIM (eta = 0) update from step t to step t_prev (< t; -1 = the end) given the x0 prediction.
   torch::Tensor DdimStep(const torch::Tensor& x0, const torch::Tensor& xt, int64_t t, int64_t t_prev) const;
+  // Karras et al. 2022 (EDM), eq. 7 and table 1, for this variance-preserving schedule: with
+  // x~ = x_t / sqrt(abar) = x0 + sigma eps, sigma^2 = (1 - abar) / abar, the x0 estimate is
+  // D = c_skip x~ + c_out F, c_skip = sd^2 / (sigma^2 + sd^2), c_out = sigma sd / sqrt(sigma^2 + sd^2).
+  // Returns {c_skip / sqrt(abar), c_out} per example as [1, N, 1], the first to multiply x_t itself:
+  // sd^2 sqrt(abar) / (1 - abar + sd^2 abar) and sd sqrt(1 - abar) / sqrt(1 - abar + sd^2 abar),
+  // finite at every step (abar -> 0 at t = T - 1).
+  std::pair<torch::Tensor, torch::Tensor> Preconditioning(const torch::Tensor& t, double sigma_data) const;
 
  private:
   int64_t steps_;

@@ -50,9 +50,17 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.adaln_text = j.value("adaln_text", o.adaln_text);
   const nlohmann::json d = j.value("diffusion", nlohmann::json::object());
   o.diffusion_steps = d.value("steps", o.diffusion_steps);
+  o.snr_shift = d.value("snr_shift", o.snr_shift);
+  o.velocity_weight = j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
+  if (!(o.velocity_weight >= 0)) throw std::invalid_argument("loss.velocity must be >= 0");
+  if (!(o.snr_shift >= 1) || o.snr_shift > 1e3) throw std::invalid_argument("diffusion.snr_shift must be in [1, 1000]");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
+  o.preconditioning = d.value("preconditioning", o.preconditioning);
+  if (o.preconditioning != "x0" && o.preconditioning != "edm") throw std::invalid_argument("diffusion.preconditioning must be x0 or edm");
+  o.sigma_data = d.value("sigma_data", o.sigma_data);
+  if (!(o.sigma_data > 0)) throw std::invalid_argument("diffusion.sigma_data must be positive");
   o.guidance_motion = d.value("guidance_motion", o.guidance_motion);
   o.guidance_text = d.value("guidance_text", o.variant == "mdm" ? 2.5 : o.guidance_text);
   if (o.drop_text + o.drop_source + o.drop_both > 1) throw std::invalid_argument("diffusion: the condition dropout probabilities sum above 1");
@@ -71,8 +79,10 @@ nlohmann::json EditorOptions::ToJson() const {
           {"aux", {{"mode", aux}, {"classes", classes}, {"weight", aux_weight}, {"class_weights", class_weights}}},
           {"features", {{"text", enhanced_text ? "enhanced" : "raw"}, {"motion", enhanced_motion ? "enhanced" : "raw"}}},
           {"adaln_text", adaln_text},
+          {"loss", {{"velocity", velocity_weight}}},
           {"diffusion", {{"steps", diffusion_steps}, {"drop_text", drop_text}, {"drop_source", drop_source}, {"drop_both", drop_both},
-                         {"guidance_motion", guidance_motion}, {"guidance_text", guidance_text}}}};
+                         {"guidance_motion", guidance_motion}, {"guidance_text", guidance_text},
+                         {"preconditioning", preconditioning}, {"sigma_data", sigma_data}, {"snr_shift", snr_shift}}}};
 }
 
 DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
@@ -93,7 +103,7 @@ torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor&
   return h + m[5] * mlp;
 }
 
-EditorNetImpl::EditorNetImpl(const EditorOptions& o) : o_(o) {
+EditorNetImpl::EditorNetImpl(const EditorOptions& o) : o_(o), schedule_(o.diffusion_steps, o.snr_shift) {
   const nn::TransformerOptions layer{o.dim, o.heads, o.ff, o.layers, o.dropout};
   text_encoder_ = register_module("text_encoder", nn::TextEncoder(o.text));
   text_proj_ = register_module("text_proj", torch::nn::Linear(o.text.dim, o.dim));
@@ -153,7 +163,12 @@ torch::Tensor EditorNetImpl::Place(const torch::Tensor& x, Segment segment) cons
 }
 
 Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c) {
-  return o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c) : ForwardEncoder(xt, t, target_padding, c);
+  Prediction p = o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c) : ForwardEncoder(xt, t, target_padding, c);
+  if (o_.preconditioning == "edm") {
+    const auto [skip, out] = schedule_.Preconditioning(t, o_.sigma_data);
+    p.x0 = skip * xt + out * p.x0;
+  }
+  return p;
 }
 
 namespace {
@@ -231,6 +246,14 @@ torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Ten
     groups.push_back(squared.narrow(2, g.begin, g.end - g.begin).sum(dims) / (frames * (g.end - g.begin)));  // [N]
   }
   return torch::stack(groups, 0).mean(0).mean();
+}
+
+torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding) {
+  const int64_t frames = prediction.size(0);
+  if (frames < 2) return torch::zeros({}, prediction.options());
+  const auto difference = [&](const torch::Tensor& x) { return x.narrow(0, 1, frames - 1) - x.narrow(0, 0, frames - 1); };
+  const auto both = padding.narrow(1, 1, frames - 1).logical_or(padding.narrow(1, 0, frames - 1));
+  return GroupedMaskedMse(difference(prediction), difference(target), both);
 }
 
 std::map<std::string, torch::Tensor> SimilarityLoss(const torch::Tensor& prediction, const torch::Tensor& classes, const torch::Tensor& similarity,

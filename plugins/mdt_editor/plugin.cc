@@ -27,7 +27,7 @@ namespace {
 class EditorModel : public plugin::Model {
  public:
   explicit EditorModel(const nlohmann::json& config)
-      : config_(config), options_(EditorOptions::FromJson(config)), schedule_(options_.diffusion_steps) {
+      : config_(config), options_(EditorOptions::FromJson(config)), schedule_(options_.diffusion_steps, options_.snr_shift) {
     net_ = EditorNet(options_);
     mean_ = net_->register_buffer("feature_mean", torch::zeros({kEditFeatureDim}));
     std_ = net_->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
@@ -91,6 +91,10 @@ class EditorModel : public plugin::Model {
     std::map<std::string, torch::Tensor> out;
     out["x0"] = GroupedMaskedMse(p.x0, target, batch.tensors.at("target_padding"));
     auto loss = out["x0"];
+    if (options_.velocity_weight > 0) {
+      out["velocity"] = VelocityMse(p.x0, target, batch.tensors.at("target_padding"));
+      loss = loss + options_.velocity_weight * out["velocity"];
+    }
     if (p.similarity.defined()) {
       const auto aux = SimilarityLoss(p.similarity, batch.tensors.at("classes"), batch.tensors.at("similarity"), c.source_padding,
                                       c.drop_source, options_);

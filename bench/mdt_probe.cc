@@ -1,0 +1,142 @@
+// Where a trained editor's error comes from (issue 15): a checkpoint's x0 error by diffusion step,
+// beside what copying the source and predicting the mean would score, and its sampled edits' error
+// against target and source in the normalised feature space, with their roughness.
+//   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
+//             [--guidance g_m,g_t]
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "../plugins/common/threads.h"
+#include "../plugins/mdt_editor/edit_data.h"
+#include "../plugins/mdt_editor/editor.h"
+#include "motionpipe/base/file.h"
+
+using namespace motionpipe;
+using namespace motionpipe::mdt;
+
+namespace {
+
+// Masked mean squared error per example [N] over frames present in both (lengths may differ).
+torch::Tensor Mse(const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& padding) {
+  const int64_t t = std::min(a.size(0), b.size(0));
+  const auto keep = padding.narrow(1, 0, t).logical_not().t().unsqueeze(2).to(torch::kFloat32);
+  return ((a.narrow(0, 0, t) - b.narrow(0, 0, t)).pow(2) * keep).sum(std::vector<int64_t>{0, 2}) / (keep.sum(std::vector<int64_t>{0, 2}) * a.size(2)).clamp_min(1);
+}
+
+// Mean squared second difference over time per example [N].
+torch::Tensor Roughness(const torch::Tensor& x, const torch::Tensor& padding) {
+  const auto d2 = x.narrow(0, 2, x.size(0) - 2) - 2 * x.narrow(0, 1, x.size(0) - 2) + x.narrow(0, 0, x.size(0) - 2);
+  const auto keep = padding.narrow(1, 2, x.size(0) - 2).logical_not().t().unsqueeze(2).to(torch::kFloat32);
+  return (d2.pow(2) * keep).sum(std::vector<int64_t>{0, 2}) / (keep.sum(std::vector<int64_t>{0, 2}) * x.size(2)).clamp_min(1);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> dirs;
+  std::string split = "test";
+  int64_t n = 64, ddim = 20;
+  double g_m = -1, g_t = -1;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--split" && i + 1 < argc) split = argv[++i];
+    else if (a == "--n" && i + 1 < argc) n = std::stoll(argv[++i]);
+    else if (a == "--ddim" && i + 1 < argc) ddim = std::stoll(argv[++i]);
+    else if (a == "--guidance" && i + 1 < argc) std::sscanf(argv[++i], "%lf,%lf", &g_m, &g_t);
+    else dirs.push_back(a);
+  }
+  if (dirs.size() < 2) {
+    std::fprintf(stderr, "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] [--guidance gm,gt]\n");
+    return 2;
+  }
+  nn::SetTorchThreads(1);
+  torch::manual_seed(0);
+  const std::string checkpoint = dirs[0];
+  auto text = ReadFile(checkpoint + "/model.json");
+  if (!text.ok()) return std::fprintf(stderr, "%s\n", text.status().message().c_str()), 1;
+  const auto options = EditorOptions::FromJson(nlohmann::json::parse(*text).at("config"));
+  EditorNet net(options);
+  auto mean = net->register_buffer("feature_mean", torch::zeros({kEditFeatureDim}));
+  auto stddev = net->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
+  net->text_encoder()->LoadExtras(checkpoint);
+  torch::serialize::InputArchive archive;
+  archive.load_from(checkpoint + "/model.pt");
+  net->load(archive);
+  net->eval();
+  if (g_m < 0) g_m = options.guidance_motion, g_t = options.guidance_text;
+
+  EditDataOptions data;
+  data.split = split;
+  data.max_frames = 120;
+  EditDataset dataset(data, std::vector<std::string>(dirs.begin() + 1, dirs.end()));
+  dataset.SetStats(mean, stddev);
+  n = std::min<int64_t>(n, dataset.size());
+  std::vector<int64_t> indices;
+  for (int64_t i = 0; i < n; ++i) indices.push_back(i * dataset.size() / n);
+  const plugin::Batch batch = dataset.Get(indices, 0);
+  const auto& target = batch.tensors.at("target");
+  const auto& source = batch.tensors.at("source");
+  const auto& padding = batch.tensors.at("target_padding");
+  CosineSchedule schedule(options.diffusion_steps, options.snr_shift);
+  torch::NoGradGuard no_grad;
+  Condition c;
+  c.texts = batch.texts;
+  c.source = source;
+  c.source_padding = batch.tensors.at("source_padding");
+  const auto none = torch::zeros({n}, torch::kBool);
+  c.drop_text = none;
+  c.drop_source = none;
+
+  std::printf("%s split, %lld triplets, %lld diffusion steps; normalised features (data variance about 0.25)\n", split.c_str(),
+              static_cast<long long>(n), static_cast<long long>(options.diffusion_steps));
+  std::printf("copy source: x0 MSE %.4f   mean (zeros): %.4f\n", Mse(source, target, padding).mean().item<double>(),
+              Mse(torch::zeros_like(target), target, padding).mean().item<double>());
+  std::printf("%6s %10s %10s %10s %10s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)");
+  for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
+    if (t >= options.diffusion_steps) continue;
+    const auto steps = torch::full({n}, t, torch::kInt64);
+    const auto noise = torch::randn(target.sizes());
+    const auto xt = schedule.QSample(target, steps, noise);
+    const double model = Mse(net->forward(xt, steps, padding, c).x0, target, padding).mean().item<double>();
+    Condition no_text = c, no_source = c;
+    no_text.drop_text = torch::ones({n}, torch::kBool);
+    no_source.drop_source = torch::ones({n}, torch::kBool);
+    const double without_text = Mse(net->forward(xt, steps, padding, no_text).x0, target, padding).mean().item<double>();
+    const double without_source = Mse(net->forward(xt, steps, padding, no_source).x0, target, padding).mean().item<double>();
+    const double scaled = Mse(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)]), target, padding).mean().item<double>();
+    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model, without_text, without_source, scaled);
+  }
+
+  // Sampled edits (DDIM, three-way guidance).
+  Condition three;
+  for (int b = 0; b < 3; ++b) three.texts.insert(three.texts.end(), c.texts.begin(), c.texts.end());
+  three.source = source.repeat({1, 3, 1});
+  three.source_padding = c.source_padding.repeat({3, 1});
+  const auto flags = [&](std::vector<int> v) {
+    std::vector<int64_t> out;
+    for (int b = 0; b < 3; ++b) out.insert(out.end(), static_cast<size_t>(n), v[static_cast<size_t>(b)]);
+    return torch::tensor(out).to(torch::kBool);
+  };
+  three.drop_text = flags({1, 1, 0});
+  three.drop_source = flags({1, 0, 0});
+  const auto padding3 = padding.repeat({3, 1});
+  for (auto [gm, gt] : std::vector<std::pair<double, double>>{{1, 1}, {g_m, g_t}}) {
+    const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
+      const auto parts = net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, t, torch::kInt64), padding3, three).x0.chunk(3, 1);
+      return GuideThreeWay(parts[0], parts[1], parts[2], gm, gt);
+    };
+    auto generator = at::make_generator<at::CPUGeneratorImpl>(7);
+    const auto x = SampleDdim(schedule, target.sizes(), ddim, denoise, generator, nullptr);
+    std::printf("DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f target %.5f source %.5f\n",
+                static_cast<long long>(ddim), gm, gt, Mse(x, target, padding).mean().item<double>(), Mse(x, source, padding).mean().item<double>(),
+                Roughness(x, padding).mean().item<double>(), Roughness(target, padding).mean().item<double>(),
+                Roughness(source, batch.tensors.at("source_padding")).mean().item<double>());
+  }
+  return 0;
+}
