@@ -2,7 +2,7 @@
 // beside what copying the source and predicting the mean would score, and its sampled edits' error
 // against target and source in the normalised feature space, with their roughness.
 //   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
-//             [--guidance g_m,g_t]
+//             [--guidance g_m,g_t] [--no-sample]
 #include <torch/torch.h>
 
 #include <nlohmann/json.hpp>
@@ -16,6 +16,7 @@
 #include "../plugins/mdt_editor/edit_data.h"
 #include "../plugins/mdt_editor/editor.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/features/motionfix207.h"
 
 using namespace motionpipe;
 using namespace motionpipe::mdt;
@@ -42,17 +43,19 @@ int main(int argc, char** argv) {
   std::vector<std::string> dirs;
   std::string split = "test";
   int64_t n = 64, ddim = 20;
+  bool sample = true;
   double g_m = -1, g_t = -1;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--split" && i + 1 < argc) split = argv[++i];
     else if (a == "--n" && i + 1 < argc) n = std::stoll(argv[++i]);
     else if (a == "--ddim" && i + 1 < argc) ddim = std::stoll(argv[++i]);
+    else if (a == "--no-sample") sample = false;
     else if (a == "--guidance" && i + 1 < argc) std::sscanf(argv[++i], "%lf,%lf", &g_m, &g_t);
     else dirs.push_back(a);
   }
   if (dirs.size() < 2) {
-    std::fprintf(stderr, "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] [--guidance gm,gt]\n");
+    std::fprintf(stderr, "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] [--guidance gm,gt] [--no-sample]\n");
     return 2;
   }
   nn::SetTorchThreads(1);
@@ -97,6 +100,12 @@ int main(int argc, char** argv) {
               static_cast<long long>(n), static_cast<long long>(options.diffusion_steps));
   std::printf("copy source: x0 MSE %.4f   mean (zeros): %.4f\n", Mse(source, target, padding).mean().item<double>(),
               Mse(torch::zeros_like(target), target, padding).mean().item<double>());
+  // How far the source is from the target, per feature group (frame i against frame i).
+  for (const auto& g : MotionFixFeatureGroups()) {
+    const auto slice = [&](const torch::Tensor& x) { return x.narrow(2, g.begin, g.end - g.begin); };
+    std::printf("  copy source, %-22s MSE %.4f (mean: %.4f)\n", g.name, Mse(slice(source), slice(target), padding).mean().item<double>(),
+                Mse(torch::zeros_like(slice(target)), slice(target), padding).mean().item<double>());
+  }
   std::printf("%6s %10s %10s %10s %10s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)");
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
     if (t >= options.diffusion_steps) continue;
@@ -113,6 +122,7 @@ int main(int argc, char** argv) {
     std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model, without_text, without_source, scaled);
   }
 
+  if (!sample) return 0;
   // Sampled edits (DDIM, three-way guidance).
   Condition three;
   for (int b = 0; b < 3; ++b) three.texts.insert(three.texts.end(), c.texts.begin(), c.texts.end());
@@ -131,8 +141,19 @@ int main(int argc, char** argv) {
       const auto parts = net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, t, torch::kInt64), padding3, three).x0.chunk(3, 1);
       return GuideThreeWay(parts[0], parts[1], parts[2], gm, gt);
     };
+    // The x0 estimate along the trajectory: where does the sample leave the source?
+    const bool trace = gm == 1 && gt == 1;
+    if (trace) std::printf("DDIM-%lld trajectory, guidance 1/1: step t, x0 estimate -> target MSE, -> source MSE\n", static_cast<long long>(ddim));
+    const Denoise traced = [&](const torch::Tensor& xt, int64_t t) {
+      const auto x0 = denoise(xt, t);
+      if (trace) {
+        std::printf("  t %3lld: %.4f %.4f\n", static_cast<long long>(t), Mse(x0, target, padding).mean().item<double>(),
+                    Mse(x0, source, padding).mean().item<double>());
+      }
+      return x0;
+    };
     auto generator = at::make_generator<at::CPUGeneratorImpl>(7);
-    const auto x = SampleDdim(schedule, target.sizes(), ddim, denoise, generator, nullptr);
+    const auto x = SampleDdim(schedule, target.sizes(), ddim, traced, generator, nullptr);
     std::printf("DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f target %.5f source %.5f\n",
                 static_cast<long long>(ddim), gm, gt, Mse(x, target, padding).mean().item<double>(), Mse(x, source, padding).mean().item<double>(),
                 Roughness(x, padding).mean().item<double>(), Roughness(target, padding).mean().item<double>(),
