@@ -67,6 +67,15 @@ class LocalRun(EngineTest):
         self.assertIn("resuming job 1", result.stdout)
         self.assertEqual(len(output_files(self.path("out", "local-1"), "write")), 300)
 
+    def test_version_and_an_unknown_command(self):
+        result = subprocess.run([MOTIONPIPE, "--version"], capture_output=True, text=True, timeout=30)
+        self.assertEqual(result.returncode, 0)
+        self.assertRegex(result.stdout, r"^motionpipe \d+\.\d+\.\d+")
+        result = subprocess.run([MOTIONPIPE, "--log", "warn", "frobnicate"], capture_output=True, text=True, timeout=30)
+        self.assertEqual(result.returncode, 2)
+        self.assertIn("unknown command 'frobnicate'", result.stderr)
+        self.assertIn("run,", result.stderr)
+
     def test_a_killed_run_takes_its_workers_with_it(self):
         # Issue 17: SIGKILL of `run` (which holds the coordinator) left its workers reconnecting for
         # more than 10 minutes.
