@@ -14,8 +14,8 @@ class CosineSchedule {
  public:
   // alpha_bar(t) = f(t) / f(0), f(t) = cos^2(((t / T) + s) / (1 + s) * pi / 2), s = 0.008;
   // beta_t = min(1 - alpha_bar(t + 1) / alpha_bar(t), 0.999).
-  // snr_shift k > 1 shifts the schedule towards noise, as Hoogeboom et al. 2023 ("simple diffusion",
-  // eq. 4) do for redundant high-resolution data: logSNR'(t) = logSNR(t) - 2 log k, i.e.
+  // snr_shift k > 1 shifts the schedule towards noise, as Hoogeboom et al. 2023 ("simple diffusion")
+  // do for redundant high-resolution data: logSNR'(t) = logSNR(t) - 2 log k, i.e.
   // alpha_bar'(t) = sigmoid(logit(alpha_bar(t)) - 2 log k); betas follow from the ratios. k = 1 is
   // the reference schedule.
   explicit CosineSchedule(int64_t steps = 300, double snr_shift = 1);

@@ -53,7 +53,6 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.snr_shift = d.value("snr_shift", o.snr_shift);
   o.velocity_weight = j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
   if (!(o.velocity_weight >= 0)) throw std::invalid_argument("loss.velocity must be >= 0");
-  if (!(o.snr_shift >= 1) || o.snr_shift > 1e3) throw std::invalid_argument("diffusion.snr_shift must be in [1, 1000]");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);

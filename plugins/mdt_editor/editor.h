@@ -37,10 +37,10 @@ struct EditorOptions {
   bool enhanced_text = true, enhanced_motion = true;  // DiT inputs: condition-transformer outputs or raw projections
   bool adaln_text = true;              // the text token joins the timestep in adaLN (reference default: zeros)
   int64_t diffusion_steps = 300;
-  // MDM's velocity loss (Tevet et al. 2023, eq. 4's L_vel) on the normalised features' frame-to-
+  // MDM's velocity loss L_vel (Tevet et al. 2023) on the normalised features' frame-to-
   // frame differences, added with this weight to the x0 loss; 0 (the reference) leaves it out.
   double velocity_weight = 0;
-  double snr_shift = 1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule)
+  double snr_shift = 1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
   // How the network's output becomes the x0 estimate. "x0": the output is x0 (REFERENCE 3.2).
   // "edm": Karras et al.'s preconditioning, x0 = c_skip x~ + c_out F, so that near t = 0 the noisy
   // target passes through instead of being rebuilt from the width-d trunk (at d = 128 < 207 the
