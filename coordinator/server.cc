@@ -10,7 +10,9 @@
 #include <chrono>
 #include <csignal>
 #include <filesystem>
+#include <optional>
 
+#include "motionpipe/base/file.h"
 #include "motionpipe/base/log.h"
 #include "motionpipe/net/protocol.h"
 #include "motionpipe/net/security.h"
@@ -349,6 +351,18 @@ Status RunCoordinator(const CoordinatorOptions& options, std::atomic<bool>* stop
   std::error_code ec;
   const auto journal_dir = std::filesystem::path(options.journal).parent_path();
   if (!journal_dir.empty()) std::filesystem::create_directories(journal_dir, ec);
+  // One coordinator per journal: a second one would resume the first one's running jobs and hand
+  // their tasks to its own workers, two trainers writing one checkpoint directory.
+  std::optional<FileLock> lock;
+  if (options.journal != ":memory:") {
+    auto held = FileLock::Acquire(options.journal + ".lock");
+    if (!held.ok()) {
+      if (held.status().code() != StatusCode::kFailedPrecondition) return held.status();
+      return FailedPrecondition("the journal " + options.journal + " is in use by another coordinator: " + held.status().message() +
+                                "; wait for it to stop, or give this one its own journal (--journal)");
+    }
+    lock.emplace(std::move(*held));
+  }
   MP_ASSIGN_OR_RETURN(std::unique_ptr<Journal> journal, Journal::Open(options.journal));
   SystemClock clock;
   Scheduler scheduler(journal.get(), &clock, CoordinatorKinds(options.plugin_dirs),

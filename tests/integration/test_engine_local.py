@@ -67,6 +67,35 @@ class LocalRun(EngineTest):
         self.assertIn("resuming job 1", result.stdout)
         self.assertEqual(len(output_files(self.path("out", "local-1"), "write")), 300)
 
+    def test_a_second_run_on_a_journal_in_use_is_refused(self):
+        # Two runs in one output root share its journal. The second used to resume the first one's
+        # running job and give its tasks to its own workers: two trainers on one checkpoint.
+        pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 20}"))
+        other = self.write_pipeline("q.yaml", PIPELINE.replace("name: local", "name: other"))
+        first = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        write_dir = self.path("out", "local-1", "write")
+        deadline = time.time() + 60
+        while time.time() < deadline and (not os.path.isdir(write_dir) or len([n for n in os.listdir(write_dir) if n.startswith("task")]) < 5):
+            time.sleep(0.05)
+        journal = self.path("out", ".motionpipe", "journal.sqlite")
+        second = subprocess.run([MOTIONPIPE, "run", other, "-q", "--workers", "1"], capture_output=True, text=True, timeout=60)
+        self.assertEqual(second.returncode, 1, second.stdout + second.stderr)
+        self.assertIn(f"the journal {journal} is in use by another coordinator", second.stderr)
+        self.assertIn(f"(pid {first.pid})", second.stderr)
+        self.assertIn("--journal", second.stderr)
+        self.assertIsNone(first.poll(), "the first run stopped")
+        # With its own journal the second run goes ahead beside the first.
+        second = subprocess.run([MOTIONPIPE, "run", other, "-q", "--workers", "1", "--journal", self.path("other.sqlite")],
+                                capture_output=True, text=True, timeout=120)
+        self.assertEqual(second.returncode, 0, second.stdout + second.stderr)
+        out, _ = first.communicate(timeout=120)
+        self.assertEqual(first.returncode, 0, out)
+        self.assertEqual(len(output_files(self.path("out", "local-1"), "write")), 300)
+        # Once the first has stopped, the lock is free: a new run on the shared journal starts.
+        result = subprocess.run([MOTIONPIPE, "run", other, "-q", "--workers", "1", "stages.write.params.tasks=3"],
+                                capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+
     def test_version_and_an_unknown_command(self):
         result = subprocess.run([MOTIONPIPE, "--version"], capture_output=True, text=True, timeout=30)
         self.assertEqual(result.returncode, 0)

@@ -1,6 +1,7 @@
 #include "motionpipe/base/file.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 
@@ -27,6 +28,26 @@ TEST(File, AtomicWriteReplacesAndLeavesNoTemporaries) {
   EXPECT_EQ(entries, 1);
   EXPECT_EQ(ReadFile(dir + "/missing").status().code(), StatusCode::kNotFound);
   EXPECT_FALSE(WriteFileAtomic(dir + "/no/such/dir/file", "x").ok());
+}
+
+TEST(FileLock, OneHolderAtATimeNamedByPid) {
+  const std::string dir = ::testing::TempDir() + "/lock";
+  ASSERT_TRUE(MakeDirs(dir).ok());
+  const std::string path = dir + "/journal.sqlite.lock";
+  {
+    auto first = FileLock::Acquire(path);
+    ASSERT_TRUE(first.ok()) << first.status().message();
+    // flock belongs to the open file: a second open of the same file conflicts, even in this process.
+    const auto second = FileLock::Acquire(path);
+    ASSERT_FALSE(second.ok());
+    EXPECT_EQ(second.status().code(), StatusCode::kFailedPrecondition);
+    EXPECT_NE(second.status().message().find(path), std::string::npos) << second.status().message();
+    EXPECT_NE(second.status().message().find("(pid " + std::to_string(::getpid()) + ")"), std::string::npos) << second.status().message();
+    FileLock moved = std::move(*first);  // the lock moves with the object
+    EXPECT_FALSE(FileLock::Acquire(path).ok());
+  }
+  EXPECT_TRUE(FileLock::Acquire(path).ok());  // released with its holder
+  EXPECT_EQ(FileLock::Acquire(dir + "/no/such/dir/lock").status().code(), StatusCode::kIoError);
 }
 
 }  // namespace

@@ -31,6 +31,24 @@ class MappedFile {
   size_t size_ = 0;
 };
 
+// An exclusive lock on a file, held until destruction (LevelDB's LOCK file): flock(2) on `path`
+// (created when missing), with the holder's pid written into it. The kernel drops the lock when the
+// holder dies, so a crashed process never leaves it held. Move-only.
+class FileLock {
+ public:
+  // FailedPrecondition naming `path` and the holder's pid when another process holds it.
+  static Result<FileLock> Acquire(const std::string& path);
+  FileLock(FileLock&& other) noexcept;
+  FileLock& operator=(FileLock&& other) noexcept;
+  FileLock(const FileLock&) = delete;
+  FileLock& operator=(const FileLock&) = delete;
+  ~FileLock();
+
+ private:
+  FileLock() = default;
+  int fd_ = -1;
+};
+
 // Atomically replaces `path` with `bytes` (temporary name + fsync + rename). Creates no directories.
 // `sync` = false skips the fsync for bulk outputs (the rename still hides partial files).
 Status WriteFileAtomic(const std::string& path, std::string_view bytes, bool sync = true);
