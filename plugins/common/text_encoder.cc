@@ -341,4 +341,49 @@ void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, cons
   encoder->LoadExtras(state_dir);
 }
 
+std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& from, const std::vector<std::string>& input_dirs, bool freeze) {
+  namespace fs = std::filesystem;
+  std::string dir;
+  if (from == "input") {
+    for (const std::string& input : input_dirs) {
+      for (const std::string& candidate : {input, input + "/model"}) {
+        if (dir.empty() && fs::exists(candidate + "/model.json")) dir = candidate;
+      }
+    }
+    if (dir.empty()) throw std::invalid_argument("text_encoder_from: input, but no stage input holds a checkpoint (model/model.json)");
+  } else {
+    dir = fs::exists(from + "/model/model.json") ? from + "/model" : from;
+  }
+  auto text = ReadFile(dir + "/model.json");
+  if (!text.ok()) throw std::invalid_argument("text_encoder_from: " + text.status().message());
+  nlohmann::json theirs;
+  try {
+    theirs = nlohmann::json::parse(*text).at("config").at("model").at("text_encoder");
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument("text_encoder_from " + dir + "/model.json: no config.model.text_encoder (" + e.what() + ")");
+  }
+  TextEncoder pretrained(TextEncoderOptions::FromJson(theirs));
+  const nlohmann::json ours = encoder->options().ToJson();
+  if (pretrained->options().ToJson() != ours) {
+    throw std::invalid_argument("text_encoder_from " + dir + ": its text encoder is " + pretrained->options().ToJson().dump() + ", this model's is " +
+                                ours.dump() + " (use the same text_encoder settings)");
+  }
+  try {
+    torch::serialize::InputArchive archive, sub;
+    archive.load_from(dir + "/model.pt");
+    archive.read("text_encoder", sub);
+    pretrained->load(sub);
+  } catch (const c10::Error& e) {
+    throw std::invalid_argument("text_encoder_from " + dir + "/model.pt: no text encoder weights of these settings (" + e.what_without_backtrace() + ")");
+  }
+  torch::NoGradGuard no_grad;
+  auto source = pretrained->named_parameters();
+  for (auto& item : encoder->named_parameters()) item.value().copy_(source[item.key()]);
+  auto source_buffers = pretrained->named_buffers();
+  for (auto& item : encoder->named_buffers()) item.value().copy_(source_buffers[item.key()]);
+  encoder->LoadExtras(dir);
+  for (auto& item : encoder->named_parameters()) item.value().set_requires_grad(!freeze || item.key() == "separator");
+  return dir;
+}
+
 }  // namespace motionpipe::nn

@@ -92,6 +92,15 @@ TORCH_MODULE(TextEncoder);
 // rank has the same vocabulary. An empty state_dir fits locally.
 void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, const std::string& state_dir, int rank);
 
+// Copies the text encoder of a trained checkpoint (its tokenizer and weights) into `encoder`: the
+// role DistilBERT/CLIP play in the papers, taken here by a TMR trained contrastively on motions
+// (REFERENCE 5). `from` is a checkpoint directory (model.json with config.model.text_encoder,
+// model.pt, tokenizer.model), a stage directory holding one in model/, or "input": the first of
+// `input_dirs` that holds one. The checkpoint's text_encoder settings must equal `encoder`'s; an
+// error names the directory and both. When `freeze`, every weight but SINC-STE's separator (this
+// model's own) stops training. Returns the checkpoint directory used.
+std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& from, const std::vector<std::string>& input_dirs, bool freeze);
+
 // Sinusoidal positional encodings [length, 1, dim].
 torch::Tensor PositionalEncoding(int64_t length, int64_t dim);
 

@@ -67,6 +67,8 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   if (!t.contains("dim")) t["dim"] = std::min<int64_t>(o.dim, 256);
   if (!t.contains("dropout")) t["dropout"] = o.dropout;
   o.text = nn::TextEncoderOptions::FromJson(t);
+  o.text_encoder_from = j.value("text_encoder_from", o.text_encoder_from);
+  o.freeze_text_encoder = j.value("freeze_text_encoder", o.freeze_text_encoder);
   if (o.dim % o.heads != 0) throw std::invalid_argument("model.dim must be divisible by model.heads");
   return o;
 }
@@ -78,6 +80,8 @@ nlohmann::json EditorOptions::ToJson() const {
           {"aux", {{"mode", aux}, {"classes", classes}, {"weight", aux_weight}, {"class_weights", class_weights}}},
           {"features", {{"text", enhanced_text ? "enhanced" : "raw"}, {"motion", enhanced_motion ? "enhanced" : "raw"}}},
           {"adaln_text", adaln_text},
+          {"text_encoder_from", text_encoder_from},
+          {"freeze_text_encoder", freeze_text_encoder},
           {"loss", {{"velocity", velocity_weight}}},
           {"diffusion", {{"steps", diffusion_steps}, {"drop_text", drop_text}, {"drop_source", drop_source}, {"drop_both", drop_both},
                          {"guidance_motion", guidance_motion}, {"guidance_text", guidance_text},

@@ -53,6 +53,11 @@ struct EditorOptions {
   double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
   double guidance_motion = 2, guidance_text = 2;                  // g_m, g_t
   nn::TextEncoderOptions text;
+  // A checkpoint whose text encoder (tokenizer and weights) replaces this one's before training, as
+  // the paper starts from CLIP: a directory, or "input" (nn::LoadPretrainedTextEncoder); frozen
+  // unless freeze_text_encoder is false. Empty: the text encoder learns from the edit texts alone.
+  std::string text_encoder_from;
+  bool freeze_text_encoder = true;
   static EditorOptions FromJson(const nlohmann::json& j);
   nlohmann::json ToJson() const;
   bool uses_source() const { return variant != "mdm"; }

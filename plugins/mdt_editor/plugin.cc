@@ -44,6 +44,12 @@ class EditorModel : public plugin::Model {
     auto dataset = std::make_unique<EditDataset>(data, context.input_dirs);
     if (context.split == "train") {
       auto encoder = net_->text_encoder();
+      if (!options_.text_encoder_from.empty() && !encoder->fitted()) {
+        const std::string dir = nn::LoadPretrainedTextEncoder(encoder, options_.text_encoder_from, context.input_dirs, options_.freeze_text_encoder);
+        if (context.rank == 0) {
+          std::fprintf(stderr, "mdt_editor: text encoder from %s (%s)\n", dir.c_str(), options_.freeze_text_encoder ? "frozen" : "fine-tuned");
+        }
+      }
       if (!encoder->fitted()) nn::FitShared(encoder, dataset->AllTexts(), context.state_dir, context.rank);
       if (!stats_ready_) {
         auto [mean, stddev] = dataset->ComputeStats();

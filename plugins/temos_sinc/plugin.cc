@@ -114,39 +114,9 @@ class SincModel : public plugin::Model {
   // (REFERENCE 5), frozen unless freeze_text_encoder is false: the role DistilBERT/CLIP play in
   // the papers. `from` is a checkpoint directory, or "input" for the stage input that is one.
   void LoadPretrainedTextEncoder(const std::string& from, const plugin::DataContext& context) {
-    std::string dir;
-    if (from == "input") {
-      for (const std::string& input : context.input_dirs) {
-        for (const std::string& candidate : {input, input + "/model"}) {
-          if (dir.empty() && fs::exists(candidate + "/model.json")) dir = candidate;
-        }
-      }
-      if (dir.empty()) throw std::invalid_argument("text_encoder_from: input, but no stage input holds a checkpoint (model/model.json)");
-    } else {
-      dir = fs::exists(from + "/model/model.json") ? from + "/model" : from;
-    }
-    auto text = ReadFile(dir + "/model.json");
-    if (!text.ok()) throw std::invalid_argument("text_encoder_from: " + text.status().message());
-    SincModel pretrained(nlohmann::json::parse(*text).at("config"));
-    const nlohmann::json theirs = pretrained.net()->text_encoder()->options().ToJson();
-    const nlohmann::json ours = net_->text_encoder()->options().ToJson();
-    if (theirs != ours) {
-      throw std::invalid_argument("text_encoder_from " + dir + ": its text encoder is " + theirs.dump() + ", this model's is " + ours.dump() +
-                                  " (use the same text_encoder settings)");
-    }
-    pretrained.LoadExtras(dir);
-    torch::serialize::InputArchive archive;
-    archive.load_from(dir + "/model.pt");
-    pretrained.Module().load(archive);
-    torch::NoGradGuard no_grad;
-    auto source = pretrained.net()->text_encoder()->named_parameters();
-    for (auto& item : net_->text_encoder()->named_parameters()) item.value().copy_(source[item.key()]);
-    auto source_buffers = pretrained.net()->text_encoder()->named_buffers();
-    for (auto& item : net_->text_encoder()->named_buffers()) item.value().copy_(source_buffers[item.key()]);
-    net_->text_encoder()->LoadExtras(dir);
-    // SINC-STE's separator token is this model's own: it stays trainable.
     const bool freeze = config_.value("freeze_text_encoder", true);
-    for (auto& item : net_->text_encoder()->named_parameters()) item.value().set_requires_grad(!freeze || item.key() == "separator");
+    auto encoder = net_->text_encoder();
+    const std::string dir = nn::LoadPretrainedTextEncoder(encoder, from, context.input_dirs, freeze);
     if (context.rank == 0) std::fprintf(stderr, "temos_sinc: text encoder from %s (%s)\n", dir.c_str(), freeze ? "frozen" : "fine-tuned");
   }
 

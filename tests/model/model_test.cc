@@ -4,6 +4,7 @@
 #include <torch/torch.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "../../plugins/common/text_encoder.h"
 #include "../../plugins/common/transformer.h"
@@ -314,6 +315,49 @@ TEST(TextEncoder, FirstLayerAttentionIsSoftAndItsQueriesAndKeysLearn) {
   const double query_key = grad.narrow(0, 0, 2 * dim).norm().item<double>() / std::sqrt(2.0);
   const double value = grad.narrow(0, 2 * dim, dim).norm().item<double>();
   EXPECT_GT(query_key, 0.05 * value) << "query/key gradient " << query_key << " value gradient " << value;
+}
+
+// A TMR-style checkpoint's text encoder, copied into another model's (the MDT's, SINC's): the same
+// features for the same texts, its tokenizer, frozen or not, and a clear error when the settings differ.
+TEST(TextEncoder, PretrainedTextEncoderIsCopiedFromACheckpoint) {
+  torch::manual_seed(3);
+  auto net = TinyTemos(0.1);
+  const std::string dir = ::testing::TempDir() + "/pretrained_text";
+  std::filesystem::create_directories(dir);
+  torch::serialize::OutputArchive out;
+  net->save(out);
+  out.save_to(dir + "/model.pt");
+  net->text_encoder()->SaveExtras(dir);
+  const nlohmann::json options = net->text_encoder()->options().ToJson();
+  std::ofstream(dir + "/model.json") << nlohmann::json{{"config", {{"variant", "tmr"}, {"model", {{"text_encoder", options}}}}}}.dump();
+
+  torch::manual_seed(99);  // other initial weights, no tokenizer yet
+  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson(options));
+  EXPECT_FALSE(encoder->fitted());
+  EXPECT_EQ(nn::LoadPretrainedTextEncoder(encoder, dir, {}, true), dir);
+  EXPECT_TRUE(encoder->fitted());
+  net->eval();
+  encoder->eval();
+  torch::NoGradGuard no_grad;
+  const std::vector<std::string> texts = {"walk forward", "wave the right hand"};
+  EXPECT_TRUE(torch::equal(encoder->forward(texts).tokens, net->text_encoder()->forward(texts).tokens));
+  for (const auto& item : encoder->named_parameters()) EXPECT_EQ(item.value().requires_grad(), item.key() == "separator") << item.key();
+
+  nn::TextEncoder tuned(nn::TextEncoderOptions::FromJson(options));
+  nn::LoadPretrainedTextEncoder(tuned, "input", {::testing::TempDir() + "/nothing", dir}, false);  // found among the inputs
+  for (const auto& item : tuned->named_parameters()) EXPECT_TRUE(item.value().requires_grad()) << item.key();
+
+  nlohmann::json wider = options;
+  wider["dim"] = 64;
+  nn::TextEncoder other(nn::TextEncoderOptions::FromJson(wider));
+  try {
+    nn::LoadPretrainedTextEncoder(other, dir, {}, true);
+    ADD_FAILURE() << "a text encoder of other settings was loaded";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(dir), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("same text_encoder settings"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(nn::LoadPretrainedTextEncoder(encoder, "input", {::testing::TempDir() + "/nothing"}, true), std::invalid_argument);
 }
 
 TEST(TextEncoder, TokenizerIsDeterministicAndRoundTrips) {
