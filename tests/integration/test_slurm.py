@@ -198,8 +198,8 @@ class SlurmScript(unittest.TestCase):
                     f"  w: {{kind: test.write, params: {{tasks: {tasks}, ms: {ms}, bytes: 256, log: {self.exec_log}}}}}\n")
         return path
 
-    def sbatch(self, pipeline):
-        env = dict(self.cluster.env, MOTIONPIPE=MOTIONPIPE, MOTIONPIPE_STATE=self.state,
+    def sbatch(self, pipeline, **extra_env):
+        env = dict(self.cluster.env, **extra_env, MOTIONPIPE=MOTIONPIPE, MOTIONPIPE_STATE=self.state,
                    MOTIONPIPE_PORT=str(self.ports[0]), MOTIONPIPE_CONTROL_PORT=str(self.ports[1]),
                    MOTIONPIPE_METRICS_PORT=str(self.ports[2]))
         out = subprocess.run(["sbatch", "--parsable", "--nodes=1", "--cpus-per-task=1", "--time=10",
@@ -254,6 +254,9 @@ class SlurmScript(unittest.TestCase):
         self.assertIn("stopped", log)  # the worker drained and stopped ...
         self.assertNotIn("Killed", log)  # ... instead of srun's SIGKILL
         self.assertFalse(os.path.exists(os.path.join(self.state, "job_id")))
+        # Secure by default: CurveZMQ with the workers' key on the allow-list, keys private.
+        self.assertIn("CurveZMQ on", log)
+        self.assertEqual(os.stat(os.path.join(self.state, "keys")).st_mode & 0o777, 0o700)
         local_root = os.path.join(self.work, "local")
         local = subprocess.run([MOTIONPIPE, "run", self.pipeline(tasks=20, ms=0, name="local.yaml", output_root=local_root), "-q",
                                 "--workers", "1"], capture_output=True, text=True, timeout=120)
@@ -261,6 +264,15 @@ class SlurmScript(unittest.TestCase):
         slurm_outputs = self.outputs(os.path.join(self.work, "out"))
         self.assertEqual(len(slurm_outputs), 20)
         self.assertEqual(slurm_outputs, self.outputs(local_root))
+
+    def test_plaintext_only_when_asked(self):
+        job = self.sbatch(self.pipeline(tasks=3, ms=0), MOTIONPIPE_PLAINTEXT="1")
+        info = self.wait_state(job, {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"})
+        log = self.slurm_log(job)
+        self.assertEqual(info["JobState"], "COMPLETED", log)
+        self.assertIn("MOTIONPIPE_PLAINTEXT=1", log)
+        self.assertNotIn("CurveZMQ on", log)
+        self.assertFalse(os.path.exists(os.path.join(self.state, "keys")))
 
     def test_a_requeued_allocation_resumes_the_same_job(self):
         job = self.sbatch(self.pipeline(tasks=60, ms=250))
