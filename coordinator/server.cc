@@ -307,7 +307,15 @@ Status CoordinatorProcess::Run(std::atomic<bool>* stop, bool handle_signals,
     SendOutgoing();
     if (std::chrono::duration<double>(now - last_flush).count() >= options_.flush_interval_seconds ||
         scheduler_->journal_backlog() > 20000) {
-      if (const Status s = scheduler_->FlushJournal(); !s.ok()) MP_LOG(kError, "coordinator") << s.message();
+      if (const Status s = scheduler_->FlushJournal(); !s.ok()) {
+        // The journal is the only memory of what was committed: going on without it would hand
+        // out work whose commits a restart forgets. Stop; restarted on a writable disk, the
+        // coordinator resumes every job from what the journal holds.
+        MP_LOG(kError, "coordinator") << s.message() << "; stopping: the journal cannot record commits";
+        UpdateMetrics();
+        return IoError(s.message() + "; the coordinator stopped rather than run on a journal it cannot write: free or fix its disk, "
+                       "then start it again to resume every job from the journal");
+      }
       last_flush = now;
     }
     // Heartbeats: every worker hears from us at least once per interval.
@@ -327,8 +335,12 @@ Status CoordinatorProcess::Run(std::atomic<bool>* stop, bool handle_signals,
     }
     if (options_.exit_when_idle && scheduler_->AllJobsFinished()) break;
   }
-  (void)scheduler_->FlushJournal();
+  const Status flushed = scheduler_->FlushJournal();
   UpdateMetrics();
+  if (!flushed.ok()) {
+    MP_LOG(kError, "coordinator") << flushed.message();
+    return IoError(flushed.message() + "; the last commits are not in the journal: start the coordinator again on a writable disk");
+  }
   MP_LOG(kInfo, "coordinator") << "stopped";
   return Status::Ok();
 }

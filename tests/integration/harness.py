@@ -80,12 +80,12 @@ class EngineTest(unittest.TestCase):
     def path(self, *parts):
         return os.path.join(self.dir, *parts)
 
-    def spawn(self, args, name):
-        p = Process(args, self.path(f"{name}.log"))
+    def spawn(self, args, name, env=None):
+        p = Process(args, self.path(f"{name}.log"), env=env)
         self.processes.append(p)
         return p
 
-    def coordinator(self, host="127.0.0.1", extra=(), journal=None, port=None, control_port=None, metrics_port=None):
+    def coordinator(self, host="127.0.0.1", extra=(), journal=None, port=None, control_port=None, metrics_port=None, env=None):
         self.worker_port = port or free_port(host)
         self.control_port = control_port or free_port()
         self.workers_endpoint = f"tcp://{host}:{self.worker_port}"
@@ -94,14 +94,14 @@ class EngineTest(unittest.TestCase):
                 "--journal", journal or self.path("journal.sqlite"), "--heartbeat", "300ms"]
         if metrics_port:
             args += ["--metrics", f"127.0.0.1:{metrics_port}"]
-        proc = self.spawn(args + list(extra), f"coordinator-{len(self.processes)}")
+        proc = self.spawn(args + list(extra), f"coordinator-{len(self.processes)}", env=env)
         self.wait_until(lambda: self.try_status() is not None, 10, "the coordinator to answer")
         return proc
 
-    def worker(self, name, extra=(), endpoint=None, credit=2, heartbeat="300ms"):
+    def worker(self, name, extra=(), endpoint=None, credit=2, heartbeat="300ms", env=None):
         args = [MOTIONPIPE, "worker", "--coordinator", endpoint or self.workers_endpoint, "--name", name,
                 "--credit", str(credit), "--heartbeat", heartbeat]
-        return self.spawn(args + list(extra), f"worker-{name}-{len(self.processes)}")
+        return self.spawn(args + list(extra), f"worker-{name}-{len(self.processes)}", env=env)
 
     def cli(self, *args, check=True, timeout=120):
         result = subprocess.run([MOTIONPIPE, *args], capture_output=True, text=True, timeout=timeout)
