@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "cron.h"
+#include "motionpipe/base/file.h"
 #include "motionpipe/base/log.h"
 
 namespace motionpipe::coordinator {
@@ -465,11 +466,23 @@ void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attem
       // in between): the first commit wins.
       fs::remove_all(staging, ec);
       ++counters_.duplicates;
+      if (const Status synced = SyncDir(fs::path(final_dir).parent_path().string()); !synced.ok()) {
+        TaskError(job, stage_index, task_index, "commit not durable: " + synced.message(), false);
+        return;
+      }
     } else {
       fs::create_directories(fs::path(final_dir).parent_path(), ec);
       fs::rename(staging, final_dir, ec);
       if (ec) {
         TaskError(job, stage_index, task_index, "cannot commit " + staging + ": " + ec.message(), false);
+        return;
+      }
+      // The rename reaches the disk before the journal records the commit (the journal is
+      // flushed after this returns): both directories' entries, as LevelDB syncs its manifest's.
+      Status synced = SyncDir(fs::path(final_dir).parent_path().string());
+      if (synced.ok()) synced = SyncDir(fs::path(staging).parent_path().string());
+      if (!synced.ok()) {
+        TaskError(job, stage_index, task_index, "commit not durable: " + synced.message(), false);
         return;
       }
     }

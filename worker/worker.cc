@@ -20,6 +20,7 @@
 
 #include "executor.h"
 #include "motionpipe.pb.h"
+#include "motionpipe/base/file.h"
 #include "motionpipe/base/log.h"
 #include "motionpipe/net/protocol.h"
 #include "motionpipe/net/security.h"
@@ -172,7 +173,15 @@ void WorkerProcess::ExecutorLoop() {
                                                                 : wire::TaskResult::ERROR);
       result.set_message(report.message);
       for (const auto& [key, value] : report.metrics) (*result.mutable_metrics())[key] = value;
+      // Durable before reported: the coordinator journals the commit of what is reported, so a
+      // power loss must not leave a committed task with outputs that never reached the disk.
       if (report.outcome == Outcome::kOk) {
+        if (const Status synced = SyncTree(job.spec.output_dir()); !synced.ok()) {
+          result.set_outcome(wire::TaskResult::ERROR);
+          result.set_message("outputs not durable: " + synced.message());
+        }
+      }
+      if (result.outcome() == wire::TaskResult::OK) {
         for (wire::OutputFile& out : ScanOutputs(job.spec.output_dir())) {
           metrics_->bytes.Increment(static_cast<double>(out.bytes()));
           *result.add_outputs() = std::move(out);

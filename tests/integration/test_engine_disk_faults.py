@@ -3,6 +3,7 @@ the spirit of LevelDB's fault-injection tests, each run ending with outputs equa
 run's:
   - the output disk fills during tasks: the tasks fail with the reason, no half-written output is
     committed, and the job completes once space returns;
+  - a disk whose fsync fails: no task is committed whose outputs could not be synced;
   - the journal's disk fails its writes under a running coordinator: the coordinator stops with the
     reason instead of running on, and a restart on a writable disk resumes the job.
 Not yet here: a simulated power loss (dropping what was never fsynced)."""
@@ -62,6 +63,26 @@ class DiskFaults(EngineTest):
         self.check_committed_outputs(job)
         self.assertEqual(output_files(self.path("out", "disk-1"), "w"), self.undisturbed(120))
         self.assertEqual([n for n in os.listdir(self.path("out", "disk-1", "w")) if n.startswith(".")], [], "staging left behind")
+
+    def test_outputs_that_cannot_be_synced_are_never_committed(self):
+        # The worker fsyncs a task's outputs before reporting them, the coordinator the directories
+        # of the rename before journaling it; a disk whose fsync fails commits nothing meanwhile.
+        out = self.path("out")
+        os.makedirs(out)
+        self.coordinator()
+        self.worker("nosync", env=self.faulty_env(out, "EIO", "sync"))
+        open(self.path("disk-fails"), "w").close()
+        # sync: false, as bulk outputs are written: the file's own fsync is skipped, the worker's is not.
+        job = self.submit(self.write_pipeline("p.yaml", WRITE.replace("TASKS", "20").replace("bytes: 4096", "bytes: 4096, sync: false")))
+        self.wait_until(lambda: len(self.failed_attempts()) >= 5, 30, "tasks failing to sync")
+        self.assertEqual(self.job(job)["stages"][0].get("committed", 0), 0)
+        reasons = self.failed_attempts()
+        self.assertTrue(all("outputs not durable" in r and "fsync failed: Input/output error" in r for r in reasons), reasons[:3])
+        os.remove(self.trigger)
+        code, text = self.wait_job(job, timeout=120)
+        self.assertEqual(code, 0, text)
+        self.check_committed_outputs(job)
+        self.assertEqual(output_files(self.path("out", "disk-1"), "w"), self.undisturbed(20))
 
     def test_a_failing_journal_disk_stops_the_coordinator_and_a_restart_resumes(self):
         state = self.path("state")

@@ -72,7 +72,11 @@ class WriteStage : public StageExecutor {
       digest = Sha256Hex(digest);
     }
     std::filesystem::create_directories(ctx.output_dir());
-    if (const Status s = WriteFileAtomic(ctx.output_dir() + "/out.txt", content); !s.ok()) return TaskReport::Error(s.message());
+    // `sync: false` writes as the bulk outputs do (no fsync of its own; the worker syncs the task's
+    // outputs before reporting them).
+    if (const Status s = WriteFileAtomic(ctx.output_dir() + "/out.txt", content, ctx.params.value("sync", true)); !s.ok()) {
+      return TaskReport::Error(s.message());
+    }
     return TaskReport::Ok();
   }
 };

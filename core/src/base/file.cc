@@ -13,6 +13,7 @@
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <vector>
 
 namespace motionpipe {
 
@@ -195,6 +196,40 @@ std::string Sha256Hex(std::string_view bytes) {
     for (int k = 7; k >= 0; --k) out.push_back(kHex[(word >> (4 * k)) & 0xf]);
   }
   return out;
+}
+
+namespace {
+
+Status SyncPath(const std::string& path, bool directory) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | (directory ? O_DIRECTORY : 0));
+  if (fd < 0) return IoError(path + ": cannot open to fsync: " + std::strerror(errno));
+  const int rc = ::fsync(fd);
+  const int error = errno;
+  ::close(fd);
+  if (rc != 0) return IoError(path + ": fsync failed: " + std::strerror(error));
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status SyncDir(const std::string& dir) { return SyncPath(dir, true); }
+
+Status SyncTree(const std::string& dir) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) return Status::Ok();
+  std::vector<std::string> dirs;
+  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec); !ec && it != std::filesystem::recursive_directory_iterator();
+       it.increment(ec)) {
+    if (it->is_symlink()) continue;  // links to the user's data are not ours to sync
+    if (it->is_directory()) {
+      dirs.push_back(it->path().string());
+    } else if (it->is_regular_file()) {
+      MP_RETURN_IF_ERROR(SyncPath(it->path().string(), false));
+    }
+  }
+  if (ec) return IoError(dir + ": cannot list to fsync: " + ec.message());
+  for (auto d = dirs.rbegin(); d != dirs.rend(); ++d) MP_RETURN_IF_ERROR(SyncPath(*d, true));  // deepest first
+  return SyncPath(dir, true);
 }
 
 Result<FileLock> FileLock::Acquire(const std::string& path) {

@@ -53,6 +53,14 @@ class FileLock {
 // `sync` = false skips the fsync for bulk outputs (the rename still hides partial files).
 Status WriteFileAtomic(const std::string& path, std::string_view bytes, bool sync = true);
 
+// fsync(2)s every regular file and directory under `dir` (each directory after its contents) and
+// `dir` itself: what a task wrote reaches the disk before its commit is journaled. A missing `dir`
+// is OK (nothing to sync). IoError naming the file on the first failure.
+Status SyncTree(const std::string& dir);
+
+// fsync(2)s one directory, so that the entries created, renamed or removed in it survive a crash.
+Status SyncDir(const std::string& dir);
+
 // Creates `path` and its parents when missing.
 Status MakeDirs(const std::string& path);
 
