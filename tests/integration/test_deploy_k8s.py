@@ -27,7 +27,7 @@ class KubernetesManifests(unittest.TestCase):
         result = validate(*MANIFESTS)
         self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
         kinds = [line.split("] ")[1].split(" ")[0] for line in result.stdout.splitlines() if line.endswith(": valid")]
-        self.assertEqual(sorted(kinds), ["Deployment", "Deployment", "Job", "PersistentVolumeClaim", "Service"])
+        self.assertEqual(sorted(kinds), ["Deployment", "Deployment", "Job", "NetworkPolicy", "PersistentVolumeClaim", "Service"])
 
     def test_broken_manifests_are_rejected_with_the_field(self):
         with open(os.path.join(ROOT, "deploy", "k8s", "workers.yaml")) as f:

@@ -199,7 +199,7 @@ class SlurmScript(unittest.TestCase):
         return path
 
     def sbatch(self, pipeline, **extra_env):
-        env = dict(self.cluster.env, **extra_env, MOTIONPIPE=MOTIONPIPE, MOTIONPIPE_STATE=self.state,
+        env = dict(self.cluster.env, **extra_env, MOTIONPIPE=MOTIONPIPE, MOTIONPIPE_LOG="info", MOTIONPIPE_STATE=self.state,
                    MOTIONPIPE_PORT=str(self.ports[0]), MOTIONPIPE_CONTROL_PORT=str(self.ports[1]),
                    MOTIONPIPE_METRICS_PORT=str(self.ports[2]))
         out = subprocess.run(["sbatch", "--parsable", "--nodes=1", "--cpus-per-task=1", "--time=10",
