@@ -157,6 +157,11 @@ def skip_reason():
     missing = [b for b in ("munged", "slurmctld", "slurmd", "sbatch", "scontrol", "squeue") if shutil.which(b) is None]
     if missing:
         return f"not installed: {', '.join(missing)} (scripts/setup installs slurmctld slurmd slurm-client munge)"
+    host = socket.gethostname().split(".")[0]
+    try:
+        socket.gethostbyname(host)  # the script's workers reach the coordinator by the node's name
+    except OSError as e:
+        return f"this host's name {host!r} does not resolve ({e}); Slurm's node name is the host name"
     return None
 
 
