@@ -23,6 +23,16 @@ stages:
 """
 
 
+def committed_tasks(stage_dir, at_least, timeout=60):
+    """The number of committed task directories of a stage, once there are `at_least` (or the timeout)."""
+    deadline = time.time() + timeout
+    while True:
+        count = len([n for n in os.listdir(stage_dir) if n.startswith("task")]) if os.path.isdir(stage_dir) else 0
+        if count >= at_least or time.time() >= deadline:
+            return count
+        time.sleep(0.05)
+
+
 class LocalRun(EngineTest):
     def test_run_executes_the_pipeline_through_workers(self):
         pipeline = self.write_pipeline("p.yaml", PIPELINE)
@@ -53,9 +63,7 @@ class LocalRun(EngineTest):
         pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 20}"))
         run = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         write_dir = self.path("out", "local-1", "write")
-        deadline = time.time() + 60
-        while time.time() < deadline and (not os.path.isdir(write_dir) or len([n for n in os.listdir(write_dir) if n.startswith("task")]) < 40):
-            time.sleep(0.05)
+        committed_tasks(write_dir, at_least=40)
         run.send_signal(signal.SIGINT)
         out, _ = run.communicate(timeout=60)
         self.assertEqual(run.returncode, 1)
@@ -73,10 +81,7 @@ class LocalRun(EngineTest):
         pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 20}"))
         other = self.write_pipeline("q.yaml", PIPELINE.replace("name: local", "name: other"))
         first = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        write_dir = self.path("out", "local-1", "write")
-        deadline = time.time() + 60
-        while time.time() < deadline and (not os.path.isdir(write_dir) or len([n for n in os.listdir(write_dir) if n.startswith("task")]) < 5):
-            time.sleep(0.05)
+        committed_tasks(self.path("out", "local-1", "write"), at_least=5)
         journal = self.path("out", ".motionpipe", "journal.sqlite")
         second = subprocess.run([MOTIONPIPE, "run", other, "-q", "--workers", "1"], capture_output=True, text=True, timeout=60)
         self.assertEqual(second.returncode, 1, second.stdout + second.stderr)
