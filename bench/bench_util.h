@@ -15,7 +15,9 @@ namespace motionpipe::bench {
 
 using Clock = std::chrono::steady_clock;
 
-inline double Since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+inline double Since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
 
 inline std::string Run(const std::string& command) {
   std::string output;

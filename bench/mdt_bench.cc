@@ -1,16 +1,16 @@
-// SimMotionEdit's MDT (plugins/mdt_editor): training samples/s at the demo's size and at the paper's
-// against the same architecture in PyTorch Python (bench/reference/mdt_ref.py, Debian's python3-torch)
-// on the same batch with the same threads, in one run; then editing latency per motion with
-// three-way guidance for DDPM-300 and DDIM-50 at batch 1 and 32.
-//   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F] [--no-reference]
+// SimMotionEdit's MDT (plugins/mdt_editor): training samples/s at the demo's size and at the
+// paper's against the same architecture in PyTorch Python (bench/reference/mdt_ref.py, Debian's
+// python3-torch) on the same batch with the same threads, in one run; then editing latency per
+// motion with three-way guidance for DDPM-300 and DDIM-50 at batch 1 and 32.
+//   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
+//   [--no-reference]
 //             [--no-latency]
 #include <torch/torch.h>
-
-#include <nlohmann/json.hpp>
 
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
 #include <string>
@@ -37,10 +37,17 @@ struct Size {
 };
 
 std::vector<std::string> Texts(int64_t n) {
-  const char* edits[] = {"raise the right arm higher", "walk faster", "bend the knees more", "do not turn at the end",
-                         "kick with the left leg instead", "lower the arms", "take bigger steps", "jump higher"};
+  const char* edits[] = {"raise the right arm higher",
+                         "walk faster",
+                         "bend the knees more",
+                         "do not turn at the end",
+                         "kick with the left leg instead",
+                         "lower the arms",
+                         "take bigger steps",
+                         "jump higher"};
   std::vector<std::string> t;
-  for (int64_t i = 0; i < n; ++i) t.push_back(edits[i % 8] + std::string(i % 3 == 0 ? " please" : ""));
+  for (int64_t i = 0; i < n; ++i)
+    t.push_back(edits[i % 8] + std::string(i % 3 == 0 ? " please" : ""));
   return t;
 }
 
@@ -51,10 +58,18 @@ std::vector<T> Values(const torch::Tensor& t) {
 }
 
 EditorNet Build(const Size& size) {
-  const json config = {{"variant", "mdt"},
-                       {"model", {{"dim", size.dim}, {"cond_layers", size.cond_layers}, {"layers", size.layers}, {"heads", size.heads},
-                                  {"ff", size.ff}, {"sim_hidden", size.ff}, {"dropout", 0.1},
-                                  {"text_encoder", {{"layers", 1}, {"vocab", 1000}, {"heads", size.heads}, {"ff", size.ff}}}}}};
+  const json config = {
+      {"variant", "mdt"},
+      {"model",
+       {{"dim", size.dim},
+        {"cond_layers", size.cond_layers},
+        {"layers", size.layers},
+        {"heads", size.heads},
+        {"ff", size.ff},
+        {"sim_hidden", size.ff},
+        {"dropout", 0.1},
+        {"text_encoder",
+         {{"layers", 1}, {"vocab", 1000}, {"heads", size.heads}, {"ff", size.ff}}}}}};
   EditorNet net(EditorOptions::FromJson(config));
   net->text_encoder()->Fit(Texts(64));
   return net;
@@ -67,37 +82,52 @@ int main(int argc, char** argv) {
   int64_t steps = 4, threads = 1, batch = 32, frames = 150;
   bool reference = true, latency = true;
   for (int k = 1; k < argc; ++k) {
-    if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc) sizes_arg = argv[++k];
-    else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc) steps = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc) threads = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc) batch = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc) frames = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--no-reference")) reference = false;
-    else if (!std::strcmp(argv[k], "--no-latency")) latency = false;
+    if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc)
+      sizes_arg = argv[++k];
+    else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc)
+      steps = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc)
+      threads = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc)
+      batch = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc)
+      frames = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--no-reference"))
+      reference = false;
+    else if (!std::strcmp(argv[k], "--no-latency"))
+      latency = false;
     else {
-      std::fprintf(stderr, "usage: mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F] [--no-reference] [--no-latency]\n");
+      std::fprintf(stderr,
+                   "usage: mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
+                   "[--frames F] [--no-reference] [--no-latency]\n");
       return 2;
     }
   }
   nn::SetTorchThreads(static_cast<int>(threads));
   const std::vector<Size> all = {{"demo", 128, 2, 4, 4, 256}, {"paper", 512, 4, 8, 8, 1024}};
-  std::printf("MDT training step (diffusion x0 + similarity loss, backward, clip, AdamW), batch %lld, source and target up to %lld frames, %lld thread(s)\n",
-              static_cast<long long>(batch), static_cast<long long>(frames), static_cast<long long>(threads));
+  std::printf(
+      "MDT training step (diffusion x0 + similarity loss, backward, clip, AdamW), batch %lld, "
+      "source and target up to %lld frames, %lld thread(s)\n",
+      static_cast<long long>(batch), static_cast<long long>(frames),
+      static_cast<long long>(threads));
   std::printf("%-6s %10s %12s %12s %8s\n", "size", "params", "C++ samp/s", "Py samp/s", "ratio");
   // The batch: lengths in [frames/2, frames], features ~ N(0, 1), classes in {0, 1, 2}.
   std::mt19937 rng(7);
   const auto lengths = [&](int64_t n) {
     auto padding = torch::zeros({n, frames}, torch::kBool);
     for (int64_t i = 0; i < n; ++i) {
-      const int64_t length = frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(frames / 2 + 1));
+      const int64_t length =
+          frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(frames / 2 + 1));
       padding[i].narrow(0, length, frames - length).fill_(true);
     }
     return padding;
   };
   torch::manual_seed(1);
   const auto source_padding = lengths(batch), target_padding = lengths(batch);
-  const auto source = torch::randn({frames, batch, kEditFeatureDim}), target = torch::randn({frames, batch, kEditFeatureDim});
-  const auto classes = torch::randint(0, 3, {batch, frames}, torch::kInt64).masked_fill(source_padding, -1);
+  const auto source = torch::randn({frames, batch, kEditFeatureDim}),
+             target = torch::randn({frames, batch, kEditFeatureDim});
+  const auto classes =
+      torch::randint(0, 3, {batch, frames}, torch::kInt64).masked_fill(source_padding, -1);
   const std::vector<std::string> texts = Texts(batch);
   for (const Size& size : all) {
     if (sizes_arg.find(size.name) == std::string::npos) continue;
@@ -106,16 +136,20 @@ int main(int argc, char** argv) {
     const CosineSchedule schedule(300);
     int64_t parameters = 0;
     for (const auto& p : net->parameters()) parameters += p.numel();
-    torch::optim::AdamW optimizer(net->parameters(), torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
+    torch::optim::AdamW optimizer(net->parameters(),
+                                  torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
     net->train();
     const auto step = [&] {
       const auto t = torch::randint(0, 300, {batch}, torch::kInt64);
       const auto u = torch::rand({batch});
-      Condition c{texts, source, source_padding, u.lt(0.2), u.lt(0.15).logical_or(u.ge(0.2).logical_and(u.lt(0.25)))};
+      Condition c{texts, source, source_padding, u.lt(0.2),
+                  u.lt(0.15).logical_or(u.ge(0.2).logical_and(u.lt(0.25)))};
       const auto xt = schedule.QSample(target, t, torch::randn_like(target));
       const Prediction p = net->forward(xt, t, target_padding, c);
       const auto loss = GroupedMaskedMse(p.x0, target, target_padding) +
-                        0.05 * SimilarityLoss(p.similarity, classes, torch::zeros({batch, frames}), source_padding, c.drop_source, net->options()).at("aux");
+                        0.05 * SimilarityLoss(p.similarity, classes, torch::zeros({batch, frames}),
+                                              source_padding, c.drop_source, net->options())
+                                   .at("aux");
       optimizer.zero_grad();
       loss.backward();
       torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
@@ -131,29 +165,40 @@ int main(int argc, char** argv) {
       const std::string dir = "/tmp/motionpipe_mdt_bench";
       fs::create_directories(dir);
       const auto tokens = net->text_encoder()->TokenIds(texts);
-      bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({tokens.size(0), tokens.size(1)}, Values<int64_t>(tokens)));
-      bench::SaveNpy(dir + "/source.npy", NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(source)));
-      bench::SaveNpy(dir + "/target.npy", NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(target)));
-      bench::SaveNpy(dir + "/classes.npy", NpyArray::Int64({batch, frames}, Values<int64_t>(classes)));
-      for (const auto& [name, pad] : {std::pair{"source_padding", source_padding}, std::pair{"target_padding", target_padding}}) {
-        bench::SaveNpy(dir + "/" + name + ".npy", NpyArray::Bool({batch, frames}, Values<uint8_t>(pad.to(torch::kUInt8))));
+      bench::SaveNpy(dir + "/tokens.npy",
+                     NpyArray::Int64({tokens.size(0), tokens.size(1)}, Values<int64_t>(tokens)));
+      bench::SaveNpy(dir + "/source.npy",
+                     NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(source)));
+      bench::SaveNpy(dir + "/target.npy",
+                     NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(target)));
+      bench::SaveNpy(dir + "/classes.npy",
+                     NpyArray::Int64({batch, frames}, Values<int64_t>(classes)));
+      for (const auto& [name, pad] : {std::pair{"source_padding", source_padding},
+                                      std::pair{"target_padding", target_padding}}) {
+        bench::SaveNpy(dir + "/" + name + ".npy",
+                       NpyArray::Bool({batch, frames}, Values<uint8_t>(pad.to(torch::kUInt8))));
       }
       std::ostringstream command;
-      command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
-              << "/bench/reference/mdt_ref.py --batch-dir " << dir << " --dim " << size.dim << " --cond-layers " << size.cond_layers
-              << " --layers " << size.layers << " --heads " << size.heads << " --ff " << size.ff << " --steps " << steps
-              << " --threads " << threads;
+      command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads
+              << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
+              << "/bench/reference/mdt_ref.py --batch-dir " << dir << " --dim " << size.dim
+              << " --cond-layers " << size.cond_layers << " --layers " << size.layers << " --heads "
+              << size.heads << " --ff " << size.ff << " --steps " << steps << " --threads "
+              << threads;
       const std::string out = Run(command.str());
       python = json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
     }
-    std::printf("%-6s %10lld %12.2f %12.2f %8.2f\n", size.name.c_str(), static_cast<long long>(parameters), cpp, python,
-                python > 0 ? cpp / python : 0.0);
+    std::printf("%-6s %10lld %12.2f %12.2f %8.2f\n", size.name.c_str(),
+                static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0);
     std::fflush(stdout);
   }
 
   if (latency) {
     // Editing: three guidance branches per motion in one batch; 150-frame sources and targets.
-    std::printf("\nediting latency, demo size, 150-frame source and target, three-way guidance, %lld thread(s)\n", static_cast<long long>(threads));
+    std::printf(
+        "\nediting latency, demo size, 150-frame source and target, three-way guidance, %lld "
+        "thread(s)\n",
+        static_cast<long long>(threads));
     std::printf("%-10s %6s %14s %16s %s\n", "sampler", "batch", "s per batch", "s per motion", "");
     torch::manual_seed(2);
     EditorNet net = Build(all[0]);
@@ -170,12 +215,15 @@ int main(int argc, char** argv) {
         dt.insert(dt.end(), static_cast<size_t>(n), b < 2);
         ds.insert(ds.end(), static_cast<size_t>(n), b < 1);
       }
-      Condition c{t3, src, torch::zeros({3 * n, 150}, torch::kBool), torch::tensor(dt).to(torch::kBool), torch::tensor(ds).to(torch::kBool)};
+      Condition c{t3, src, torch::zeros({3 * n, 150}, torch::kBool),
+                  torch::tensor(dt).to(torch::kBool), torch::tensor(ds).to(torch::kBool)};
       const auto padding = torch::zeros({3 * n, 150}, torch::kBool);
       int64_t calls = 0;
       const Denoise denoise = [&](const torch::Tensor& xt, int64_t step) {
         ++calls;
-        const auto x0 = net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, step, torch::kInt64), padding, c).x0.chunk(3, 1);
+        const auto x0 = net->forward(xt.repeat({1, 3, 1}),
+                                     torch::full({3 * n}, step, torch::kInt64), padding, c)
+                            .x0.chunk(3, 1);
         return GuideThreeWay(x0[0], x0[1], x0[2], 2.0, 2.0);
       };
       const CosineSchedule schedule(300);
@@ -190,9 +238,10 @@ int main(int argc, char** argv) {
       started = Clock::now();
       SampleDdpm(part, {150, n, kEditFeatureDim}, denoise, generator);
       const double ddpm = Since(started) * 300.0 / static_cast<double>(measured);
-      std::printf("%-10s %6lld %14.2f %16.3f\n", "DDIM-50", static_cast<long long>(n), ddim, ddim / static_cast<double>(n));
-      std::printf("%-10s %6lld %14.2f %16.3f %s\n", "DDPM-300", static_cast<long long>(n), ddpm, ddpm / static_cast<double>(n),
-                  measured < 300 ? "(30 steps timed, x10)" : "");
+      std::printf("%-10s %6lld %14.2f %16.3f\n", "DDIM-50", static_cast<long long>(n), ddim,
+                  ddim / static_cast<double>(n));
+      std::printf("%-10s %6lld %14.2f %16.3f %s\n", "DDPM-300", static_cast<long long>(n), ddpm,
+                  ddpm / static_cast<double>(n), measured < 300 ? "(30 steps timed, x10)" : "");
       std::fflush(stdout);
     }
   }

@@ -5,10 +5,9 @@
 //             [--guidance g_m,g_t] [--no-sample]
 #include <torch/torch.h>
 
-#include <nlohmann/json.hpp>
-
 #include <cstdio>
 #include <cstring>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -27,14 +26,18 @@ namespace {
 torch::Tensor Mse(const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& padding) {
   const int64_t t = std::min(a.size(0), b.size(0));
   const auto keep = padding.narrow(1, 0, t).logical_not().t().unsqueeze(2).to(torch::kFloat32);
-  return ((a.narrow(0, 0, t) - b.narrow(0, 0, t)).pow(2) * keep).sum(std::vector<int64_t>{0, 2}) / (keep.sum(std::vector<int64_t>{0, 2}) * a.size(2)).clamp_min(1);
+  return ((a.narrow(0, 0, t) - b.narrow(0, 0, t)).pow(2) * keep).sum(std::vector<int64_t>{0, 2}) /
+         (keep.sum(std::vector<int64_t>{0, 2}) * a.size(2)).clamp_min(1);
 }
 
 // Mean squared second difference over time per example [N].
 torch::Tensor Roughness(const torch::Tensor& x, const torch::Tensor& padding) {
-  const auto d2 = x.narrow(0, 2, x.size(0) - 2) - 2 * x.narrow(0, 1, x.size(0) - 2) + x.narrow(0, 0, x.size(0) - 2);
-  const auto keep = padding.narrow(1, 2, x.size(0) - 2).logical_not().t().unsqueeze(2).to(torch::kFloat32);
-  return (d2.pow(2) * keep).sum(std::vector<int64_t>{0, 2}) / (keep.sum(std::vector<int64_t>{0, 2}) * x.size(2)).clamp_min(1);
+  const auto d2 = x.narrow(0, 2, x.size(0) - 2) - 2 * x.narrow(0, 1, x.size(0) - 2) +
+                  x.narrow(0, 0, x.size(0) - 2);
+  const auto keep =
+      padding.narrow(1, 2, x.size(0) - 2).logical_not().t().unsqueeze(2).to(torch::kFloat32);
+  return (d2.pow(2) * keep).sum(std::vector<int64_t>{0, 2}) /
+         (keep.sum(std::vector<int64_t>{0, 2}) * x.size(2)).clamp_min(1);
 }
 
 }  // namespace
@@ -47,15 +50,23 @@ int main(int argc, char** argv) {
   double g_m = -1, g_t = -1;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--split" && i + 1 < argc) split = argv[++i];
-    else if (a == "--n" && i + 1 < argc) n = std::stoll(argv[++i]);
-    else if (a == "--ddim" && i + 1 < argc) ddim = std::stoll(argv[++i]);
-    else if (a == "--no-sample") sample = false;
-    else if (a == "--guidance" && i + 1 < argc) std::sscanf(argv[++i], "%lf,%lf", &g_m, &g_t);
-    else dirs.push_back(a);
+    if (a == "--split" && i + 1 < argc)
+      split = argv[++i];
+    else if (a == "--n" && i + 1 < argc)
+      n = std::stoll(argv[++i]);
+    else if (a == "--ddim" && i + 1 < argc)
+      ddim = std::stoll(argv[++i]);
+    else if (a == "--no-sample")
+      sample = false;
+    else if (a == "--guidance" && i + 1 < argc)
+      std::sscanf(argv[++i], "%lf,%lf", &g_m, &g_t);
+    else
+      dirs.push_back(a);
   }
   if (dirs.size() < 2) {
-    std::fprintf(stderr, "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] [--guidance gm,gt] [--no-sample]\n");
+    std::fprintf(stderr,
+                 "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
+                 "[--guidance gm,gt] [--no-sample]\n");
     return 2;
   }
   nn::SetTorchThreads(1);
@@ -96,15 +107,22 @@ int main(int argc, char** argv) {
   c.drop_text = none;
   c.drop_source = none;
 
-  std::printf("%s split, %lld triplets, %lld diffusion steps; normalised features (data variance about 0.25)\n", split.c_str(),
-              static_cast<long long>(n), static_cast<long long>(options.diffusion_steps));
-  std::printf("copy source: x0 MSE %.4f   mean (zeros): %.4f\n", Mse(source, target, padding).mean().item<double>(),
+  std::printf(
+      "%s split, %lld triplets, %lld diffusion steps; normalised features (data variance about "
+      "0.25)\n",
+      split.c_str(), static_cast<long long>(n), static_cast<long long>(options.diffusion_steps));
+  std::printf("copy source: x0 MSE %.4f   mean (zeros): %.4f\n",
+              Mse(source, target, padding).mean().item<double>(),
               Mse(torch::zeros_like(target), target, padding).mean().item<double>());
   // How far the source is from the target, per feature group (frame i against frame i).
   for (const auto& g : MotionFixFeatureGroups()) {
-    const auto slice = [&](const torch::Tensor& x) { return x.narrow(2, g.begin, g.end - g.begin); };
-    std::printf("  copy source, %-22s MSE %.4f (mean: %.4f)\n", g.name, Mse(slice(source), slice(target), padding).mean().item<double>(),
-                Mse(torch::zeros_like(slice(target)), slice(target), padding).mean().item<double>());
+    const auto slice = [&](const torch::Tensor& x) {
+      return x.narrow(2, g.begin, g.end - g.begin);
+    };
+    std::printf(
+        "  copy source, %-22s MSE %.4f (mean: %.4f)\n", g.name,
+        Mse(slice(source), slice(target), padding).mean().item<double>(),
+        Mse(torch::zeros_like(slice(target)), slice(target), padding).mean().item<double>());
   }
   std::printf("%6s %10s %10s %10s %10s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)");
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
@@ -112,14 +130,21 @@ int main(int argc, char** argv) {
     const auto steps = torch::full({n}, t, torch::kInt64);
     const auto noise = torch::randn(target.sizes());
     const auto xt = schedule.QSample(target, steps, noise);
-    const double model = Mse(net->forward(xt, steps, padding, c).x0, target, padding).mean().item<double>();
+    const double model =
+        Mse(net->forward(xt, steps, padding, c).x0, target, padding).mean().item<double>();
     Condition no_text = c, no_source = c;
     no_text.drop_text = torch::ones({n}, torch::kBool);
     no_source.drop_source = torch::ones({n}, torch::kBool);
-    const double without_text = Mse(net->forward(xt, steps, padding, no_text).x0, target, padding).mean().item<double>();
-    const double without_source = Mse(net->forward(xt, steps, padding, no_source).x0, target, padding).mean().item<double>();
-    const double scaled = Mse(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)]), target, padding).mean().item<double>();
-    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model, without_text, without_source, scaled);
+    const double without_text =
+        Mse(net->forward(xt, steps, padding, no_text).x0, target, padding).mean().item<double>();
+    const double without_source =
+        Mse(net->forward(xt, steps, padding, no_source).x0, target, padding).mean().item<double>();
+    const double scaled =
+        Mse(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)]), target, padding)
+            .mean()
+            .item<double>();
+    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model,
+                without_text, without_source, scaled);
   }
 
   if (!sample) return 0;
@@ -130,7 +155,8 @@ int main(int argc, char** argv) {
   three.source_padding = c.source_padding.repeat({3, 1});
   const auto flags = [&](std::vector<int> v) {
     std::vector<int64_t> out;
-    for (int b = 0; b < 3; ++b) out.insert(out.end(), static_cast<size_t>(n), v[static_cast<size_t>(b)]);
+    for (int b = 0; b < 3; ++b)
+      out.insert(out.end(), static_cast<size_t>(n), v[static_cast<size_t>(b)]);
     return torch::tensor(out).to(torch::kBool);
   };
   three.drop_text = flags({1, 1, 0});
@@ -138,26 +164,35 @@ int main(int argc, char** argv) {
   const auto padding3 = padding.repeat({3, 1});
   for (auto [gm, gt] : std::vector<std::pair<double, double>>{{1, 1}, {g_m, g_t}}) {
     const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
-      const auto parts = net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, t, torch::kInt64), padding3, three).x0.chunk(3, 1);
+      const auto parts = net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, t, torch::kInt64),
+                                      padding3, three)
+                             .x0.chunk(3, 1);
       return GuideThreeWay(parts[0], parts[1], parts[2], gm, gt);
     };
     // The x0 estimate along the trajectory: where does the sample leave the source?
     const bool trace = gm == 1 && gt == 1;
-    if (trace) std::printf("DDIM-%lld trajectory, guidance 1/1: step t, x0 estimate -> target MSE, -> source MSE\n", static_cast<long long>(ddim));
+    if (trace)
+      std::printf(
+          "DDIM-%lld trajectory, guidance 1/1: step t, x0 estimate -> target MSE, -> source MSE\n",
+          static_cast<long long>(ddim));
     const Denoise traced = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = denoise(xt, t);
       if (trace) {
-        std::printf("  t %3lld: %.4f %.4f\n", static_cast<long long>(t), Mse(x0, target, padding).mean().item<double>(),
+        std::printf("  t %3lld: %.4f %.4f\n", static_cast<long long>(t),
+                    Mse(x0, target, padding).mean().item<double>(),
                     Mse(x0, source, padding).mean().item<double>());
       }
       return x0;
     };
     auto generator = at::make_generator<at::CPUGeneratorImpl>(7);
     const auto x = SampleDdim(schedule, target.sizes(), ddim, traced, generator, nullptr);
-    std::printf("DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f target %.5f source %.5f\n",
-                static_cast<long long>(ddim), gm, gt, Mse(x, target, padding).mean().item<double>(), Mse(x, source, padding).mean().item<double>(),
-                Roughness(x, padding).mean().item<double>(), Roughness(target, padding).mean().item<double>(),
-                Roughness(source, batch.tensors.at("source_padding")).mean().item<double>());
+    std::printf(
+        "DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f "
+        "target %.5f source %.5f\n",
+        static_cast<long long>(ddim), gm, gt, Mse(x, target, padding).mean().item<double>(),
+        Mse(x, source, padding).mean().item<double>(), Roughness(x, padding).mean().item<double>(),
+        Roughness(target, padding).mean().item<double>(),
+        Roughness(source, batch.tensors.at("source_padding")).mean().item<double>());
   }
   return 0;
 }

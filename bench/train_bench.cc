@@ -1,19 +1,19 @@
 // Training throughput (samples/s) of the TEMOS model (plugins/temos_sinc) at the demo's size and at
-// the paper's, against the same architecture in PyTorch Python (bench/reference/temos_ref.py, run by
-// Debian's /usr/bin/python3) on the same batch with the same threads, in one run; then the train
+// the paper's, against the same architecture in PyTorch Python (bench/reference/temos_ref.py, run
+// by Debian's /usr/bin/python3) on the same batch with the same threads, in one run; then the train
 // stage's own rate through workers with world_size 1 and 2 (scaling from 1 to 2 ranks).
-//   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F] [--no-reference]
+//   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
+//   [--no-reference]
 //               [--no-scaling]
 #include <sys/wait.h>
 #include <torch/torch.h>
-
-#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
 #include <string>
@@ -21,9 +21,8 @@
 
 #include "../plugins/common/threads.h"
 #include "../plugins/temos_sinc/temos.h"
-#include "motionpipe/formats/npy.h"
-
 #include "bench_util.h"
+#include "motionpipe/formats/npy.h"
 
 namespace fs = std::filesystem;
 using namespace motionpipe;
@@ -41,8 +40,12 @@ struct Size {
 
 // Action texts like the corpus's, to train the tokenizer and fill the batch.
 std::vector<std::string> Texts(int64_t n) {
-  const char* verbs[] = {"walk forward", "wave the right hand", "jump in place", "turn left", "raise both arms", "kick with the left leg",
-                         "sit down", "run in a circle", "clap the hands", "bow", "crouch", "step to the side"};
+  const char* verbs[] = {"walk forward",    "wave the right hand",
+                         "jump in place",   "turn left",
+                         "raise both arms", "kick with the left leg",
+                         "sit down",        "run in a circle",
+                         "clap the hands",  "bow",
+                         "crouch",          "step to the side"};
   const char* manners[] = {"slowly", "quickly", "", "twice", "while looking around", "with energy"};
   std::vector<std::string> texts;
   for (int64_t i = 0; i < n; ++i) {
@@ -61,27 +64,44 @@ int main(int argc, char** argv) {
   int64_t steps = 8, threads = 1, batch = 32, frames = 150;
   bool reference = true, scaling = true;
   for (int k = 1; k < argc; ++k) {
-    if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc) sizes_arg = argv[++k];
-    else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc) steps = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc) threads = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc) batch = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc) frames = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--no-reference")) reference = false;
-    else if (!std::strcmp(argv[k], "--no-scaling")) scaling = false;
+    if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc)
+      sizes_arg = argv[++k];
+    else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc)
+      steps = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc)
+      threads = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc)
+      batch = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc)
+      frames = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--no-reference"))
+      reference = false;
+    else if (!std::strcmp(argv[k], "--no-scaling"))
+      scaling = false;
     else {
-      std::fprintf(stderr, "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F] [--no-reference] [--no-scaling]\n");
+      std::fprintf(stderr,
+                   "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
+                   "[--frames F] [--no-reference] [--no-scaling]\n");
       return 2;
     }
   }
   nn::SetTorchThreads(static_cast<int>(threads));
   const std::vector<Size> all = {{"demo", 128, 2, 4, 512, 1}, {"paper", 256, 6, 4, 1024, 2}};
-  std::printf("TEMOS training step (forward, backward, clip, AdamW), batch %lld, up to %lld frames, %lld thread(s)\n",
-              static_cast<long long>(batch), static_cast<long long>(frames), static_cast<long long>(threads));
+  std::printf(
+      "TEMOS training step (forward, backward, clip, AdamW), batch %lld, up to %lld frames, %lld "
+      "thread(s)\n",
+      static_cast<long long>(batch), static_cast<long long>(frames),
+      static_cast<long long>(threads));
   std::printf("%-6s %10s %12s %12s %8s\n", "size", "params", "C++ samp/s", "Py samp/s", "ratio");
   for (const Size& size : all) {
     if (sizes_arg.find(size.name) == std::string::npos) continue;
-    const json config = {{"latent", size.latent}, {"layers", size.layers}, {"heads", size.heads}, {"ff", size.ff}, {"dropout", 0.1},
-                         {"text_encoder", {{"layers", size.text_layers}, {"vocab", 1000}, {"ff", size.ff}}}};
+    const json config = {
+        {"latent", size.latent},
+        {"layers", size.layers},
+        {"heads", size.heads},
+        {"ff", size.ff},
+        {"dropout", 0.1},
+        {"text_encoder", {{"layers", size.text_layers}, {"vocab", 1000}, {"ff", size.ff}}}};
     torch::manual_seed(1);
     temos::Temos net(temos::TemosOptions::FromJson(config));
     const std::vector<std::string> texts = Texts(batch);
@@ -90,16 +110,19 @@ int main(int argc, char** argv) {
     std::mt19937 rng(7);
     auto padding = torch::zeros({batch, frames}, torch::kBool);
     for (int64_t i = 0; i < batch; ++i) {
-      const int64_t length = frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(frames / 2 + 1));
+      const int64_t length =
+          frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(frames / 2 + 1));
       padding[i].narrow(0, length, frames - length).fill_(true);
     }
-    const auto features = torch::randn({frames, batch, temos::kFeatureDim}).masked_fill(padding.t().unsqueeze(2), 0.0);
+    const auto features = torch::randn({frames, batch, temos::kFeatureDim})
+                              .masked_fill(padding.t().unsqueeze(2), 0.0);
     std::vector<std::vector<std::string>> groups;
     for (const auto& t : texts) groups.push_back({t});
     int64_t parameters = 0;
     for (const auto& p : net->parameters()) parameters += p.numel();
 
-    torch::optim::AdamW optimizer(net->parameters(), torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
+    torch::optim::AdamW optimizer(net->parameters(),
+                                  torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
     net->train();
     const auto step = [&] {
       auto losses = net->Losses(groups, features, padding);
@@ -119,51 +142,66 @@ int main(int argc, char** argv) {
       const std::string dir = "/tmp/motionpipe_train_bench";
       fs::create_directories(dir);
       const auto tokens = net->text_encoder()->TokenIds(texts).contiguous();
-      bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({tokens.size(0), tokens.size(1)},
-                                               std::vector<int64_t>(tokens.data_ptr<int64_t>(), tokens.data_ptr<int64_t>() + tokens.numel())));
+      bench::SaveNpy(
+          dir + "/tokens.npy",
+          NpyArray::Int64({tokens.size(0), tokens.size(1)},
+                          std::vector<int64_t>(tokens.data_ptr<int64_t>(),
+                                               tokens.data_ptr<int64_t>() + tokens.numel())));
       const auto f = features.contiguous();
-      bench::SaveNpy(dir + "/features.npy", NpyArray::Float32({frames, batch, temos::kFeatureDim},
-                                                   std::vector<float>(f.data_ptr<float>(), f.data_ptr<float>() + f.numel())));
+      bench::SaveNpy(dir + "/features.npy",
+                     NpyArray::Float32(
+                         {frames, batch, temos::kFeatureDim},
+                         std::vector<float>(f.data_ptr<float>(), f.data_ptr<float>() + f.numel())));
       const auto pad = padding.to(torch::kUInt8).contiguous();
-      bench::SaveNpy(dir + "/padding.npy", NpyArray::Bool({batch, frames}, std::vector<uint8_t>(pad.data_ptr<uint8_t>(), pad.data_ptr<uint8_t>() + pad.numel())));
+      bench::SaveNpy(dir + "/padding.npy",
+                     NpyArray::Bool({batch, frames},
+                                    std::vector<uint8_t>(pad.data_ptr<uint8_t>(),
+                                                         pad.data_ptr<uint8_t>() + pad.numel())));
       std::ostringstream command;
-      command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
-              << "/bench/reference/temos_ref.py --batch-dir " << dir << " --latent " << size.latent << " --layers " << size.layers
-              << " --heads " << size.heads << " --ff " << size.ff << " --text-layers " << size.text_layers << " --vocab 1000 --steps "
-              << steps << " --threads " << threads;
+      command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads
+              << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
+              << "/bench/reference/temos_ref.py --batch-dir " << dir << " --latent " << size.latent
+              << " --layers " << size.layers << " --heads " << size.heads << " --ff " << size.ff
+              << " --text-layers " << size.text_layers << " --vocab 1000 --steps " << steps
+              << " --threads " << threads;
       const std::string out = Run(command.str());
       python = json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
     }
-    std::printf("%-6s %10lld %12.1f %12.1f %8.2f\n", size.name.c_str(), static_cast<long long>(parameters), cpp, python,
-                python > 0 ? cpp / python : 0.0);
+    std::printf("%-6s %10lld %12.1f %12.1f %8.2f\n", size.name.c_str(),
+                static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0);
     std::fflush(stdout);
   }
 
   if (scaling) {
     // The train stage through workers, one thread each: 1 rank on 1 worker, then 2 ranks on 2.
-    std::printf("\ntrain stage (SINC, demo size, batch 32, 40 steps, on-the-fly data) through workers, 1 thread per worker\n");
+    std::printf(
+        "\ntrain stage (SINC, demo size, batch 32, 40 steps, on-the-fly data) through workers, 1 "
+        "thread per worker\n");
     std::printf("%-8s %12s %12s %10s\n", "ranks", "samples/s", "wall s", "vs 1 rank");
     const std::string root = "/tmp/motionpipe_train_bench_runs";
     const std::string pipeline = root + ".yaml";
-    std::ofstream(pipeline) << "name: train_bench\noutput_root: " << root << "\nseed: 1\nvars: {world: 1}\nstages:\n"
-                            << "  corpus: {kind: corpus, params: {clips: 200, triplets: 0, shard_size: 100}}\n"
-                            << "  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}\n"
-                            << "  sinc:\n    kind: train\n    inputs: [singles]\n    world_size: \"${vars.world}\"\n"
-                            << "    params:\n      model: temos_sinc\n"
-                            << "      config: {variant: sinc, model: {latent: 128, layers: 2, heads: 4, ff: 512, text_encoder: {layers: 1, vocab: 800}}}\n"
-                            << "      data: {synthetic_p: 0.5, max_frames: 150}\n"
-                            << "      steps: 40\n      batch_size: 32\n      warmup: 5\n      checkpoint_every: 1000\n";
+    std::ofstream(pipeline)
+        << "name: train_bench\noutput_root: " << root << "\nseed: 1\nvars: {world: 1}\nstages:\n"
+        << "  corpus: {kind: corpus, params: {clips: 200, triplets: 0, shard_size: 100}}\n"
+        << "  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}\n"
+        << "  sinc:\n    kind: train\n    inputs: [singles]\n    world_size: \"${vars.world}\"\n"
+        << "    params:\n      model: temos_sinc\n"
+        << "      config: {variant: sinc, model: {latent: 128, layers: 2, heads: 4, ff: 512, "
+           "text_encoder: {layers: 1, vocab: 800}}}\n"
+        << "      data: {synthetic_p: 0.5, max_frames: 150}\n"
+        << "      steps: 40\n      batch_size: 32\n      warmup: 5\n      checkpoint_every: 1000\n";
     double one = 0;
     for (int world : {1, 2}) {
       fs::remove_all(root);
       const auto started = Clock::now();
-      Run(std::string(MOTIONPIPE_BINARY) + " run " + pipeline + " --workers " + std::to_string(world) +
-          " --threads 1 vars.world=" + std::to_string(world) + " 2>&1");
+      Run(std::string(MOTIONPIPE_BINARY) + " run " + pipeline + " --workers " +
+          std::to_string(world) + " --threads 1 vars.world=" + std::to_string(world) + " 2>&1");
       const double wall = Since(started);
       double total = 0;
       for (const auto& entry : fs::recursive_directory_iterator(root)) {
         const std::string name = entry.path().filename().string();
-        if (name.rfind("rank-", 0) == 0 && entry.path().string().find("/sinc/") != std::string::npos) {
+        if (name.rfind("rank-", 0) == 0 &&
+            entry.path().string().find("/sinc/") != std::string::npos) {
           std::ifstream in(entry.path());
           total += json::parse(in).at("samples_per_second").get<double>();
         }

@@ -36,11 +36,13 @@ int Fail(const Status& status) {
 std::atomic<int> g_run_signal{0};
 extern "C" void OnRunSignal(int signal) { g_run_signal = signal; }
 
-void AddDurationOption(CLI::App* cmd, const std::string& name, double* seconds, const std::string& help) {
+void AddDurationOption(CLI::App* cmd, const std::string& name, double* seconds,
+                       const std::string& help) {
   cmd->add_option_function<std::string>(
          name,
          [seconds, name](const std::string& text) {
-           if (!coordinator::ParseDuration(text, seconds)) throw CLI::ValidationError(name, "expected a duration like 1s, 500ms, 2m");
+           if (!coordinator::ParseDuration(text, seconds))
+             throw CLI::ValidationError(name, "expected a duration like 1s, 500ms, 2m");
          },
          help)
       ->type_name("DURATION");
@@ -62,8 +64,9 @@ Result<wire::ControlReply> StatusOf(const std::string& endpoint, int64_t job) {
 }
 
 // Spawns `motionpipe worker ...` with this same binary. The worker dies with `run` (which holds the
-// coordinator): a SIGKILLed `run` left its workers reconnecting for ever (issue 17). Called from the
-// main thread, whose exit is the process's (PR_SET_PDEATHSIG fires when the forking thread ends).
+// coordinator): a SIGKILLed `run` left its workers reconnecting for ever (issue 17). Called from
+// the main thread, whose exit is the process's (PR_SET_PDEATHSIG fires when the forking thread
+// ends).
 pid_t SpawnWorker(const std::vector<std::string>& args) {
   const pid_t parent = ::getpid();
   const pid_t pid = ::fork();
@@ -102,11 +105,15 @@ int Run(const RunOptions& o) {
   // (bench/eval_bench.py, one worker on 2 cores: 2 threads per task with 2 tasks at once took 399 s
   // for what 1 thread per task did in 257 s: the spinning BLAS pools oversubscribe the machine.)
   const int credit = o.credit > 0 ? o.credit : 2;
-  const int threads = o.threads > 0 ? o.threads : std::max(1, static_cast<int>(cores) / std::max(1, o.workers * credit));
+  const int threads = o.threads > 0
+                          ? o.threads
+                          : std::max(1, static_cast<int>(cores) / std::max(1, o.workers * credit));
   if (threads * o.workers > static_cast<int>(cores)) {
-    MP_LOG(kWarn, "run") << o.workers << " workers x " << threads << " threads oversubscribe " << cores << " cores";
+    MP_LOG(kWarn, "run") << o.workers << " workers x " << threads << " threads oversubscribe "
+                         << cores << " cores";
   }
-  const std::string journal = o.journal.empty() ? spec->output_root + "/.motionpipe/journal.sqlite" : o.journal;
+  const std::string journal =
+      o.journal.empty() ? spec->output_root + "/.motionpipe/journal.sqlite" : o.journal;
   // An unfinished job of this very pipeline in the journal is resumed, not started again.
   int64_t job_id = 0;
   {
@@ -133,26 +140,31 @@ int Run(const RunOptions& o) {
   std::atomic<bool> ready{false};
   Status coordinator_status;
   std::thread coordinator_thread([&] {
-    coordinator_status = coordinator::RunCoordinator(copts, &stop, false, [&](const std::string& w, const std::string& c) {
-      worker_endpoint = w;
-      control_endpoint = c;
-      ready = true;
-    });
+    coordinator_status = coordinator::RunCoordinator(
+        copts, &stop, false, [&](const std::string& w, const std::string& c) {
+          worker_endpoint = w;
+          control_endpoint = c;
+          ready = true;
+        });
     ready = true;
   });
   while (!ready) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   if (!coordinator_status.ok() || worker_endpoint.empty()) {
     stop = true;
     coordinator_thread.join();
-    return Fail(coordinator_status.ok() ? Internal("coordinator failed to start") : coordinator_status);
+    return Fail(coordinator_status.ok() ? Internal("coordinator failed to start")
+                                        : coordinator_status);
   }
 
   std::signal(SIGINT, OnRunSignal);
   std::signal(SIGTERM, OnRunSignal);
   const auto worker_args = [&](int index) {
-    std::vector<std::string> args = {"motionpipe",  "worker", "--coordinator", worker_endpoint, "--name", "local-" + std::to_string(index),
-                                     "--threads",   std::to_string(threads), "--credit", std::to_string(o.credit > 0 ? o.credit : 2),
-                                     "--heartbeat", std::to_string(o.heartbeat) + "s"};
+    std::vector<std::string> args = {"motionpipe",    "worker",
+                                     "--coordinator", worker_endpoint,
+                                     "--name",        "local-" + std::to_string(index),
+                                     "--threads",     std::to_string(threads),
+                                     "--credit",      std::to_string(o.credit > 0 ? o.credit : 2),
+                                     "--heartbeat",   std::to_string(o.heartbeat) + "s"};
     for (const std::string& dir : o.plugin_dirs) {
       args.push_back("--plugins");
       args.push_back(dir);
@@ -163,7 +175,9 @@ int Run(const RunOptions& o) {
   for (int k = 0; k < o.workers; ++k) pids[static_cast<size_t>(k)] = SpawnWorker(worker_args(k));
 
   if (job_id != 0) {
-    if (!o.quiet) std::printf("resuming job %lld of %s from %s\n", static_cast<long long>(job_id), o.pipeline.c_str(), journal.c_str());
+    if (!o.quiet)
+      std::printf("resuming job %lld of %s from %s\n", static_cast<long long>(job_id),
+                  o.pipeline.c_str(), journal.c_str());
   } else {
     wire::ControlRequest request;
     request.mutable_submit()->set_pipeline_yaml(*text);
@@ -190,7 +204,10 @@ int Run(const RunOptions& o) {
       int status = 0;
       if (pids[k] > 0 && ::waitpid(pids[k], &status, WNOHANG) == pids[k]) {
         if (restarts++ < 100) {
-          MP_LOG(kWarn, "run") << "worker local-" << k << " exited (" << (WIFSIGNALED(status) ? "signal " + std::to_string(WTERMSIG(status)) : "code " + std::to_string(WEXITSTATUS(status)))
+          MP_LOG(kWarn, "run") << "worker local-" << k << " exited ("
+                               << (WIFSIGNALED(status)
+                                       ? "signal " + std::to_string(WTERMSIG(status))
+                                       : "code " + std::to_string(WEXITSTATUS(status)))
                                << "); restarting it";
           pids[k] = SpawnWorker(worker_args(static_cast<int>(k)));
         } else {
@@ -216,7 +233,8 @@ int Run(const RunOptions& o) {
       } else if (!o.quiet) {
         const std::string text_block = FormatStatus(*status, false, false, job.stages_size() > 12);
         const auto now = std::chrono::steady_clock::now();
-        if (text_block != last_plain && now - last_plain_time > std::chrono::seconds(job.stages_size() > 12 ? 20 : 5)) {
+        if (text_block != last_plain &&
+            now - last_plain_time > std::chrono::seconds(job.stages_size() > 12 ? 20 : 5)) {
           std::fputs(text_block.c_str(), stdout);
           std::fflush(stdout);
           last_plain = text_block;
@@ -227,15 +245,17 @@ int Run(const RunOptions& o) {
         final_state = job.state();
         if (!tty && !o.quiet) std::fputs(FormatStatus(*status, false, false).c_str(), stdout);
         if (!o.quiet) {
-          std::printf("job %lld %s in %.1f s; outputs in %s\n", static_cast<long long>(job_id), final_state.c_str(),
-                      job.finished_unix() - job.created_unix(), job.output_dir().c_str());
+          std::printf("job %lld %s in %.1f s; outputs in %s\n", static_cast<long long>(job_id),
+                      final_state.c_str(), job.finished_unix() - job.created_unix(),
+                      job.output_dir().c_str());
         }
         break;
       }
     }
     if (g_run_signal.load()) {
       final_state = "interrupted";
-      std::printf("interrupted: the job stays in %s; run the same command again to resume it\n", journal.c_str());
+      std::printf("interrupted: the job stays in %s; run the same command again to resume it\n",
+                  journal.c_str());
       break;
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(tty ? 300 : 500));
@@ -245,7 +265,8 @@ int Run(const RunOptions& o) {
   }
   for (pid_t pid : pids) {
     if (pid <= 0) continue;
-    for (int k = 0; k < 100 && ::waitpid(pid, nullptr, WNOHANG) == 0; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    for (int k = 0; k < 100 && ::waitpid(pid, nullptr, WNOHANG) == 0; ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
     if (::waitpid(pid, nullptr, WNOHANG) == 0) {
       ::kill(pid, SIGKILL);
       ::waitpid(pid, nullptr, 0);
@@ -260,32 +281,45 @@ int Run(const RunOptions& o) {
 
 void AddEngineCommands(CLI::App& app, int* exit_code) {
   {  // run
-    auto* cmd = app.add_subcommand("run", "Run a pipeline locally: a coordinator and N worker processes on this machine");
+    auto* cmd = app.add_subcommand(
+        "run", "Run a pipeline locally: a coordinator and N worker processes on this machine");
     static RunOptions o;
     cmd->add_option("pipeline", o.pipeline, "Pipeline YAML")->required()->check(CLI::ExistingFile);
     cmd->add_option("overrides", o.overrides, "Overrides key.sub=value");
-    cmd->add_option("--workers,-w", o.workers, "Worker processes")->capture_default_str()->check(CLI::Range(1, 256));
-    cmd->add_option("--threads", o.threads, "Threads per task (default: cores / (workers x credit), at least 1)");
+    cmd->add_option("--workers,-w", o.workers, "Worker processes")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 256));
+    cmd->add_option("--threads", o.threads,
+                    "Threads per task (default: cores / (workers x credit), at least 1)");
     cmd->add_option("--credit", o.credit, "Tasks leased to a worker at once (default 2)");
-    cmd->add_option("--journal", o.journal, "Journal file (default: <output_root>/.motionpipe/journal.sqlite)");
-    cmd->add_option("--metrics", o.metrics, "Serve the coordinator's /metrics here, e.g. 127.0.0.1:9100");
+    cmd->add_option("--journal", o.journal,
+                    "Journal file (default: <output_root>/.motionpipe/journal.sqlite)");
+    cmd->add_option("--metrics", o.metrics,
+                    "Serve the coordinator's /metrics here, e.g. 127.0.0.1:9100");
     cmd->add_option("--plugins", o.plugin_dirs, "Extra plugin directories");
     AddDurationOption(cmd, "--heartbeat", &o.heartbeat, "Heartbeat interval (default 1s)");
     cmd->add_flag("--quiet,-q", o.quiet, "No progress display");
     cmd->callback([exit_code] { *exit_code = Run(o); });
   }
   {  // coordinator
-    auto* cmd = app.add_subcommand("coordinator", "Run a coordinator (workers connect to it; submit jobs with `submit`)");
+    auto* cmd = app.add_subcommand(
+        "coordinator", "Run a coordinator (workers connect to it; submit jobs with `submit`)");
     static coordinator::CoordinatorOptions o;
     cmd->add_option("--bind", o.bind, "Endpoint for workers")->capture_default_str();
-    cmd->add_option("--control", o.control, "Endpoint for CLI requests (keep it on loopback unless you mean it)")->capture_default_str();
+    cmd->add_option("--control", o.control,
+                    "Endpoint for CLI requests (keep it on loopback unless you mean it)")
+        ->capture_default_str();
     cmd->add_option("--journal", o.journal, "SQLite journal (WAL)")->capture_default_str();
     cmd->add_option("--metrics", o.metrics_bind, "Serve /metrics here, e.g. 127.0.0.1:9100");
-    cmd->add_option("--liveness", o.liveness, "Missed heartbeats before a worker is lost")->capture_default_str();
+    cmd->add_option("--liveness", o.liveness, "Missed heartbeats before a worker is lost")
+        ->capture_default_str();
     AddDurationOption(cmd, "--heartbeat", &o.heartbeat_seconds, "Heartbeat interval (default 1s)");
-    cmd->add_option("--curve-keys", o.curve_keys, "Key file of this coordinator: enables CurveZMQ")->check(CLI::ExistingFile);
-    cmd->add_option("--allow", o.allow_list, "Worker public keys admitted (one per line)")->check(CLI::ExistingFile);
-    cmd->add_option("--plugins", o.plugin_dirs, "Plugin directories whose stage kinds pipelines may use");
+    cmd->add_option("--curve-keys", o.curve_keys, "Key file of this coordinator: enables CurveZMQ")
+        ->check(CLI::ExistingFile);
+    cmd->add_option("--allow", o.allow_list, "Worker public keys admitted (one per line)")
+        ->check(CLI::ExistingFile);
+    cmd->add_option("--plugins", o.plugin_dirs,
+                    "Plugin directories whose stage kinds pipelines may use");
     cmd->callback([exit_code] {
       std::atomic<bool> stop{false};
       const Status s = coordinator::RunCoordinator(o, &stop, true);
@@ -295,17 +329,26 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
   {  // worker
     auto* cmd = app.add_subcommand("worker", "Run a worker that connects to a coordinator");
     static worker::WorkerOptions o;
-    cmd->add_option("--coordinator,-c", o.coordinator, "Coordinator endpoint")->capture_default_str();
+    cmd->add_option("--coordinator,-c", o.coordinator, "Coordinator endpoint")
+        ->capture_default_str();
     cmd->add_option("--name", o.name, "Worker name (default host:pid)");
-    cmd->add_option("--threads", o.threads, "Thread budget of one task")->capture_default_str()->check(CLI::Range(1, 1024));
-    cmd->add_option("--credit", o.credit, "Tasks leased at once")->capture_default_str()->check(CLI::Range(1, 100000));
+    cmd->add_option("--threads", o.threads, "Thread budget of one task")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 1024));
+    cmd->add_option("--credit", o.credit, "Tasks leased at once")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 100000));
     AddDurationOption(cmd, "--heartbeat", &o.heartbeat_seconds, "Heartbeat interval (default 1s)");
-    cmd->add_option("--liveness", o.liveness, "Missed heartbeats before reconnecting")->capture_default_str();
-    AddDurationOption(cmd, "--drain-timeout", &o.drain_timeout_seconds, "On SIGTERM, how long the running task may finish");
+    cmd->add_option("--liveness", o.liveness, "Missed heartbeats before reconnecting")
+        ->capture_default_str();
+    AddDurationOption(cmd, "--drain-timeout", &o.drain_timeout_seconds,
+                      "On SIGTERM, how long the running task may finish");
     cmd->add_option("--plugins", o.plugin_dirs, "Extra plugin directories");
     cmd->add_option("--metrics", o.metrics_bind, "Serve /metrics here, e.g. 127.0.0.1:9101");
-    cmd->add_option("--curve-keys", o.curve_keys, "This worker's key file: enables CurveZMQ")->check(CLI::ExistingFile);
-    cmd->add_option("--server-key", o.server_key, "The coordinator's public key (40-char Z85) or key file");
+    cmd->add_option("--curve-keys", o.curve_keys, "This worker's key file: enables CurveZMQ")
+        ->check(CLI::ExistingFile);
+    cmd->add_option("--server-key", o.server_key,
+                    "The coordinator's public key (40-char Z85) or key file");
     cmd->callback([exit_code] {
       std::atomic<bool> stop{false};
       const Status s = worker::RunWorker(o, &stop, true);
@@ -314,7 +357,8 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
   }
   static std::string control = DefaultControlEndpoint();
   {  // submit
-    auto* cmd = app.add_subcommand("submit", "Submit a pipeline to a running coordinator; prints the job id");
+    auto* cmd = app.add_subcommand("submit",
+                                   "Submit a pipeline to a running coordinator; prints the job id");
     static std::string pipeline;
     static std::vector<std::string> overrides;
     cmd->add_option("pipeline", pipeline, "Pipeline YAML")->required()->check(CLI::ExistingFile);
@@ -330,12 +374,15 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
       auto reply = Control(control, request);
       if (!reply.ok()) return void(*exit_code = Fail(reply.status()));
       if (!reply->ok()) return void(*exit_code = Fail(InvalidArgument(reply->error())));
-      if (reply->job_id() == 0) std::printf("scheduled (recurring pipeline); see `motionpipe status`\n");
-      else std::printf("%lld\n", static_cast<long long>(reply->job_id()));
+      if (reply->job_id() == 0)
+        std::printf("scheduled (recurring pipeline); see `motionpipe status`\n");
+      else
+        std::printf("%lld\n", static_cast<long long>(reply->job_id()));
     });
   }
   {  // status
-    auto* cmd = app.add_subcommand("status", "Jobs, their stages (counts, throughput, ETA, failures) and workers");
+    auto* cmd = app.add_subcommand(
+        "status", "Jobs, their stages (counts, throughput, ETA, failures) and workers");
     static int64_t job = 0;
     static bool json = false, watch = false;
     cmd->add_option("job", job, "Job id (default: all)");
@@ -348,15 +395,18 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
         auto reply = StatusOf(control, job);
         if (!reply.ok()) return void(*exit_code = Fail(reply.status()));
         if (!reply->ok()) return void(*exit_code = Fail(NotFound(reply->error())));
-        if (json) std::puts(JsonOf(*reply).c_str());
-        else std::fputs(FormatStatus(*reply, tty, true).c_str(), stdout);
+        if (json)
+          std::puts(JsonOf(*reply).c_str());
+        else
+          std::fputs(FormatStatus(*reply, tty, true).c_str(), stdout);
         std::fflush(stdout);
         if (watch) std::this_thread::sleep_for(std::chrono::seconds(1));
       } while (watch);
     });
   }
   {  // wait
-    auto* cmd = app.add_subcommand("wait", "Wait for a job; exit 0 if it succeeded, 1 if it failed or was cancelled");
+    auto* cmd = app.add_subcommand(
+        "wait", "Wait for a job; exit 0 if it succeeded, 1 if it failed or was cancelled");
     static int64_t job = 0;
     static double timeout = 0;
     cmd->add_option("job", job, "Job id")->required();
@@ -367,7 +417,8 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
       while (true) {
         auto reply = StatusOf(control, job);
         if (!reply.ok()) return void(*exit_code = Fail(reply.status()));
-        if (!reply->ok() || reply->jobs_size() != 1) return void(*exit_code = Fail(NotFound(reply->error())));
+        if (!reply->ok() || reply->jobs_size() != 1)
+          return void(*exit_code = Fail(NotFound(reply->error())));
         const std::string state = reply->jobs(0).state();
         if (state != "running" && state != "pending") {
           std::printf("job %lld %s\n", static_cast<long long>(job), state.c_str());
@@ -375,8 +426,11 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
           *exit_code = state == "succeeded" ? kExitOk : kExitFailure;
           return;
         }
-        if (timeout > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() > timeout) {
-          std::printf("job %lld still %s after the timeout\n", static_cast<long long>(job), state.c_str());
+        if (timeout > 0 &&
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >
+                timeout) {
+          std::printf("job %lld still %s after the timeout\n", static_cast<long long>(job),
+                      state.c_str());
           *exit_code = kExitFailure;
           return;
         }
@@ -401,7 +455,8 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
   {  // plugins
     auto* cmd = app.add_subcommand("plugins", "Plugin libraries");
     cmd->require_subcommand(1);
-    auto* list = cmd->add_subcommand("list", "Load the plugins and list their stage kinds and objects (and any problems)");
+    auto* list = cmd->add_subcommand(
+        "list", "Load the plugins and list their stage kinds and objects (and any problems)");
     static std::vector<std::string> dirs;
     list->add_option("--dir", dirs, "Plugin directories (besides the defaults)");
     list->callback([exit_code] {
@@ -410,27 +465,32 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
       for (const std::string& d : worker::DefaultPluginDirs()) searched.push_back(d);
       for (const std::string& d : searched) host.LoadDirectory(d);
       std::printf("searched: ");
-      for (size_t k = 0; k < searched.size(); ++k) std::printf("%s%s", k ? ", " : "", searched[k].c_str());
+      for (size_t k = 0; k < searched.size(); ++k)
+        std::printf("%s%s", k ? ", " : "", searched[k].c_str());
       std::printf("\n");
       for (const auto& p : host.plugins()) {
         std::printf("%s %s (%s)\n", p.name.c_str(), p.version.c_str(), p.path.c_str());
         for (const std::string& k : p.stage_kinds) std::printf("  stage kind %s\n", k.c_str());
         for (const std::string& k : p.objects) std::printf("  object %s\n", k.c_str());
       }
-      for (const auto& problem : host.problems()) std::printf("refused %s: %s\n", problem.path.c_str(), problem.message.c_str());
+      for (const auto& problem : host.problems())
+        std::printf("refused %s: %s\n", problem.path.c_str(), problem.message.c_str());
       if (!host.problems().empty()) *exit_code = kExitFailure;
     });
   }
   {  // keys
-    auto* cmd = app.add_subcommand("keys", "CurveZMQ keys for encrypted, authenticated worker connections");
+    auto* cmd =
+        app.add_subcommand("keys", "CurveZMQ keys for encrypted, authenticated worker connections");
     cmd->require_subcommand(1);
-    auto* generate = cmd->add_subcommand("generate", "Write a new key pair (mode 600) and print the public key");
+    auto* generate =
+        cmd->add_subcommand("generate", "Write a new key pair (mode 600) and print the public key");
     static std::string out;
     generate->add_option("--out", out, "Key file to write")->required();
     generate->callback([exit_code] {
       auto keys = net::GenerateCurveKeyPair();
       if (!keys.ok()) return void(*exit_code = Fail(keys.status()));
-      if (const Status s = WriteFileAtomic(out, net::FormatKeyFile(*keys)); !s.ok()) return void(*exit_code = Fail(s));
+      if (const Status s = WriteFileAtomic(out, net::FormatKeyFile(*keys)); !s.ok())
+        return void(*exit_code = Fail(s));
       ::chmod(out.c_str(), 0600);
       std::printf("%s\n", keys->public_key.c_str());
     });

@@ -21,7 +21,8 @@ int Fail(const Status& status) {
 Result<nlohmann::json> ParseConfig(const std::string& text) {
   if (text.empty()) return nlohmann::json::object();
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
-  if (!j.is_object()) return InvalidArgument("--config: expected a JSON object, e.g. '{\"fallback\": \"lexicon\"}'");
+  if (!j.is_object())
+    return InvalidArgument("--config: expected a JSON object, e.g. '{\"fallback\": \"lexicon\"}'");
   return j;
 }
 
@@ -35,7 +36,8 @@ worker::PluginHost& Plugins() {
 }
 
 // The GPT-labelled texts of SINC's answers file (third answer, binary truth), one split of them.
-Result<std::vector<labels::LabelledText>> GptTruth(const std::string& path, const std::string& split) {
+Result<std::vector<labels::LabelledText>> GptTruth(const std::string& path,
+                                                   const std::string& split) {
   MP_ASSIGN_OR_RETURN(const labels::GptAnswers answers, labels::LoadGptAnswers(path, 2));
   std::vector<labels::LabelledText> out;
   for (size_t k = 0; k < answers.texts.size(); ++k) {
@@ -43,25 +45,30 @@ Result<std::vector<labels::LabelledText>> GptTruth(const std::string& path, cons
     if ((split == "heldout" && !held_out) || (split == "train" && held_out)) continue;
     labels::LabelledText t;
     t.text = answers.texts[k];
-    for (int p = 0; p < kNumBodyParts; ++p) t.truth[static_cast<size_t>(p)] = ((answers.parts[k] >> p) & 1u) ? 1.f : 0.f;
+    for (int p = 0; p < kNumBodyParts; ++p)
+      t.truth[static_cast<size_t>(p)] = ((answers.parts[k] >> p) & 1u) ? 1.f : 0.f;
     out.push_back(std::move(t));
   }
   return out;
 }
 
-// The corpus's texts with their known parts (texts/labels.json: fractions; in-between = "sometimes").
+// The corpus's texts with their known parts (texts/labels.json: fractions; in-between =
+// "sometimes").
 Result<std::vector<labels::LabelledText>> CorpusTextTruth(const std::string& dir) {
   const std::string path = dir + "/texts/labels.json";
   MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
-  if (!j.is_object() || !j.contains("labels") || !j["labels"].is_object()) return DataLoss(path + ": expected {\"labels\": {...}}");
+  if (!j.is_object() || !j.contains("labels") || !j["labels"].is_object())
+    return DataLoss(path + ": expected {\"labels\": {...}}");
   std::vector<labels::LabelledText> out;
   for (const auto& item : j["labels"].items()) {
     const auto& parts = item.value().at("parts");
-    if (!parts.is_array() || parts.size() != kNumBodyParts) return DataLoss(path + ": '" + item.key() + "': parts must have 6 values");
+    if (!parts.is_array() || parts.size() != kNumBodyParts)
+      return DataLoss(path + ": '" + item.key() + "': parts must have 6 values");
     labels::LabelledText t;
     t.text = item.key();
-    for (int p = 0; p < kNumBodyParts; ++p) t.truth[static_cast<size_t>(p)] = parts[static_cast<size_t>(p)].get<float>();
+    for (int p = 0; p < kNumBodyParts; ++p)
+      t.truth[static_cast<size_t>(p)] = parts[static_cast<size_t>(p)].get<float>();
     out.push_back(std::move(t));
   }
   return out;
@@ -76,7 +83,8 @@ Result<SegmentTruth> CorpusSegmentTruth(const std::string& dir, size_t limit) {
   SegmentTruth out;
   std::vector<std::string> files;
   std::error_code ec;
-  for (const auto& entry : std::filesystem::directory_iterator(dir + "/clips", ec)) files.push_back(entry.path().string());
+  for (const auto& entry : std::filesystem::directory_iterator(dir + "/clips", ec))
+    files.push_back(entry.path().string());
   if (ec) return NotFound(dir + "/clips: " + ec.message());
   std::sort(files.begin(), files.end());
   for (const std::string& file : files) {
@@ -88,7 +96,8 @@ Result<SegmentTruth> CorpusSegmentTruth(const std::string& dir, size_t limit) {
         out.motions.push_back(SliceFrames(clip.motion, seg.start_frame, seg.end_frame));
         labels::LabelledText t;
         t.text = seg.text;
-        for (int p = 0; p < kNumBodyParts; ++p) t.truth[static_cast<size_t>(p)] = ((seg.parts >> p) & 1u) ? 1.f : 0.f;
+        for (int p = 0; p < kNumBodyParts; ++p)
+          t.truth[static_cast<size_t>(p)] = ((seg.parts >> p) & 1u) ? 1.f : 0.f;
         out.truth.push_back(std::move(t));
       }
     }
@@ -97,8 +106,10 @@ Result<SegmentTruth> CorpusSegmentTruth(const std::string& dir, size_t limit) {
   return out;
 }
 
-void PrintRow(const std::string& labeler, const std::string& data, const labels::LabelerAccuracy& acc) {
-  std::printf("%-14s %-26s %6lld", labeler.c_str(), data.c_str(), static_cast<long long>(acc.texts));
+void PrintRow(const std::string& labeler, const std::string& data,
+              const labels::LabelerAccuracy& acc) {
+  std::printf("%-14s %-26s %6lld", labeler.c_str(), data.c_str(),
+              static_cast<long long>(acc.texts));
   for (const double a : acc.part) std::printf(" %7.3f", a);
   std::printf(" %7.3f\n", acc.mean);
 }
@@ -106,13 +117,15 @@ void PrintRow(const std::string& labeler, const std::string& data, const labels:
 }  // namespace
 
 void AddLabelsCommands(CLI::App& app, int* exit_code) {
-  CLI::App* group = app.add_subcommand("labels", "Body-part labels of action texts (SINC): label texts, score labelers");
+  CLI::App* group = app.add_subcommand(
+      "labels", "Body-part labels of action texts (SINC): label texts, score labelers");
   group->require_subcommand(1);
   {  // label
     auto* cmd = group->add_subcommand("label", "Print the body parts a labeler gives each text");
     static std::string name = "lexicon", config_text;
     static std::vector<std::string> texts;
-    cmd->add_option("--labeler", name, "gpt-answers, lexicon, llm, random, or a plugin's (learned)")->capture_default_str();
+    cmd->add_option("--labeler", name, "gpt-answers, lexicon, llm, random, or a plugin's (learned)")
+        ->capture_default_str();
     cmd->add_option("--config", config_text, "The labeler's configuration as JSON");
     cmd->add_option("texts", texts, "Action texts")->required();
     cmd->callback([exit_code] {
@@ -124,22 +137,30 @@ void AddLabelsCommands(CLI::App& app, int* exit_code) {
       for (const auto& t : texts) inputs.push_back({t, nullptr});
       auto parts = (*labeler)->Label(inputs);
       if (!parts.ok()) return void(*exit_code = Fail(parts.status()));
-      for (size_t k = 0; k < texts.size(); ++k) std::printf("%-40s %s\n", texts[k].c_str(), PartSetToString((*parts)[k]).c_str());
+      for (size_t k = 0; k < texts.size(); ++k)
+        std::printf("%-40s %s\n", texts[k].c_str(), PartSetToString((*parts)[k]).c_str());
     });
   }
   {  // eval
-    auto* cmd = group->add_subcommand(
-        "eval", "Per-part and mean accuracy (SINC Table 1: Yes/No counted, 'sometimes' ignored) of labelers");
+    auto* cmd = group->add_subcommand("eval",
+                                      "Per-part and mean accuracy (SINC Table 1: Yes/No counted, "
+                                      "'sometimes' ignored) of labelers");
     static std::vector<std::string> names;
-    static std::string config_text, gpt_file = "data/text/babel_action_labels_gpt3.json", split = "heldout", corpus;
+    static std::string config_text, gpt_file = "data/text/babel_action_labels_gpt3.json",
+                                    split = "heldout", corpus;
     static size_t segments = 2000;
     static int show_errors = 0;
-    cmd->add_option("--labeler", names, "Labelers to score (repeat); default: lexicon")->capture_default_str();
+    cmd->add_option("--labeler", names, "Labelers to score (repeat); default: lexicon")
+        ->capture_default_str();
     cmd->add_option("--config", config_text, "JSON configuration given to every labeler");
-    cmd->add_option("--gpt", gpt_file, "SINC's GPT answers file: the third answer is the truth")->capture_default_str();
-    cmd->add_option("--split", split, "Which GPT texts: heldout (1 in 5 by hash), train, all, none")->capture_default_str();
-    cmd->add_option("--corpus", corpus, "A generated corpus: its texts (known parts) and labelled segments");
-    cmd->add_option("--segments", segments, "Segments scored for motion-based labelers")->capture_default_str();
+    cmd->add_option("--gpt", gpt_file, "SINC's GPT answers file: the third answer is the truth")
+        ->capture_default_str();
+    cmd->add_option("--split", split, "Which GPT texts: heldout (1 in 5 by hash), train, all, none")
+        ->capture_default_str();
+    cmd->add_option("--corpus", corpus,
+                    "A generated corpus: its texts (known parts) and labelled segments");
+    cmd->add_option("--segments", segments, "Segments scored for motion-based labelers")
+        ->capture_default_str();
     cmd->add_option("--show-errors", show_errors, "Print this many disagreements per data set");
     cmd->callback([exit_code] {
       auto config = ParseConfig(config_text);
@@ -160,8 +181,8 @@ void AddLabelsCommands(CLI::App& app, int* exit_code) {
         if (!segs.ok()) return void(*exit_code = Fail(segs.status()));
         corpus_segments = std::move(*segs);
       }
-      std::printf("%-14s %-26s %6s %7s %7s %7s %7s %7s %7s %7s\n", "labeler", "data", "n", "global", "torso", "l.arm",
-                  "r.arm", "l.leg", "r.leg", "mean");
+      std::printf("%-14s %-26s %6s %7s %7s %7s %7s %7s %7s %7s\n", "labeler", "data", "n", "global",
+                  "torso", "l.arm", "r.arm", "l.leg", "r.leg", "mean");
       for (const std::string& name : names) {
         auto labeler = worker::MakeLabeler(name, *config, &Plugins());
         if (!labeler.ok()) {
@@ -188,8 +209,8 @@ void AddLabelsCommands(CLI::App& app, int* exit_code) {
             }
             if (((*parts)[k] & mask) == want) continue;
             ++shown;
-            std::printf("    %-50s truth %-40s got %s\n", truth[k].text.c_str(), PartSetToString(want).c_str(),
-                        PartSetToString((*parts)[k]).c_str());
+            std::printf("    %-50s truth %-40s got %s\n", truth[k].text.c_str(),
+                        PartSetToString(want).c_str(), PartSetToString((*parts)[k]).c_str());
           }
         };
         if ((*labeler)->NeedsMotion()) {

@@ -1,6 +1,5 @@
 // motionpipe: one binary, many subcommands (ARCHITECTURE.md, "Processes and protocol").
 #include <CLI/CLI.hpp>
-
 #include <cstdio>
 #include <cstring>
 #include <iostream>
@@ -10,11 +9,13 @@
 #include "motionpipe/base/log.h"
 
 int main(int argc, char** argv) {
-  CLI::App app{"motionpipe: distributed batch pipelines for 3D human-motion research (SimMotionEdit, SINC)"};
+  CLI::App app{
+      "motionpipe: distributed batch pipelines for 3D human-motion research (SimMotionEdit, SINC)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("motionpipe ") + MOTIONPIPE_VERSION);
   std::string log_level = "info";
-  app.add_option("--log", log_level, "Log level: debug, info, warn, error")->envname("MOTIONPIPE_LOG");
+  app.add_option("--log", log_level, "Log level: debug, info, warn, error")
+      ->envname("MOTIONPIPE_LOG");
   int exit_code = motionpipe::cli::kExitOk;
   motionpipe::cli::AddDataCommands(app, &exit_code);
   motionpipe::cli::AddEngineCommands(app, &exit_code);
@@ -23,7 +24,8 @@ int main(int argc, char** argv) {
   motionpipe::cli::AddModelCommands(app, &exit_code);
   app.parse_complete_callback([&] {
     motionpipe::LogLevel level;
-    if (!motionpipe::ParseLogLevel(log_level, &level)) throw CLI::ValidationError("--log", "unknown level " + log_level);
+    if (!motionpipe::ParseLogLevel(log_level, &level))
+      throw CLI::ValidationError("--log", "unknown level " + log_level);
     motionpipe::SetLogLevel(level);
   });
   // The first word that is not an option must name a command: CLI11 alone would answer an unknown
@@ -41,7 +43,8 @@ int main(int argc, char** argv) {
       known += (known.empty() ? "" : ", ") + command->get_name();
     }
     if (!found) {
-      std::fprintf(stderr, "motionpipe: unknown command '%s' (commands: %s; motionpipe --help)\n", argv[i], known.c_str());
+      std::fprintf(stderr, "motionpipe: unknown command '%s' (commands: %s; motionpipe --help)\n",
+                   argv[i], known.c_str());
       return motionpipe::cli::kExitUsage;
     }
     break;

@@ -9,7 +9,8 @@ namespace motionpipe::coordinator {
 namespace {
 
 template <size_t N>
-Status ParseField(const std::string& field, int lo, int hi, const char* name, std::bitset<N>* out, bool* restricted) {
+Status ParseField(const std::string& field, int lo, int hi, const char* name, std::bitset<N>* out,
+                  bool* restricted) {
   *restricted = field != "*";
   std::stringstream items(field);
   std::string item;
@@ -33,7 +34,8 @@ Status ParseField(const std::string& field, int lo, int hi, const char* name, st
       try {
         size_t used = 0;
         a = std::stoi(range.substr(0, dash), &used);
-        if (used != (dash == std::string::npos ? range.size() : dash)) throw std::invalid_argument("a");
+        if (used != (dash == std::string::npos ? range.size() : dash))
+          throw std::invalid_argument("a");
         b = a;
         if (dash != std::string::npos) {
           b = std::stoi(range.substr(dash + 1), &used);
@@ -46,7 +48,8 @@ Status ParseField(const std::string& field, int lo, int hi, const char* name, st
       }
     }
     if (a < lo || b > hi || a > b) {
-      return InvalidArgument(std::string(name) + " must be within " + std::to_string(lo) + "-" + std::to_string(hi) + ": '" + item + "'");
+      return InvalidArgument(std::string(name) + " must be within " + std::to_string(lo) + "-" +
+                             std::to_string(hi) + ": '" + item + "'");
     }
     for (int v = a; v <= b; v += step) out->set(static_cast<size_t>(v));
   }
@@ -57,17 +60,23 @@ Status ParseField(const std::string& field, int lo, int hi, const char* name, st
 
 Result<CronSpec> ParseCron(const std::string& text) {
   std::string expr = text;
-  if (expr == "@hourly") expr = "0 * * * *";
-  else if (expr == "@daily" || expr == "@midnight") expr = "0 0 * * *";
-  else if (expr == "@weekly") expr = "0 0 * * 0";
-  else if (expr == "@monthly") expr = "0 0 1 * *";
-  else if (expr == "@yearly" || expr == "@annually") expr = "0 0 1 1 *";
+  if (expr == "@hourly")
+    expr = "0 * * * *";
+  else if (expr == "@daily" || expr == "@midnight")
+    expr = "0 0 * * *";
+  else if (expr == "@weekly")
+    expr = "0 0 * * 0";
+  else if (expr == "@monthly")
+    expr = "0 0 1 * *";
+  else if (expr == "@yearly" || expr == "@annually")
+    expr = "0 0 1 1 *";
   std::istringstream in(expr);
   std::vector<std::string> fields;
   std::string field;
   while (in >> field) fields.push_back(field);
   if (fields.size() != 5) {
-    return InvalidArgument("cron '" + text + "': expected 5 fields (minute hour day month weekday), found " +
+    return InvalidArgument("cron '" + text +
+                           "': expected 5 fields (minute hour day month weekday), found " +
                            std::to_string(fields.size()));
   }
   CronSpec spec;

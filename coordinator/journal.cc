@@ -34,10 +34,14 @@ std::string Text(sqlite3_stmt* stmt, int column) {
 
 const char* TaskStateName(TaskState state) {
   switch (state) {
-    case TaskState::kPending: return "pending";
-    case TaskState::kCommitted: return "committed";
-    case TaskState::kFailed: return "failed";
-    case TaskState::kQuarantined: return "quarantined";
+    case TaskState::kPending:
+      return "pending";
+    case TaskState::kCommitted:
+      return "committed";
+    case TaskState::kFailed:
+      return "failed";
+    case TaskState::kQuarantined:
+      return "quarantined";
   }
   return "unknown";
 }
@@ -53,17 +57,22 @@ Result<std::unique_ptr<Journal>> Journal::Open(const std::string& path) {
   sqlite3_busy_timeout(db, 5000);
   // WAL survives a killed process; NORMAL syncs at checkpoints (a power cut may lose the last
   // batch, a SIGKILL loses nothing that was committed).
-  MP_RETURN_IF_ERROR(journal->Exec("PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;").WithContext(path));
+  MP_RETURN_IF_ERROR(
+      journal->Exec("PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;").WithContext(path));
   MP_RETURN_IF_ERROR(journal->Exec(kSchema).WithContext(path));
   const auto prepare = [&](const char* sql, sqlite3_stmt** stmt) -> Status {
-    if (sqlite3_prepare_v2(db, sql, -1, stmt, nullptr) != SQLITE_OK) return Internal(path + ": " + sqlite3_errmsg(db));
+    if (sqlite3_prepare_v2(db, sql, -1, stmt, nullptr) != SQLITE_OK)
+      return Internal(path + ": " + sqlite3_errmsg(db));
     return Status::Ok();
   };
-  MP_RETURN_IF_ERROR(prepare("UPDATE tasks SET state=?, errors=?, lost=?, message=? WHERE job=? AND stage=? AND idx=?",
-                             &journal->update_task_));
-  MP_RETURN_IF_ERROR(prepare("INSERT INTO outputs (job, stage, idx, path, sha256, bytes) VALUES (?,?,?,?,?,?)",
-                             &journal->insert_output_));
-  MP_RETURN_IF_ERROR(prepare("UPDATE jobs SET state=?, finished=?, error=? WHERE id=?", &journal->update_job_));
+  MP_RETURN_IF_ERROR(prepare(
+      "UPDATE tasks SET state=?, errors=?, lost=?, message=? WHERE job=? AND stage=? AND idx=?",
+      &journal->update_task_));
+  MP_RETURN_IF_ERROR(
+      prepare("INSERT INTO outputs (job, stage, idx, path, sha256, bytes) VALUES (?,?,?,?,?,?)",
+              &journal->insert_output_));
+  MP_RETURN_IF_ERROR(
+      prepare("UPDATE jobs SET state=?, finished=?, error=? WHERE id=?", &journal->update_job_));
   return journal;
 }
 
@@ -88,7 +97,8 @@ Result<int64_t> Journal::CreateJob(const StoredJob& job) {
   MP_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
   sqlite3_stmt* stmt = nullptr;
   sqlite3_prepare_v2(db_,
-                     "INSERT INTO jobs (name, pipeline, fingerprint, state, created, output_dir) VALUES (?,?,?,?,?,?)",
+                     "INSERT INTO jobs (name, pipeline, fingerprint, state, created, output_dir) "
+                     "VALUES (?,?,?,?,?,?)",
                      -1, &stmt, nullptr);
   sqlite3_bind_text(stmt, 1, job.name.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(stmt, 2, job.pipeline.c_str(), -1, SQLITE_TRANSIENT);
@@ -120,17 +130,19 @@ Result<int64_t> Journal::CreateJob(const StoredJob& job) {
   return id;
 }
 
-void Journal::UpdateTask(int64_t job, const std::string& stage, int index, TaskState state, int errors, int lost,
-                         const std::string& message) {
+void Journal::UpdateTask(int64_t job, const std::string& stage, int index, TaskState state,
+                         int errors, int lost, const std::string& message) {
   ops_.push_back({0, job, stage, index, static_cast<int>(state), errors, lost, message, 0, {}});
 }
 
-void Journal::AddOutputs(int64_t job, const std::string& stage, int index, const std::vector<OutputRecord>& outputs) {
+void Journal::AddOutputs(int64_t job, const std::string& stage, int index,
+                         const std::vector<OutputRecord>& outputs) {
   if (outputs.empty()) return;
   ops_.push_back({1, job, stage, index, 0, 0, 0, "", 0, outputs});
 }
 
-void Journal::UpdateJob(int64_t job, const std::string& state, double finished, const std::string& error) {
+void Journal::UpdateJob(int64_t job, const std::string& state, double finished,
+                        const std::string& error) {
   ops_.push_back({2, job, "", 0, 0, 0, 0, state + '\n' + error, finished, {}});
 }
 
@@ -187,7 +199,8 @@ Result<std::vector<StoredJob>> Journal::LoadUnfinished() {
   std::map<int64_t, size_t> index;
   sqlite3_stmt* stmt = nullptr;
   sqlite3_prepare_v2(db_,
-                     "SELECT id, name, pipeline, fingerprint, state, created, finished, output_dir, error FROM jobs "
+                     "SELECT id, name, pipeline, fingerprint, state, created, finished, "
+                     "output_dir, error FROM jobs "
                      "WHERE state IN ('pending', 'running') ORDER BY id",
                      -1, &stmt, nullptr);
   while (sqlite3_step(stmt) == SQLITE_ROW) {
@@ -205,7 +218,10 @@ Result<std::vector<StoredJob>> Journal::LoadUnfinished() {
     jobs.push_back(std::move(job));
   }
   sqlite3_finalize(stmt);
-  sqlite3_prepare_v2(db_, "SELECT job, stage, idx, state, errors, lost, message FROM tasks ORDER BY job, stage, idx", -1, &stmt, nullptr);
+  sqlite3_prepare_v2(
+      db_,
+      "SELECT job, stage, idx, state, errors, lost, message FROM tasks ORDER BY job, stage, idx",
+      -1, &stmt, nullptr);
   std::map<std::tuple<int64_t, std::string, int>, std::pair<size_t, size_t>> task_index;
   while (sqlite3_step(stmt) == SQLITE_ROW) {
     const auto it = index.find(sqlite3_column_int64(stmt, 0));
@@ -221,11 +237,14 @@ Result<std::vector<StoredJob>> Journal::LoadUnfinished() {
     jobs[it->second].tasks.push_back(std::move(task));
   }
   sqlite3_finalize(stmt);
-  sqlite3_prepare_v2(db_, "SELECT job, stage, idx, path, sha256, bytes FROM outputs", -1, &stmt, nullptr);
+  sqlite3_prepare_v2(db_, "SELECT job, stage, idx, path, sha256, bytes FROM outputs", -1, &stmt,
+                     nullptr);
   while (sqlite3_step(stmt) == SQLITE_ROW) {
-    const auto it = task_index.find({sqlite3_column_int64(stmt, 0), Text(stmt, 1), sqlite3_column_int(stmt, 2)});
+    const auto it = task_index.find(
+        {sqlite3_column_int64(stmt, 0), Text(stmt, 1), sqlite3_column_int(stmt, 2)});
     if (it == task_index.end()) continue;
-    jobs[it->second.first].tasks[it->second.second].outputs.push_back({Text(stmt, 3), Text(stmt, 4), sqlite3_column_int64(stmt, 5)});
+    jobs[it->second.first].tasks[it->second.second].outputs.push_back(
+        {Text(stmt, 3), Text(stmt, 4), sqlite3_column_int64(stmt, 5)});
   }
   sqlite3_finalize(stmt);
   return jobs;
@@ -234,7 +253,9 @@ Result<std::vector<StoredJob>> Journal::LoadUnfinished() {
 Result<std::vector<StoredJob>> Journal::ListJobs(int limit) {
   std::vector<StoredJob> jobs;
   sqlite3_stmt* stmt = nullptr;
-  sqlite3_prepare_v2(db_, "SELECT id, name, fingerprint, state, created, finished, output_dir, error FROM jobs ORDER BY id DESC LIMIT ?",
+  sqlite3_prepare_v2(db_,
+                     "SELECT id, name, fingerprint, state, created, finished, output_dir, error "
+                     "FROM jobs ORDER BY id DESC LIMIT ?",
                      -1, &stmt, nullptr);
   sqlite3_bind_int(stmt, 1, limit);
   while (sqlite3_step(stmt) == SQLITE_ROW) {
@@ -254,8 +275,9 @@ Result<std::vector<StoredJob>> Journal::ListJobs(int limit) {
 }
 
 Result<int64_t> Journal::NextAttemptBlock() {
-  MP_RETURN_IF_ERROR(Exec("INSERT INTO meta (key, value) VALUES ('attempt_block', 1) "
-                          "ON CONFLICT(key) DO UPDATE SET value = value + 1"));
+  MP_RETURN_IF_ERROR(
+      Exec("INSERT INTO meta (key, value) VALUES ('attempt_block', 1) "
+           "ON CONFLICT(key) DO UPDATE SET value = value + 1"));
   sqlite3_stmt* stmt = nullptr;
   sqlite3_prepare_v2(db_, "SELECT value FROM meta WHERE key = 'attempt_block'", -1, &stmt, nullptr);
   int64_t block = 0;
@@ -267,14 +289,17 @@ Result<int64_t> Journal::NextAttemptBlock() {
 
 Result<int64_t> Journal::AddSchedule(const StoredSchedule& schedule) {
   sqlite3_stmt* stmt = nullptr;
-  sqlite3_prepare_v2(db_, "INSERT INTO schedules (name, pipeline, cron, next_fire) VALUES (?,?,?,?)", -1, &stmt, nullptr);
+  sqlite3_prepare_v2(db_,
+                     "INSERT INTO schedules (name, pipeline, cron, next_fire) VALUES (?,?,?,?)", -1,
+                     &stmt, nullptr);
   sqlite3_bind_text(stmt, 1, schedule.name.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(stmt, 2, schedule.pipeline.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(stmt, 3, schedule.cron.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_int64(stmt, 4, schedule.next_fire);
   const int rc = sqlite3_step(stmt);
   sqlite3_finalize(stmt);
-  if (rc != SQLITE_DONE) return IoError(std::string("journal: cannot add schedule: ") + sqlite3_errmsg(db_));
+  if (rc != SQLITE_DONE)
+    return IoError(std::string("journal: cannot add schedule: ") + sqlite3_errmsg(db_));
   return sqlite3_last_insert_rowid(db_);
 }
 
@@ -285,16 +310,19 @@ Status Journal::SetScheduleNextFire(int64_t id, int64_t next_fire) {
   sqlite3_bind_int64(stmt, 2, id);
   const int rc = sqlite3_step(stmt);
   sqlite3_finalize(stmt);
-  if (rc != SQLITE_DONE) return IoError(std::string("journal: cannot update schedule: ") + sqlite3_errmsg(db_));
+  if (rc != SQLITE_DONE)
+    return IoError(std::string("journal: cannot update schedule: ") + sqlite3_errmsg(db_));
   return Status::Ok();
 }
 
 Result<std::vector<StoredSchedule>> Journal::LoadSchedules() {
   std::vector<StoredSchedule> schedules;
   sqlite3_stmt* stmt = nullptr;
-  sqlite3_prepare_v2(db_, "SELECT id, name, pipeline, cron, next_fire FROM schedules ORDER BY id", -1, &stmt, nullptr);
+  sqlite3_prepare_v2(db_, "SELECT id, name, pipeline, cron, next_fire FROM schedules ORDER BY id",
+                     -1, &stmt, nullptr);
   while (sqlite3_step(stmt) == SQLITE_ROW) {
-    schedules.push_back({sqlite3_column_int64(stmt, 0), Text(stmt, 1), Text(stmt, 2), Text(stmt, 3), sqlite3_column_int64(stmt, 4)});
+    schedules.push_back({sqlite3_column_int64(stmt, 0), Text(stmt, 1), Text(stmt, 2), Text(stmt, 3),
+                         sqlite3_column_int64(stmt, 4)});
   }
   sqlite3_finalize(stmt);
   return schedules;

@@ -1,8 +1,9 @@
-// The coordinator's journal: jobs, their stages' tasks, committed outputs, and recurring schedules in
-// SQLite (WAL). Job creation is committed at once; task and job state changes are buffered and
-// written in one transaction per Flush() (the coordinator flushes every few milliseconds), so a job of
-// tens of thousands of tasks costs a few transactions, not one per task. A coordinator killed with
-// SIGKILL and restarted reloads every unfinished job: tasks journaled as committed are never run again.
+// The coordinator's journal: jobs, their stages' tasks, committed outputs, and recurring schedules
+// in SQLite (WAL). Job creation is committed at once; task and job state changes are buffered and
+// written in one transaction per Flush() (the coordinator flushes every few milliseconds), so a job
+// of tens of thousands of tasks costs a few transactions, not one per task. A coordinator killed
+// with SIGKILL and restarted reloads every unfinished job: tasks journaled as committed are never
+// run again.
 #pragma once
 
 #include <sqlite3.h>
@@ -40,7 +41,7 @@ struct StoredJob {
   std::string name;
   std::string pipeline;  // resolved JSON
   std::string fingerprint;
-  std::string state;     // pending, running, succeeded, failed, cancelled
+  std::string state;  // pending, running, succeeded, failed, cancelled
   double created = 0, finished = 0;
   std::string output_dir;
   std::string error;
@@ -64,9 +65,10 @@ class Journal {
   // Inserts the job and all its tasks (pending) in one committed transaction; returns the job id.
   Result<int64_t> CreateJob(const StoredJob& job);
   // Buffered until Flush().
-  void UpdateTask(int64_t job, const std::string& stage, int index, TaskState state, int errors, int lost,
-                  const std::string& message);
-  void AddOutputs(int64_t job, const std::string& stage, int index, const std::vector<OutputRecord>& outputs);
+  void UpdateTask(int64_t job, const std::string& stage, int index, TaskState state, int errors,
+                  int lost, const std::string& message);
+  void AddOutputs(int64_t job, const std::string& stage, int index,
+                  const std::vector<OutputRecord>& outputs);
   void UpdateJob(int64_t job, const std::string& state, double finished, const std::string& error);
   // Commits every buffered change in one transaction. IoError on failure (the buffer is kept).
   Status Flush();

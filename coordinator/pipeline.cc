@@ -28,8 +28,8 @@ struct ExpansionLimit : std::length_error {
                           " values (nested aliases, e.g. a \"billion laughs\" file?)") {}
 };
 
-// YAML -> JSON with scalar types inferred as YAML 1.2's core schema does; quoted scalars stay strings.
-// Counts the values made in *budget and throws ExpansionLimit past kMaxDocumentNodes.
+// YAML -> JSON with scalar types inferred as YAML 1.2's core schema does; quoted scalars stay
+// strings. Counts the values made in *budget and throws ExpansionLimit past kMaxDocumentNodes.
 Json ToJson(const YAML::Node& node, int64_t* budget) {
   if (++*budget > kMaxDocumentNodes) throw ExpansionLimit();
   switch (node.Type()) {
@@ -68,7 +68,9 @@ Json ToJson(const YAML::Node& node, int64_t* budget) {
   return nullptr;
 }
 
-std::string PathJoin(const std::string& path, const std::string& key) { return path.empty() ? key : path + "." + key; }
+std::string PathJoin(const std::string& path, const std::string& key) {
+  return path.empty() ? key : path + "." + key;
+}
 
 // Applies "a.b.c=value" (value parsed as YAML) to the document.
 Status ApplyOverride(Json* doc, const std::string& override_text) {
@@ -90,10 +92,14 @@ Status ApplyOverride(Json* doc, const std::string& override_text) {
   size_t start = 0;
   while (true) {
     const size_t dot = key.find('.', start);
-    const std::string part = key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
-    if (part.empty()) return InvalidArgument("override '" + override_text + "': empty key component");
+    const std::string part =
+        key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    if (part.empty())
+      return InvalidArgument("override '" + override_text + "': empty key component");
     if (!node->is_object()) {
-      if (!node->is_null()) return InvalidArgument("override '" + override_text + "': '" + key.substr(0, start - 1) + "' is not a map");
+      if (!node->is_null())
+        return InvalidArgument("override '" + override_text + "': '" + key.substr(0, start - 1) +
+                               "' is not a map");
       *node = Json::object();
     }
     if (dot == std::string::npos) {
@@ -110,7 +116,8 @@ const Json* Lookup(const Json& doc, const std::string& dotted) {
   size_t start = 0;
   while (start <= dotted.size()) {
     const size_t dot = dotted.find('.', start);
-    const std::string part = dotted.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    const std::string part =
+        dotted.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
     if (!node->is_object() || !node->contains(part)) return nullptr;
     node = &(*node)[part];
     if (dot == std::string::npos) return node;
@@ -120,12 +127,15 @@ const Json* Lookup(const Json& doc, const std::string& dotted) {
 }
 
 // ${a.b} references: a whole-string reference keeps the referenced value's type.
-void Interpolate(Json* node, const Json& doc, const std::string& path, std::vector<std::string>* errors, int depth = 0) {
+void Interpolate(Json* node, const Json& doc, const std::string& path,
+                 std::vector<std::string>* errors, int depth = 0) {
   if (depth > 64) return;
   if (node->is_object()) {
-    for (auto& [key, value] : node->items()) Interpolate(&value, doc, PathJoin(path, key), errors, depth + 1);
+    for (auto& [key, value] : node->items())
+      Interpolate(&value, doc, PathJoin(path, key), errors, depth + 1);
   } else if (node->is_array()) {
-    for (size_t k = 0; k < node->size(); ++k) Interpolate(&(*node)[k], doc, path + "[" + std::to_string(k) + "]", errors, depth + 1);
+    for (size_t k = 0; k < node->size(); ++k)
+      Interpolate(&(*node)[k], doc, path + "[" + std::to_string(k) + "]", errors, depth + 1);
   } else if (node->is_string()) {
     std::string text = node->get<std::string>();
     static const std::regex kRef("\\$\\{([A-Za-z0-9_.-]+)\\}");
@@ -161,14 +171,17 @@ bool ValidName(const std::string& name) {
   return std::regex_match(name, kName);
 }
 
-void CheckKeys(const Json& map, const std::set<std::string>& allowed, const std::string& path, std::vector<std::string>* errors) {
+void CheckKeys(const Json& map, const std::set<std::string>& allowed, const std::string& path,
+               std::vector<std::string>* errors) {
   for (const auto& [key, value] : map.items()) {
     if (!allowed.count(key)) errors->push_back(PathJoin(path, key) + ": unknown key");
   }
 }
 
-bool ReadInt(const Json& node, const std::string& path, int min, int* out, std::vector<std::string>* errors) {
-  if (!node.is_number_integer() || node.get<int64_t>() < min || node.get<int64_t>() > 1'000'000'000) {
+bool ReadInt(const Json& node, const std::string& path, int min, int* out,
+             std::vector<std::string>* errors) {
+  if (!node.is_number_integer() || node.get<int64_t>() < min ||
+      node.get<int64_t>() > 1'000'000'000) {
     errors->push_back(path + ": must be an integer >= " + std::to_string(min));
     return false;
   }
@@ -176,7 +189,8 @@ bool ReadInt(const Json& node, const std::string& path, int min, int* out, std::
   return true;
 }
 
-bool ReadDuration(const Json& node, const std::string& path, double* out, std::vector<std::string>* errors) {
+bool ReadDuration(const Json& node, const std::string& path, double* out,
+                  std::vector<std::string>* errors) {
   if (node.is_number() && node.get<double>() >= 0) {
     *out = node.get<double>();
     return true;
@@ -186,16 +200,24 @@ bool ReadDuration(const Json& node, const std::string& path, double* out, std::v
   return false;
 }
 
-void ReadStageSettings(const Json& map, const std::string& path, StageSpec* stage, std::vector<std::string>* errors) {
-  if (map.contains("max_attempts")) ReadInt(map["max_attempts"], PathJoin(path, "max_attempts"), 1, &stage->max_attempts, errors);
-  if (map.contains("retry_backoff")) ReadDuration(map["retry_backoff"], PathJoin(path, "retry_backoff"), &stage->retry_backoff_seconds, errors);
-  if (map.contains("timeout")) ReadDuration(map["timeout"], PathJoin(path, "timeout"), &stage->timeout_seconds, errors);
-  if (map.contains("poison_threshold")) ReadInt(map["poison_threshold"], PathJoin(path, "poison_threshold"), 1, &stage->poison_threshold, errors);
-  if (map.contains("threads")) ReadInt(map["threads"], PathJoin(path, "threads"), 0, &stage->threads, errors);
+void ReadStageSettings(const Json& map, const std::string& path, StageSpec* stage,
+                       std::vector<std::string>* errors) {
+  if (map.contains("max_attempts"))
+    ReadInt(map["max_attempts"], PathJoin(path, "max_attempts"), 1, &stage->max_attempts, errors);
+  if (map.contains("retry_backoff"))
+    ReadDuration(map["retry_backoff"], PathJoin(path, "retry_backoff"),
+                 &stage->retry_backoff_seconds, errors);
+  if (map.contains("timeout"))
+    ReadDuration(map["timeout"], PathJoin(path, "timeout"), &stage->timeout_seconds, errors);
+  if (map.contains("poison_threshold"))
+    ReadInt(map["poison_threshold"], PathJoin(path, "poison_threshold"), 1,
+            &stage->poison_threshold, errors);
+  if (map.contains("threads"))
+    ReadInt(map["threads"], PathJoin(path, "threads"), 0, &stage->threads, errors);
 }
 
-int IntParam(const nlohmann::json& params, const char* key, int fallback, int min, const std::string& path,
-             std::vector<std::string>* errors) {
+int IntParam(const nlohmann::json& params, const char* key, int fallback, int min,
+             const std::string& path, std::vector<std::string>* errors) {
   if (!params.contains(key)) return fallback;
   const auto& v = params[key];
   if (!v.is_number_integer() || v.get<int64_t>() < min || v.get<int64_t>() > 100'000'000) {
@@ -222,7 +244,9 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
     seeds[name] = static_cast<int>(n.get<int64_t>());
   }
   if (seeds.empty()) return;
-  const auto replicate = [](const std::string& name, int k) { return k == 1 ? name : name + "-s" + std::to_string(k); };
+  const auto replicate = [](const std::string& name, int k) {
+    return k == 1 ? name : name + "-s" + std::to_string(k);
+  };
   Json out = Json::object();
   for (const auto& [name, node] : stages->items()) {
     if (!node.is_object()) {
@@ -244,7 +268,8 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
         Json all = Json::array();
         for (const std::string& input : inputs) {
           const auto s = seeds.find(input);
-          for (int k = 1; k <= (s == seeds.end() ? 1 : s->second); ++k) all.push_back(replicate(input, k));
+          for (int k = 1; k <= (s == seeds.end() ? 1 : s->second); ++k)
+            all.push_back(replicate(input, k));
         }
         copy["inputs"] = all;
       }
@@ -255,7 +280,8 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
     for (const std::string& input : inputs) {
       const auto s = seeds.find(input);
       if (s != seeds.end() && s->second != n) {
-        errors->push_back("stages." + name + ".seeds: " + std::to_string(n) + " replicates, but its input '" + input + "' has " +
+        errors->push_back("stages." + name + ".seeds: " + std::to_string(n) +
+                          " replicates, but its input '" + input + "' has " +
                           std::to_string(s->second) + " (seeded chains need the same count)");
       }
     }
@@ -264,7 +290,8 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
       copy.erase("seeds");
       if (!inputs.empty()) {
         Json renamed = Json::array();
-        for (const std::string& input : inputs) renamed.push_back(seeds.count(input) ? replicate(input, k) : input);
+        for (const std::string& input : inputs)
+          renamed.push_back(seeds.count(input) ? replicate(input, k) : input);
         copy["inputs"] = renamed;
       }
       if (!copy.contains("params") || !copy["params"].is_object()) copy["params"] = Json::object();
@@ -276,7 +303,9 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
         }
       }
       if (k > 1) {
-        const uint64_t base = params.contains("seed") && params["seed"].is_number_integer() ? params["seed"].get<uint64_t>() : pipeline_seed;
+        const uint64_t base = params.contains("seed") && params["seed"].is_number_integer()
+                                  ? params["seed"].get<uint64_t>()
+                                  : pipeline_seed;
         params["seed"] = base + static_cast<uint64_t>(k - 1);
       }
       copy["replicate"] = k;
@@ -294,7 +323,11 @@ bool ParseDuration(const std::string& text, double* seconds) {
   if (!std::regex_match(text, match, kDuration)) return false;
   const double value = std::stod(match[1]);
   const std::string unit = match[2];
-  const double scale = unit == "ms" ? 1e-3 : unit == "m" ? 60 : unit == "h" ? 3600 : unit == "d" ? 86400 : 1;
+  const double scale = unit == "ms"  ? 1e-3
+                       : unit == "m" ? 60
+                       : unit == "h" ? 3600
+                       : unit == "d" ? 86400
+                                     : 1;
   *seconds = value * scale;
   return true;
 }
@@ -303,29 +336,34 @@ bool ParseDuration(const std::string& text, double* seconds) {
 static bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs) {
   if (!value.is_string()) return false;
   const std::string name = value.get<std::string>();
-  return name.find('/') != std::string::npos || std::find(inputs.begin(), inputs.end(), name) != inputs.end();
+  return name.find('/') != std::string::npos ||
+         std::find(inputs.begin(), inputs.end(), name) != inputs.end();
 }
 
 KindRegistry KindRegistry::WithBuiltins() {
   KindRegistry registry;
   // Diagnostic kinds: `tasks` map tasks each.
-  const StagePlanner by_tasks = [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+  const StagePlanner by_tasks = [](StageSpec* stage, const std::string& path,
+                                   std::vector<std::string>* errors) {
     stage->shards = IntParam(stage->params, "tasks", stage->shards, 1, path, errors);
   };
-  for (const char* kind : {"noop", "sleep", "test.write", "test.fail", "test.crash"}) registry.Add(kind, by_tasks);
-  // The procedural corpus: shards of shard_size clips (and triplets), then a reduce task that merges
-  // them into one corpus directory with its annotations and manifest.
-  registry.Add("corpus", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    const int clips = IntParam(stage->params, "clips", 1000, 1, path, errors);
-    const int triplets = IntParam(stage->params, "triplets", clips, 0, path, errors);
-    const int shard_size = IntParam(stage->params, "shard_size", 500, 1, path, errors);
-    stage->shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
-    stage->reduce = true;
-  });
+  for (const char* kind : {"noop", "sleep", "test.write", "test.fail", "test.crash"})
+    registry.Add(kind, by_tasks);
+  // The procedural corpus: shards of shard_size clips (and triplets), then a reduce task that
+  // merges them into one corpus directory with its annotations and manifest.
+  registry.Add(
+      "corpus", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+        const int clips = IntParam(stage->params, "clips", 1000, 1, path, errors);
+        const int triplets = IntParam(stage->params, "triplets", clips, 0, path, errors);
+        const int shard_size = IntParam(stage->params, "shard_size", 500, 1, path, errors);
+        stage->shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
+        stage->reduce = true;
+      });
   // SimMotionEdit's dataset filter: `shards` tasks (default 8) over the triplet files of the input
   // stage or of params.triplets, then a summary. The similarity constants are checked here, before
   // anything runs.
-  registry.Add("filter", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+  registry.Add("filter", [](StageSpec* stage, const std::string& path,
+                            std::vector<std::string>* errors) {
     if (!stage->shards_set) stage->shards = 8;
     stage->reduce = true;
     const auto& p = stage->params;
@@ -333,111 +371,152 @@ KindRegistry KindRegistry::WithBuiltins() {
       errors->push_back(path + ".params.triplets: must be a path or a list of paths");
     }
     if (!p.contains("triplets") && stage->inputs.empty()) {
-      errors->push_back(path + ": needs an input stage (inputs: [corpus]) or params.triplets (files or directories)");
+      errors->push_back(
+          path +
+          ": needs an input stage (inputs: [corpus]) or params.triplets (files or directories)");
     }
     if (p.contains("input") && (!p["input"].is_string() ||
-                                std::find(stage->inputs.begin(), stage->inputs.end(), p["input"].get<std::string>()) == stage->inputs.end())) {
+                                std::find(stage->inputs.begin(), stage->inputs.end(),
+                                          p["input"].get<std::string>()) == stage->inputs.end())) {
       errors->push_back(path + ".params.input: must name one of the stage's inputs");
     }
     auto options = similarity::OptionsFromJson(p, path + ".params", {"triplets", "input"});
     if (!options.ok()) errors->push_back(options.status().message());
   });
-  // Training: one task per rank; world_size > 1 makes a gang that starts together on distinct workers
-  // and restarts together from the last checkpoint when a rank fails.
-  registry.Add("train", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    stage->shards = std::max(1, stage->world_size);
-    stage->reduce = false;
-    const auto& p = stage->params;
-    if (!p.contains("model") || !p["model"].is_string()) errors->push_back(path + ".params.model: the model plugin's name is required (e.g. temos_sinc)");
-    if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;  // training runs long
-  });
-  // Editing a test split with a trained editor: `shards` tasks (default 2), each every count-th triplet.
-  registry.Add("edit", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    if (!stage->shards_set) stage->shards = 2;
-    stage->reduce = false;
-    if (stage->inputs.empty()) errors->push_back(path + ": needs inputs: the train stage of the editor and a stage with triplets");
-    const auto& p = stage->params;
-    if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim") errors->push_back(path + ".params.sampler: ddpm or ddim");
-    if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
-  });
+  // Training: one task per rank; world_size > 1 makes a gang that starts together on distinct
+  // workers and restarts together from the last checkpoint when a rank fails.
+  registry.Add(
+      "train", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+        stage->shards = std::max(1, stage->world_size);
+        stage->reduce = false;
+        const auto& p = stage->params;
+        if (!p.contains("model") || !p["model"].is_string())
+          errors->push_back(path +
+                            ".params.model: the model plugin's name is required (e.g. temos_sinc)");
+        if (stage->timeout_seconds == 3600)
+          stage->timeout_seconds = 6 * 3600;  // training runs long
+      });
+  // Editing a test split with a trained editor: `shards` tasks (default 2), each every count-th
+  // triplet.
+  registry.Add(
+      "edit", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+        if (!stage->shards_set) stage->shards = 2;
+        stage->reduce = false;
+        if (stage->inputs.empty())
+          errors->push_back(
+              path + ": needs inputs: the train stage of the editor and a stage with triplets");
+        const auto& p = stage->params;
+        if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim")
+          errors->push_back(path + ".params.sampler: ddpm or ddim");
+        if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
+      });
   // Scoring an edit stage with an evaluator checkpoint: one task.
-  registry.Add("eval_edit", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+  registry.Add("eval_edit", [](StageSpec* stage, const std::string& path,
+                               std::vector<std::string>* errors) {
     stage->shards = 1;
     stage->reduce = false;
     const auto& p = stage->params;
     for (const char* key : {"evaluator", "edits"}) {
-      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs)) errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
+      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs))
+        errors->push_back(path + ".params." + key +
+                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
     }
   });
-  // Text-to-motion generation of a test split (`shards` tasks, default 2) and its scoring (one task).
-  registry.Add("generate", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    if (!stage->shards_set) stage->shards = 2;
-    stage->reduce = false;
-    if (stage->inputs.empty()) errors->push_back(path + ": needs inputs: the train stage of the model and a `singles` stage");
-    const auto& p = stage->params;
-    if (p.contains("spans") && p["spans"] != "pairs" && p["spans"] != "singles" && p["spans"] != "all") {
-      errors->push_back(path + ".params.spans: pairs, singles or all");
-    }
-    if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
-  });
-  registry.Add("eval_generate", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+  // Text-to-motion generation of a test split (`shards` tasks, default 2) and its scoring (one
+  // task).
+  registry.Add(
+      "generate", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+        if (!stage->shards_set) stage->shards = 2;
+        stage->reduce = false;
+        if (stage->inputs.empty())
+          errors->push_back(path +
+                            ": needs inputs: the train stage of the model and a `singles` stage");
+        const auto& p = stage->params;
+        if (p.contains("spans") && p["spans"] != "pairs" && p["spans"] != "singles" &&
+            p["spans"] != "all") {
+          errors->push_back(path + ".params.spans: pairs, singles or all");
+        }
+        if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
+      });
+  registry.Add("eval_generate", [](StageSpec* stage, const std::string& path,
+                                   std::vector<std::string>* errors) {
     stage->shards = 1;
     stage->reduce = false;
     const auto& p = stage->params;
     for (const char* key : {"evaluator", "temos", "generated"}) {
-      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs)) errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
+      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs))
+        errors->push_back(path + ".params." + key +
+                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
     }
   });
   // The job's HTML report: one task after its inputs (the evaluation stages).
-  registry.Add("report", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    stage->shards = 1;
-    stage->reduce = false;
-    if (stage->inputs.empty()) errors->push_back(path + ": needs inputs: the stages to wait for (the evaluations)");
-  });
+  registry.Add(
+      "report", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+        stage->shards = 1;
+        stage->reduce = false;
+        if (stage->inputs.empty())
+          errors->push_back(path + ": needs inputs: the stages to wait for (the evaluations)");
+      });
   // The CMU clips through import, composition, editing, metrics and rendering: one task.
-  registry.Add("showcase", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+  registry.Add("showcase", [](StageSpec* stage, const std::string& path,
+                              std::vector<std::string>* errors) {
     stage->shards = 1;
     stage->reduce = false;
     for (const char* key : {"editor", "generator", "evaluator"}) {
       if (stage->params.contains(key) && !NamesInputOrPath(stage->params[key], stage->inputs)) {
-        errors->push_back(path + ".params." + key + ": must name one of the stage's inputs (or a checkpoint path pattern)");
+        errors->push_back(path + ".params." + key +
+                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
       }
     }
   });
   // Real data (converted MotionFix, BABEL + AMASS) linked in the corpus stage's layout: one task.
-  registry.Add("dataset", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    stage->shards = 1;
-    stage->reduce = false;
-    const auto& p = stage->params;
-    if (!p.contains("motionfix") && !p.contains("babel")) errors->push_back(path + ".params: give motionfix (converted .npz files) and/or babel + amass_root");
-    if (p.contains("babel") && !p.contains("amass_root")) errors->push_back(path + ".params.amass_root: required with babel (the AMASS directory)");
-  });
+  registry.Add(
+      "dataset", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+        stage->shards = 1;
+        stage->reduce = false;
+        const auto& p = stage->params;
+        if (!p.contains("motionfix") && !p.contains("babel"))
+          errors->push_back(
+              path + ".params: give motionfix (converted .npz files) and/or babel + amass_root");
+        if (p.contains("babel") && !p.contains("amass_root"))
+          errors->push_back(path + ".params.amass_root: required with babel (the AMASS directory)");
+      });
   // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
-  registry.Add("singles", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    stage->shards = 1;
-    stage->reduce = false;
+  registry.Add("singles",
+               [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
+                 stage->shards = 1;
+                 stage->reduce = false;
+                 const auto& p = stage->params;
+                 if (!p.contains("babel") && stage->inputs.empty())
+                   errors->push_back(path + ": needs an input stage (a corpus) or params.babel");
+                 if (p.contains("labeler") && !p["labeler"].is_string())
+                   errors->push_back(path + ".params.labeler: must be a labeler name");
+               });
+  registry.Add("synth", [](StageSpec* stage, const std::string& path,
+                           std::vector<std::string>* errors) {
     const auto& p = stage->params;
-    if (!p.contains("babel") && stage->inputs.empty()) errors->push_back(path + ": needs an input stage (a corpus) or params.babel");
-    if (p.contains("labeler") && !p["labeler"].is_string()) errors->push_back(path + ".params.labeler: must be a labeler name");
-  });
-  registry.Add("synth", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-    const auto& p = stage->params;
-    const int64_t pairs = p.contains("pairs") && p["pairs"].is_number_integer() ? p["pairs"].get<int64_t>() : 10000;
-    const int64_t shard = p.contains("shard_size") && p["shard_size"].is_number_integer() ? p["shard_size"].get<int64_t>() : 50000;
+    const int64_t pairs =
+        p.contains("pairs") && p["pairs"].is_number_integer() ? p["pairs"].get<int64_t>() : 10000;
+    const int64_t shard = p.contains("shard_size") && p["shard_size"].is_number_integer()
+                              ? p["shard_size"].get<int64_t>()
+                              : 50000;
     if (pairs < 1 || shard < 1) {
       errors->push_back(path + ".params: pairs and shard_size must be positive integers");
       return;
     }
     stage->shards = static_cast<int>((pairs + shard - 1) / shard);
     stage->reduce = true;
-    if (!p.contains("spans") && stage->inputs.empty()) errors->push_back(path + ": needs an input `singles` stage or params.spans");
+    if (!p.contains("spans") && stage->inputs.empty())
+      errors->push_back(path + ": needs an input `singles` stage or params.spans");
     auto options = sinc::SynthOptionsFromJson(p, path + ".params");
     if (!options.ok()) errors->push_back(options.status().message());
   });
   return registry;
 }
 
-void KindRegistry::Add(const std::string& kind, StagePlanner planner) { planners_[kind] = std::move(planner); }
+void KindRegistry::Add(const std::string& kind, StagePlanner planner) {
+  planners_[kind] = std::move(planner);
+}
 
 void KindRegistry::AddGeneric(const std::string& kind) {
   if (planners_.count(kind)) return;
@@ -455,47 +534,60 @@ std::vector<std::string> KindRegistry::Kinds() const {
   return out;
 }
 
-Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vector<std::string>& overrides,
+Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
+                                   const std::vector<std::string>& overrides,
                                    const std::string& origin, const KindRegistry& kinds) {
   Json doc;
   try {
     int64_t budget = 0;
     doc = ToJson(YAML::Load(yaml_text), &budget);
   } catch (const YAML::Exception& error) {
-    return InvalidArgument(origin + ":" + std::to_string(error.mark.line + 1) + ":" + std::to_string(error.mark.column + 1) +
+    return InvalidArgument(origin + ":" + std::to_string(error.mark.line + 1) + ":" +
+                           std::to_string(error.mark.column + 1) +
                            ": malformed YAML: " + error.msg);
   } catch (const ExpansionLimit& error) {
     return InvalidArgument(origin + ": " + error.what());
   }
-  if (!doc.is_object()) return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
+  if (!doc.is_object())
+    return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
   std::vector<std::string> errors;
-  // `scale: NAME` picks `scales.NAME`, a map of vars: they override the file's vars, and command-line
-  // overrides (which may also pick the scale) override both.
+  // `scale: NAME` picks `scales.NAME`, a map of vars: they override the file's vars, and
+  // command-line overrides (which may also pick the scale) override both.
   if (doc.contains("scale") || doc.contains("scales")) {
     Json chosen = doc;
-    for (const std::string& o : overrides) MP_RETURN_IF_ERROR(ApplyOverride(&chosen, o).WithContext(origin));
+    for (const std::string& o : overrides)
+      MP_RETURN_IF_ERROR(ApplyOverride(&chosen, o).WithContext(origin));
     const Json scale = chosen.value("scale", Json());
     const Json scales = chosen.value("scales", Json::object());
     if (!scale.is_string() || !scales.is_object() || !scales.contains(scale.get<std::string>()) ||
         !scales[scale.get<std::string>()].is_object()) {
       std::string known;
       if (scales.is_object()) {
-        for (const auto& [name, value] : scales.items()) known += (known.empty() ? "" : ", ") + name;
+        for (const auto& [name, value] : scales.items())
+          known += (known.empty() ? "" : ", ") + name;
       }
-      errors.push_back("scale: must name one of scales (" + (known.empty() ? std::string("none defined") : known) + "), got " + scale.dump());
+      errors.push_back("scale: must name one of scales (" +
+                       (known.empty() ? std::string("none defined") : known) + "), got " +
+                       scale.dump());
     } else {
       if (!doc.contains("vars") || !doc["vars"].is_object()) doc["vars"] = Json::object();
-      for (const auto& [key, value] : scales[scale.get<std::string>()].items()) doc["vars"][key] = value;
+      for (const auto& [key, value] : scales[scale.get<std::string>()].items())
+        doc["vars"][key] = value;
       doc["vars"]["scale"] = scale;
     }
   }
-  for (const std::string& o : overrides) MP_RETURN_IF_ERROR(ApplyOverride(&doc, o).WithContext(origin));
+  for (const std::string& o : overrides)
+    MP_RETURN_IF_ERROR(ApplyOverride(&doc, o).WithContext(origin));
 
   Interpolate(&doc, Json(doc), "", &errors);
-  CheckKeys(doc, {"name", "description", "output_root", "seed", "schedule", "scale", "scales", "vars", "defaults", "stages"}, "", &errors);
+  CheckKeys(doc,
+            {"name", "description", "output_root", "seed", "schedule", "scale", "scales", "vars",
+             "defaults", "stages"},
+            "", &errors);
 
   PipelineSpec spec;
-  if (!doc.contains("name") || !doc["name"].is_string() || !ValidName(doc["name"].get<std::string>())) {
+  if (!doc.contains("name") || !doc["name"].is_string() ||
+      !ValidName(doc["name"].get<std::string>())) {
     errors.push_back("name: required; letters, digits, '_', '.', '-'");
   } else {
     spec.name = doc["name"].get<std::string>();
@@ -518,7 +610,8 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
     if (!doc["schedule"].is_string()) {
       errors.push_back("schedule: must be a cron string such as \"0 3 * * *\"");
     } else {
-      // An empty schedule (the override `schedule=`, or `schedule=""`) runs a recurring pipeline once, now.
+      // An empty schedule (the override `schedule=`, or `schedule=""`) runs a recurring pipeline
+      // once, now.
       spec.schedule = doc["schedule"].get<std::string>();
       if (!spec.schedule.empty()) {
         auto cron = ParseCron(spec.schedule);
@@ -531,12 +624,15 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
     if (!doc["defaults"].is_object()) {
       errors.push_back("defaults: must be a map");
     } else {
-      CheckKeys(doc["defaults"], {"max_attempts", "retry_backoff", "timeout", "poison_threshold", "threads"}, "defaults", &errors);
+      CheckKeys(doc["defaults"],
+                {"max_attempts", "retry_backoff", "timeout", "poison_threshold", "threads"},
+                "defaults", &errors);
       ReadStageSettings(doc["defaults"], "defaults", &defaults, &errors);
     }
   }
 
-  if (doc.contains("stages") && doc["stages"].is_object()) ExpandSeeds(&doc["stages"], spec.seed, &errors);
+  if (doc.contains("stages") && doc["stages"].is_object())
+    ExpandSeeds(&doc["stages"], spec.seed, &errors);
   std::map<std::string, size_t> index;
   if (!doc.contains("stages") || !doc["stages"].is_object() || doc["stages"].empty()) {
     errors.push_back("stages: required, a map of stage name -> stage");
@@ -545,14 +641,17 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
       const std::string path = "stages." + name;
       StageSpec stage = defaults;
       stage.name = name;
-      if (!ValidName(name)) errors.push_back(path + ": stage names use letters, digits, '_', '.', '-'");
+      if (!ValidName(name))
+        errors.push_back(path + ": stage names use letters, digits, '_', '.', '-'");
       if (!node.is_object()) {
         errors.push_back(path + ": must be a map with at least 'kind'");
         continue;
       }
-      CheckKeys(node, {"kind", "inputs", "params", "shards", "reduce", "max_attempts", "retry_backoff", "timeout",
-                       "poison_threshold", "threads", "world_size", "description", "replicate"},
-                path, &errors);
+      CheckKeys(
+          node,
+          {"kind", "inputs", "params", "shards", "reduce", "max_attempts", "retry_backoff",
+           "timeout", "poison_threshold", "threads", "world_size", "description", "replicate"},
+          path, &errors);
       if (!node.contains("kind") || !node["kind"].is_string()) {
         errors.push_back(path + ".kind: required");
       } else {
@@ -581,20 +680,26 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
           stage.params = nlohmann::json::parse(node["params"].dump());
         }
       }
-      if (node.contains("shards")) stage.shards_set = ReadInt(node["shards"], path + ".shards", 1, &stage.shards, &errors);
+      if (node.contains("shards"))
+        stage.shards_set = ReadInt(node["shards"], path + ".shards", 1, &stage.shards, &errors);
       if (node.contains("reduce")) {
-        if (!node["reduce"].is_boolean()) errors.push_back(path + ".reduce: must be true or false");
-        else stage.reduce = node["reduce"].get<bool>();
+        if (!node["reduce"].is_boolean())
+          errors.push_back(path + ".reduce: must be true or false");
+        else
+          stage.reduce = node["reduce"].get<bool>();
       }
-      if (node.contains("world_size")) ReadInt(node["world_size"], path + ".world_size", 1, &stage.world_size, &errors);
+      if (node.contains("world_size"))
+        ReadInt(node["world_size"], path + ".world_size", 1, &stage.world_size, &errors);
       ReadStageSettings(node, path, &stage, &errors);
-      if (node.contains("replicate") && node["replicate"].is_number_integer()) stage.replicate = node["replicate"].get<int>();
+      if (node.contains("replicate") && node["replicate"].is_number_integer())
+        stage.replicate = node["replicate"].get<int>();
       if (!stage.kind.empty()) {
         const StagePlanner* planner = kinds.Find(stage.kind);
         if (!planner) {
           std::string known;
           for (const std::string& k : kinds.Kinds()) known += (known.empty() ? "" : ", ") + k;
-          errors.push_back(path + ".kind: unknown kind '" + stage.kind + "' (known: " + known + "; plugins add more)");
+          errors.push_back(path + ".kind: unknown kind '" + stage.kind + "' (known: " + known +
+                           "; plugins add more)");
         } else {
           (*planner)(&stage, path, &errors);
           if (stage.world_size > 1) {  // a gang: one task per rank, no reduce
@@ -611,14 +716,19 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
   for (const StageSpec& stage : spec.stages) {
     for (size_t k = 0; k < stage.inputs.size(); ++k) {
       const std::string& input = stage.inputs[k];
-      if (input == stage.name) errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) + "]: a stage cannot be its own input");
-      else if (!index.count(input)) errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) + "]: unknown stage '" + input + "'");
+      if (input == stage.name)
+        errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) +
+                         "]: a stage cannot be its own input");
+      else if (!index.count(input))
+        errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) +
+                         "]: unknown stage '" + input + "'");
     }
   }
   std::vector<StageSpec> ordered;
   if (errors.empty()) {
     std::vector<int> pending(spec.stages.size(), 0);
-    for (size_t s = 0; s < spec.stages.size(); ++s) pending[s] = static_cast<int>(spec.stages[s].inputs.size());
+    for (size_t s = 0; s < spec.stages.size(); ++s)
+      pending[s] = static_cast<int>(spec.stages[s].inputs.size());
     std::vector<bool> done(spec.stages.size(), false);
     bool progress = true;
     while (progress) {
@@ -629,7 +739,8 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
         progress = true;
         ordered.push_back(spec.stages[s]);
         for (size_t t = 0; t < spec.stages.size(); ++t) {
-          for (const std::string& input : spec.stages[t].inputs) pending[t] -= input == spec.stages[s].name;
+          for (const std::string& input : spec.stages[t].inputs)
+            pending[t] -= input == spec.stages[s].name;
         }
       }
     }
@@ -652,8 +763,9 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vect
     if (n > largest_tasks) largest_tasks = n, largest = stage.name;
   }
   if (tasks > kMaxJobTasks) {
-    errors.push_back("the pipeline plans " + std::to_string(tasks) + " tasks (stage " + largest + ": " + std::to_string(largest_tasks) +
-                     "); a job holds at most " + std::to_string(kMaxJobTasks));
+    errors.push_back("the pipeline plans " + std::to_string(tasks) + " tasks (stage " + largest +
+                     ": " + std::to_string(largest_tasks) + "); a job holds at most " +
+                     std::to_string(kMaxJobTasks));
   }
   if (!errors.empty()) {
     std::string message = origin + ": invalid pipeline:";

@@ -1,7 +1,7 @@
-// Pipeline YAML: named stages with a kind, inputs, params, sharding, retries and resources; the stages
-// form a DAG by their inputs. Command-line overrides `key.sub=value` (the Hydra habit) and
-// `${vars.name}` interpolation are applied before validation; an invalid pipeline is rejected before
-// anything runs, with the YAML path of each error.
+// Pipeline YAML: named stages with a kind, inputs, params, sharding, retries and resources; the
+// stages form a DAG by their inputs. Command-line overrides `key.sub=value` (the Hydra habit) and
+// `${vars.name}` interpolation are applied before validation; an invalid pipeline is rejected
+// before anything runs, with the YAML path of each error.
 //
 //   name: demo                      # required
 //   output_root: out                # job outputs go to <output_root>/<name>-<job id>/
@@ -17,10 +17,9 @@
 //     mdt:     {kind: train, inputs: [filter], seeds: 3, params: {...}}   # mdt, mdt-s2, mdt-s3
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -36,10 +35,11 @@ struct StageSpec {
   std::string kind;
   std::vector<std::string> inputs;
   nlohmann::json params = nlohmann::json::object();
-  int shards = 1;        // map tasks
-  bool shards_set = false;  // `shards:` given in the YAML (planners may pick their own default otherwise)
-  bool reduce = false;   // plus one reduce task after all shards committed
-  int max_attempts = 3;  // task errors tolerated before the task fails
+  int shards = 1;  // map tasks
+  bool shards_set =
+      false;  // `shards:` given in the YAML (planners may pick their own default otherwise)
+  bool reduce = false;                 // plus one reduce task after all shards committed
+  int max_attempts = 3;                // task errors tolerated before the task fails
   double retry_backoff_seconds = 1.0;  // doubled after each error
   double timeout_seconds = 3600;       // lease of one attempt
   int poison_threshold = 3;            // a task that loses this many workers is quarantined
@@ -60,7 +60,8 @@ struct PipelineSpec {
 
 // How a stage kind turns its params into tasks. Validates the params (appending errors prefixed by
 // the YAML path) and sets shards/reduce.
-using StagePlanner = std::function<void(StageSpec* stage, const std::string& path, std::vector<std::string>* errors)>;
+using StagePlanner = std::function<void(StageSpec* stage, const std::string& path,
+                                        std::vector<std::string>* errors)>;
 
 // Kinds the coordinator can plan: the built-in ones and those that plugins declare.
 class KindRegistry {
@@ -78,7 +79,8 @@ class KindRegistry {
 
 // Parses, overrides, interpolates, validates and plans. InvalidArgument lists every problem as
 // "origin: path: message" lines.
-Result<PipelineSpec> ParsePipeline(const std::string& yaml_text, const std::vector<std::string>& overrides,
+Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
+                                   const std::vector<std::string>& overrides,
                                    const std::string& origin, const KindRegistry& kinds);
 
 // "90", "90s", "15m", "2h", "1d" -> seconds; false on anything else.

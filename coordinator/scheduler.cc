@@ -17,7 +17,8 @@ double SystemClock::Now() const {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-Scheduler::Scheduler(Journal* journal, const Clock* clock, KindRegistry kinds, SchedulerOptions options)
+Scheduler::Scheduler(Journal* journal, const Clock* clock, KindRegistry kinds,
+                     SchedulerOptions options)
     : journal_(journal), clock_(clock), kinds_(std::move(kinds)), options_(options) {
   // Attempt ids stay unique across coordinator restarts (a block per run, from the journal), so a
   // late result from before a restart can never be mistaken for a new attempt.
@@ -40,8 +41,10 @@ std::string Scheduler::TaskDir(const Job& job, const Stage& stage, int task) con
   return job.output_dir + "/" + stage.spec.name + "/" + name;
 }
 
-std::string Scheduler::StagingDir(const Job& job, const Stage& stage, int task, int64_t attempt) const {
-  return job.output_dir + "/" + stage.spec.name + "/.staging/" + std::to_string(task) + ".attempt-" + std::to_string(attempt);
+std::string Scheduler::StagingDir(const Job& job, const Stage& stage, int task,
+                                  int64_t attempt) const {
+  return job.output_dir + "/" + stage.spec.name + "/.staging/" + std::to_string(task) +
+         ".attempt-" + std::to_string(attempt);
 }
 
 void Scheduler::BuildStages(Job* job) {
@@ -74,7 +77,8 @@ Result<int64_t> Scheduler::CreateJob(const PipelineSpec& spec) {
       stored.tasks.push_back(std::move(task));
     }
   }
-  // The output directory needs the id, which the journal assigns: insert, then record the directory.
+  // The output directory needs the id, which the journal assigns: insert, then record the
+  // directory.
   std::error_code ec;
   const std::string root = fs::absolute(spec.output_root, ec).lexically_normal().string();
   stored.output_dir = root;  // completed below
@@ -85,22 +89,27 @@ Result<int64_t> Scheduler::CreateJob(const PipelineSpec& spec) {
   if (ec) return IoError(job.output_dir + ": cannot create the job directory: " + ec.message());
   auto& stored_job = jobs_[id] = std::move(job);
   for (size_t s = 0; s < stored_job.stages.size(); ++s) {
-    for (size_t t = 0; t < stored_job.stages[s].tasks.size(); ++t) Enqueue(&stored_job, s, static_cast<int>(t));
+    for (size_t t = 0; t < stored_job.stages[s].tasks.size(); ++t)
+      Enqueue(&stored_job, s, static_cast<int>(t));
   }
-  MP_LOG(kInfo, "coordinator") << "job " << id << " '" << spec.name << "': " << stored_job.stages.size() << " stage(s) -> "
+  MP_LOG(kInfo, "coordinator") << "job " << id << " '" << spec.name
+                               << "': " << stored_job.stages.size() << " stage(s) -> "
                                << stored_job.output_dir;
   return id;
 }
 
-Result<int64_t> Scheduler::Submit(const std::string& yaml, const std::vector<std::string>& overrides, const std::string& origin,
-                                  bool run_now) {
+Result<int64_t> Scheduler::Submit(const std::string& yaml,
+                                  const std::vector<std::string>& overrides,
+                                  const std::string& origin, bool run_now) {
   MP_ASSIGN_OR_RETURN(const PipelineSpec spec, ParsePipeline(yaml, overrides, origin, kinds_));
   if (!spec.schedule.empty() && !run_now) {
     MP_ASSIGN_OR_RETURN(const CronSpec cron, ParseCron(spec.schedule));
-    StoredSchedule schedule{0, spec.name, spec.resolved, spec.schedule, NextFireTime(cron, static_cast<int64_t>(clock_->Now()))};
+    StoredSchedule schedule{0, spec.name, spec.resolved, spec.schedule,
+                            NextFireTime(cron, static_cast<int64_t>(clock_->Now()))};
     MP_ASSIGN_OR_RETURN(schedule.id, journal_->AddSchedule(schedule));
     schedules_.push_back(schedule);
-    MP_LOG(kInfo, "coordinator") << "scheduled '" << spec.name << "' (" << spec.schedule << "), next run at unix " << schedule.next_fire;
+    MP_LOG(kInfo, "coordinator") << "scheduled '" << spec.name << "' (" << spec.schedule
+                                 << "), next run at unix " << schedule.next_fire;
     return 0;
   }
   return CreateJob(spec);
@@ -109,14 +118,16 @@ Result<int64_t> Scheduler::Submit(const std::string& yaml, const std::vector<std
 Status Scheduler::Resume() {
   MP_ASSIGN_OR_RETURN(auto stored_jobs, journal_->LoadUnfinished());
   for (StoredJob& stored : stored_jobs) {
-    auto spec = ParsePipeline(stored.pipeline, {}, "journal job " + std::to_string(stored.id), kinds_);
+    auto spec =
+        ParsePipeline(stored.pipeline, {}, "journal job " + std::to_string(stored.id), kinds_);
     Job job;
     job.id = stored.id;
     job.created = stored.created;
     job.output_dir = stored.output_dir + "/" + stored.name + "-" + std::to_string(stored.id);
     if (!spec.ok()) {
       journal_->UpdateJob(stored.id, "failed", clock_->Now(), spec.status().message());
-      MP_LOG(kError, "coordinator") << "job " << stored.id << " cannot resume: " << spec.status().message();
+      MP_LOG(kError, "coordinator")
+          << "job " << stored.id << " cannot resume: " << spec.status().message();
       continue;
     }
     job.spec = *spec;
@@ -141,14 +152,15 @@ Status Scheduler::Resume() {
           ++stage.committed;
           ++committed;
         }
-        if (task.state == TaskState::kFailed || task.state == TaskState::kQuarantined) ++stage.failed;
+        if (task.state == TaskState::kFailed || task.state == TaskState::kQuarantined)
+          ++stage.failed;
       }
       for (size_t t = 0; t < stage.tasks.size(); ++t) {
         if (stage.tasks[t].state == TaskState::kPending) Enqueue(&live, s, static_cast<int>(t));
       }
     }
-    MP_LOG(kInfo, "coordinator") << "resumed job " << live.id << " '" << live.spec.name << "': " << committed
-                                 << " task(s) already committed";
+    MP_LOG(kInfo, "coordinator") << "resumed job " << live.id << " '" << live.spec.name
+                                 << "': " << committed << " task(s) already committed";
     for (size_t s = 0; s < live.stages.size(); ++s) StageProgress(&live, s);
   }
   MP_ASSIGN_OR_RETURN(schedules_, journal_->LoadSchedules());
@@ -168,7 +180,8 @@ Status Scheduler::Cancel(int64_t job_id) {
 bool Scheduler::InputsDone(const Job& job, const Stage& stage) const {
   for (const std::string& input : stage.spec.inputs) {
     for (const Stage& other : job.stages) {
-      if (other.spec.name == input && other.committed != static_cast<int>(other.tasks.size())) return false;
+      if (other.spec.name == input && other.committed != static_cast<int>(other.tasks.size()))
+        return false;
     }
   }
   return true;
@@ -197,12 +210,14 @@ std::optional<int> Scheduler::TakeReady(Job* job, size_t stage_index) {
     const int t = stage.ready.front();
     stage.ready.pop_front();
     const Task& task = stage.tasks[static_cast<size_t>(t)];
-    if (task.state == TaskState::kPending && task.live_attempts == 0) return t;  // skip stale entries
+    if (task.state == TaskState::kPending && task.live_attempts == 0)
+      return t;  // skip stale entries
   }
   return std::nullopt;
 }
 
-wire::TaskSpec Scheduler::MakeSpec(const Job& job, size_t stage_index, int task, int64_t attempt) const {
+wire::TaskSpec Scheduler::MakeSpec(const Job& job, size_t stage_index, int task,
+                                   int64_t attempt) const {
   const Stage& stage = job.stages[stage_index];
   wire::TaskSpec spec;
   spec.set_job_id(job.id);
@@ -216,7 +231,9 @@ wire::TaskSpec Scheduler::MakeSpec(const Job& job, size_t stage_index, int task,
   spec.set_output_dir(StagingDir(job, stage, task, attempt));
   // A stage's own params.seed (seed replicates set it) overrides the pipeline's.
   const auto& params = stage.spec.params;
-  spec.set_seed(params.contains("seed") && params["seed"].is_number_unsigned() ? params["seed"].get<uint64_t>() : job.spec.seed);
+  spec.set_seed(params.contains("seed") && params["seed"].is_number_unsigned()
+                    ? params["seed"].get<uint64_t>()
+                    : job.spec.seed);
   spec.set_threads(stage.spec.threads);
   for (const std::string& input : stage.spec.inputs) {
     for (const Stage& other : job.stages) {
@@ -237,12 +254,20 @@ wire::TaskSpec Scheduler::MakeSpec(const Job& job, size_t stage_index, int task,
   return spec;
 }
 
-void Scheduler::Assign(Worker* worker, Job* job, size_t stage_index, int task_index, const std::string& rendezvous) {
+void Scheduler::Assign(Worker* worker, Job* job, size_t stage_index, int task_index,
+                       const std::string& rendezvous) {
   Stage& stage = job->stages[stage_index];
   Task& task = stage.tasks[static_cast<size_t>(task_index)];
   const int64_t id = next_attempt_++;
   const double now = clock_->Now();
-  attempts_[id] = {id, job->id, stage_index, task_index, worker->identity, now, now + stage.spec.timeout_seconds, false};
+  attempts_[id] = {id,
+                   job->id,
+                   stage_index,
+                   task_index,
+                   worker->identity,
+                   now,
+                   now + stage.spec.timeout_seconds,
+                   false};
   worker->attempts.insert(id);
   ++task.live_attempts;
   ++stage.running;
@@ -267,25 +292,31 @@ void Scheduler::DispatchGangs() {
       // Every rank must be pending, idle and past its backoff.
       bool ready = stage.committed == 0;
       for (const Task& task : stage.tasks) {
-        ready = ready && task.state == TaskState::kPending && task.live_attempts == 0 && task.not_before <= now;
+        ready = ready && task.state == TaskState::kPending && task.live_attempts == 0 &&
+                task.not_before <= now;
       }
       if (!ready) continue;
       std::vector<Worker*> free;
       for (auto& [identity, worker] : workers_) {
         const int credit = std::max(1, worker.ready.credit());
-        if (!worker.draining && worker.kinds.count(stage.spec.kind) && static_cast<int>(worker.attempts.size()) < credit) {
+        if (!worker.draining && worker.kinds.count(stage.spec.kind) &&
+            static_cast<int>(worker.attempts.size()) < credit) {
           free.push_back(&worker);
         }
       }
       if (static_cast<int>(free.size()) < stage.spec.world_size) continue;
       // Idle workers first, so that ranks do not share a busy machine's threads.
-      std::stable_sort(free.begin(), free.end(), [](const Worker* a, const Worker* b) { return a->attempts.size() < b->attempts.size(); });
-      const std::string rendezvous = job.output_dir + "/" + stage.spec.name + "/.rendezvous/gang-" + std::to_string(next_attempt_);
+      std::stable_sort(free.begin(), free.end(), [](const Worker* a, const Worker* b) {
+        return a->attempts.size() < b->attempts.size();
+      });
+      const std::string rendezvous = job.output_dir + "/" + stage.spec.name + "/.rendezvous/gang-" +
+                                     std::to_string(next_attempt_);
       std::error_code ec;
       fs::create_directories(fs::path(rendezvous).parent_path(), ec);
-      for (int rank = 0; rank < stage.spec.world_size; ++rank) Assign(free[static_cast<size_t>(rank)], &job, s, rank, rendezvous);
-      MP_LOG(kInfo, "coordinator") << "job " << job.id << " stage '" << stage.spec.name << "': gang of " << stage.spec.world_size
-                                   << " ranks started";
+      for (int rank = 0; rank < stage.spec.world_size; ++rank)
+        Assign(free[static_cast<size_t>(rank)], &job, s, rank, rendezvous);
+      MP_LOG(kInfo, "coordinator") << "job " << job.id << " stage '" << stage.spec.name
+                                   << "': gang of " << stage.spec.world_size << " ranks started";
     }
   }
 }
@@ -294,7 +325,9 @@ void Scheduler::StopGang(Job* job, size_t stage_index, int failed_rank, const st
   Stage& stage = job->stages[stage_index];
   std::vector<int64_t> siblings;
   for (const auto& [id, attempt] : attempts_) {
-    if (attempt.job == job->id && attempt.stage == stage_index && attempt.task != failed_rank && !attempt.expired) siblings.push_back(id);
+    if (attempt.job == job->id && attempt.stage == stage_index && attempt.task != failed_rank &&
+        !attempt.expired)
+      siblings.push_back(id);
   }
   for (const int64_t id : siblings) {
     const Attempt attempt = attempts_[id];
@@ -309,15 +342,19 @@ void Scheduler::StopGang(Job* job, size_t stage_index, int failed_rank, const st
     fs::remove_all(StagingDir(*job, stage, attempt.task, id), ec);
   }
   if (stage.committed > 0 && job->state == "running") {
-    FinishJob(job, "failed", "stage '" + stage.spec.name + "': rank " + std::to_string(failed_rank) + " failed after other ranks finished: " + why);
+    FinishJob(job, "failed",
+              "stage '" + stage.spec.name + "': rank " + std::to_string(failed_rank) +
+                  " failed after other ranks finished: " + why);
     return;
   }
   for (int rank = 0; rank < static_cast<int>(stage.tasks.size()); ++rank) {
     if (rank != failed_rank) Enqueue(job, stage_index, rank);
   }
   if (!siblings.empty()) {
-    MP_LOG(kWarn, "coordinator") << "job " << job->id << " stage '" << stage.spec.name << "': gang stopped (" << why
-                                 << "); it restarts from its last checkpoint when " << stage.spec.world_size << " workers are free";
+    MP_LOG(kWarn, "coordinator") << "job " << job->id << " stage '" << stage.spec.name
+                                 << "': gang stopped (" << why
+                                 << "); it restarts from its last checkpoint when "
+                                 << stage.spec.world_size << " workers are free";
   }
 }
 
@@ -331,7 +368,9 @@ void Scheduler::Dispatch() {
         if (job.state != "running") continue;
         for (size_t s = 0; s < job.stages.size() && !assigned; ++s) {
           Stage& stage = job.stages[s];
-          if (stage.gang() || stage.ready.empty() || !worker.kinds.count(stage.spec.kind) || !StageRunnable(job, s)) continue;
+          if (stage.gang() || stage.ready.empty() || !worker.kinds.count(stage.spec.kind) ||
+              !StageRunnable(job, s))
+            continue;
           if (const auto task = TakeReady(&job, s)) {
             Assign(&worker, &job, s, *task);
             assigned = true;
@@ -348,7 +387,8 @@ void Scheduler::ReleaseAttempt(int64_t attempt_id) {
   const auto it = attempts_.find(attempt_id);
   if (it == attempts_.end()) return;
   const Attempt& a = it->second;
-  if (const auto w = workers_.find(a.identity); w != workers_.end()) w->second.attempts.erase(attempt_id);
+  if (const auto w = workers_.find(a.identity); w != workers_.end())
+    w->second.attempts.erase(attempt_id);
   if (Job* job = FindJob(a.job)) {
     Stage& stage = job->stages[a.stage];
     Task& task = stage.tasks[static_cast<size_t>(a.task)];
@@ -369,12 +409,14 @@ void Scheduler::OnReady(const std::string& identity, const wire::Ready& ready) {
   worker.kinds = std::set<std::string>(ready.kinds().begin(), ready.kinds().end());
   worker.last_seen = clock_->Now();
   worker.draining = false;
-  MP_LOG(kInfo, "coordinator") << "worker " << ready.worker_id() << " ready: " << ready.kinds_size() << " kinds, "
-                               << ready.threads() << " thread(s), credit " << ready.credit();
+  MP_LOG(kInfo, "coordinator") << "worker " << ready.worker_id() << " ready: " << ready.kinds_size()
+                               << " kinds, " << ready.threads() << " thread(s), credit "
+                               << ready.credit();
 }
 
 void Scheduler::OnSeen(const std::string& identity) {
-  if (const auto it = workers_.find(identity); it != workers_.end()) it->second.last_seen = clock_->Now();
+  if (const auto it = workers_.find(identity); it != workers_.end())
+    it->second.last_seen = clock_->Now();
 }
 
 void Scheduler::OnDrain(const std::string& identity) {
@@ -398,12 +440,14 @@ void Scheduler::DropWorker(const std::string& identity, const std::string& reaso
     ReleaseAttempt(attempt_id);
     if (attempt.expired) continue;
     if (Job* job = FindJob(attempt.job)) {
-      TaskLost(job, attempt.stage, attempt.task, "worker " + name + " " + reason + " while running it");
+      TaskLost(job, attempt.stage, attempt.task,
+               "worker " + name + " " + reason + " while running it");
     }
   }
   workers_.erase(it);
   ++counters_.workers_lost;
-  MP_LOG(kWarn, "coordinator") << "worker " << name << " " << reason << "; " << held.size() << " task(s) re-queued";
+  MP_LOG(kWarn, "coordinator") << "worker " << name << " " << reason << "; " << held.size()
+                               << " task(s) re-queued";
 }
 
 void Scheduler::TaskLost(Job* job, size_t stage_index, int task_index, const std::string& message) {
@@ -417,19 +461,25 @@ void Scheduler::TaskLost(Job* job, size_t stage_index, int task_index, const std
     task.state = TaskState::kQuarantined;
     ++stage.failed;
     ++counters_.quarantined;
-    const std::string report = "task " + std::to_string(task_index) + " quarantined: it was running when " +
-                               std::to_string(task.lost) + " workers died (poison); last: " + message;
+    const std::string report = "task " + std::to_string(task_index) +
+                               " quarantined: it was running when " + std::to_string(task.lost) +
+                               " workers died (poison); last: " + message;
     stage.failures.push_back(report);
-    journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, report);
+    journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost,
+                         report);
     FinishJob(job, "failed", "stage '" + stage.spec.name + "': " + report);
     return;
   }
-  journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, message);
+  journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost,
+                       message);
   Enqueue(job, stage_index, task_index);
-  if (stage.gang()) StopGang(job, stage_index, task_index, "rank " + std::to_string(task_index) + " lost: " + message);
+  if (stage.gang())
+    StopGang(job, stage_index, task_index,
+             "rank " + std::to_string(task_index) + " lost: " + message);
 }
 
-void Scheduler::TaskError(Job* job, size_t stage_index, int task_index, const std::string& message, bool bad_input) {
+void Scheduler::TaskError(Job* job, size_t stage_index, int task_index, const std::string& message,
+                          bool bad_input) {
   Stage& stage = job->stages[stage_index];
   Task& task = stage.tasks[static_cast<size_t>(task_index)];
   if (task.state != TaskState::kPending) return;
@@ -440,21 +490,28 @@ void Scheduler::TaskError(Job* job, size_t stage_index, int task_index, const st
     task.state = TaskState::kFailed;
     ++stage.failed;
     ++counters_.failed;
-    const std::string report = "task " + std::to_string(task_index) +
-                               (bad_input ? " rejected its input: " : " failed after " + std::to_string(task.errors) + " attempt(s): ") +
-                               message;
+    const std::string report =
+        "task " + std::to_string(task_index) +
+        (bad_input ? " rejected its input: "
+                   : " failed after " + std::to_string(task.errors) + " attempt(s): ") +
+        message;
     stage.failures.push_back(report);
-    journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, report);
+    journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost,
+                         report);
     FinishJob(job, "failed", "stage '" + stage.spec.name + "': " + report);
     return;
   }
-  task.not_before = clock_->Now() + stage.spec.retry_backoff_seconds * std::pow(2.0, task.errors - 1);
-  journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, message);
+  task.not_before =
+      clock_->Now() + stage.spec.retry_backoff_seconds * std::pow(2.0, task.errors - 1);
+  journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost,
+                       message);
   Enqueue(job, stage_index, task_index);
-  if (stage.gang()) StopGang(job, stage_index, task_index, "rank " + std::to_string(task_index) + ": " + message);
+  if (stage.gang())
+    StopGang(job, stage_index, task_index, "rank " + std::to_string(task_index) + ": " + message);
 }
 
-void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attempt& attempt, const wire::TaskResult& result) {
+void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attempt& attempt,
+                       const wire::TaskResult& result) {
   Stage& stage = job->stages[stage_index];
   Task& task = stage.tasks[static_cast<size_t>(task_index)];
   const std::string staging = StagingDir(*job, stage, task_index, attempt.id);
@@ -474,7 +531,8 @@ void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attem
       fs::create_directories(fs::path(final_dir).parent_path(), ec);
       fs::rename(staging, final_dir, ec);
       if (ec) {
-        TaskError(job, stage_index, task_index, "cannot commit " + staging + ": " + ec.message(), false);
+        TaskError(job, stage_index, task_index, "cannot commit " + staging + ": " + ec.message(),
+                  false);
         return;
       }
       // The rename reaches the disk before the journal records the commit (the journal is
@@ -487,7 +545,8 @@ void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attem
       }
     }
   } else if (result.outputs_size() > 0 && !fs::exists(final_dir, ec)) {
-    TaskError(job, stage_index, task_index, "the attempt reported outputs but its directory " + staging + " is missing", false);
+    TaskError(job, stage_index, task_index,
+              "the attempt reported outputs but its directory " + staging + " is missing", false);
     return;
   }
   task.state = TaskState::kCommitted;
@@ -501,7 +560,8 @@ void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attem
   ++counters_.committed;
   stage.commit_times.push_back(clock_->Now());
   if (stage.commit_times.size() > 512) stage.commit_times.pop_front();
-  journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost, "");
+  journal_->UpdateTask(job->id, stage.spec.name, task_index, task.state, task.errors, task.lost,
+                       "");
   journal_->AddOutputs(job->id, stage.spec.name, task_index, task.outputs);
   StageProgress(job, stage_index);
 }
@@ -511,7 +571,8 @@ void Scheduler::StageProgress(Job* job, size_t stage_index) {
   // The reduce task becomes ready once every shard has committed.
   if (stage.spec.reduce && stage.committed == stage.spec.shards) {
     const int reduce = stage.spec.shards;
-    if (stage.waiting.count(reduce) && stage.tasks[static_cast<size_t>(reduce)].not_before <= clock_->Now()) {
+    if (stage.waiting.count(reduce) &&
+        stage.tasks[static_cast<size_t>(reduce)].not_before <= clock_->Now()) {
       stage.waiting.erase(reduce);
       stage.ready.push_back(reduce);
     }
@@ -547,7 +608,8 @@ void Scheduler::FinishJob(Job* job, const std::string& state, const std::string&
     MP_LOG(kInfo, "coordinator") << "job " << job->id << " '" << job->spec.name << "' succeeded in "
                                  << static_cast<int64_t>(job->finished - job->created) << " s";
   } else {
-    MP_LOG(kWarn, "coordinator") << "job " << job->id << " '" << job->spec.name << "' " << state << ": " << error;
+    MP_LOG(kWarn, "coordinator") << "job " << job->id << " '" << job->spec.name << "' " << state
+                                 << ": " << error;
   }
 }
 
@@ -587,9 +649,10 @@ void Scheduler::OnResult(const std::string& identity, const wire::TaskResult& re
     case wire::TaskResult::ERROR:
     default:
       fs::remove_all(StagingDir(*job, stage, attempt.task, attempt.id), ec);
-      if (attempt.expired) return;          // its expiry was already counted as the error
+      if (attempt.expired) return;         // its expiry was already counted as the error
       if (task.live_attempts > 0) return;  // another attempt is still running it
-      TaskError(job, attempt.stage, attempt.task, result.message(), result.outcome() == wire::TaskResult::BAD_INPUT);
+      TaskError(job, attempt.stage, attempt.task, result.message(),
+                result.outcome() == wire::TaskResult::BAD_INPUT);
       break;
   }
 }
@@ -599,7 +662,8 @@ void Scheduler::Tick() {
   // Dead workers: silent for liveness heartbeats.
   std::vector<std::string> dead;
   for (const auto& [identity, worker] : workers_) {
-    if (now - worker.last_seen > options_.liveness * options_.heartbeat_seconds) dead.push_back(identity);
+    if (now - worker.last_seen > options_.liveness * options_.heartbeat_seconds)
+      dead.push_back(identity);
   }
   for (const std::string& identity : dead) {
     DropWorker(identity, "missed " + std::to_string(options_.liveness) + " heartbeats");
@@ -617,7 +681,8 @@ void Scheduler::Tick() {
     Task& task = stage.tasks[static_cast<size_t>(attempt.task)];
     --task.live_attempts;
     --stage.running;
-    const std::string worker = workers_.count(attempt.identity) ? workers_[attempt.identity].ready.worker_id() : "?";
+    const std::string worker =
+        workers_.count(attempt.identity) ? workers_[attempt.identity].ready.worker_id() : "?";
     Outgoing out;
     out.identity = attempt.identity;
     out.cancel.emplace();
@@ -626,7 +691,10 @@ void Scheduler::Tick() {
     outgoing_.push_back(std::move(out));
     if (job->state == "running" && task.state == TaskState::kPending) {
       TaskError(job, attempt.stage, attempt.task,
-                "lease expired after " + std::to_string(static_cast<int>(stage.spec.timeout_seconds)) + " s on worker " + worker, false);
+                "lease expired after " +
+                    std::to_string(static_cast<int>(stage.spec.timeout_seconds)) + " s on worker " +
+                    worker,
+                false);
     }
   }
   // Backoff over.
@@ -654,7 +722,8 @@ void Scheduler::FireSchedules() {
       MP_LOG(kError, "coordinator") << s.message();
     }
     if (!spec.ok()) {
-      MP_LOG(kError, "coordinator") << "scheduled pipeline '" << schedule.name << "' no longer valid: " << spec.status().message();
+      MP_LOG(kError, "coordinator") << "scheduled pipeline '" << schedule.name
+                                    << "' no longer valid: " << spec.status().message();
       continue;
     }
     auto job = CreateJob(*spec);
@@ -670,7 +739,8 @@ int64_t Scheduler::pending_tasks() const {
   int64_t pending = 0;
   for (const auto& [id, job] : jobs_) {
     if (job.state != "running") continue;
-    for (const Stage& stage : job.stages) pending += static_cast<int64_t>(stage.ready.size() + stage.waiting.size());
+    for (const Stage& stage : job.stages)
+      pending += static_cast<int64_t>(stage.ready.size() + stage.waiting.size());
   }
   return pending;
 }
@@ -713,20 +783,22 @@ std::vector<wire::JobStatus> Scheduler::JobStatuses(int64_t job_id) const {
       s->set_failed(stage.failed - quarantined);
       s->set_quarantined(quarantined);
       s->set_pending(total - stage.committed - stage.failed - stage.running);
-      const std::string state = stage.failed > 0             ? "failed"
-                                : stage.committed == total    ? "succeeded"
-                                : !InputsDone(job, stage)     ? "waiting"
-                                : stage.started               ? "running"
-                                                              : "ready";
+      const std::string state = stage.failed > 0           ? "failed"
+                                : stage.committed == total ? "succeeded"
+                                : !InputsDone(job, stage)  ? "waiting"
+                                : stage.started            ? "running"
+                                                           : "ready";
       s->set_state(state);
       // Throughput over the recent commits, and the time left at that pace.
       double rate = 0;
       if (stage.commit_times.size() >= 2) {
-        const double span = std::max(1e-3, std::max(now, stage.commit_times.back()) - stage.commit_times.front());
+        const double span =
+            std::max(1e-3, std::max(now, stage.commit_times.back()) - stage.commit_times.front());
         rate = static_cast<double>(stage.commit_times.size() - 1) / span;
       }
       s->set_tasks_per_second(rate);
-      s->set_eta_seconds(rate > 0 ? (total - stage.committed) / rate : (stage.committed == total ? 0 : -1));
+      s->set_eta_seconds(rate > 0 ? (total - stage.committed) / rate
+                                  : (stage.committed == total ? 0 : -1));
       for (const std::string& f : stage.failures) s->add_failures(f);
       if (stage.spec.reduce) s->set_result_dir(TaskDir(job, stage, stage.spec.shards));
     }

@@ -6,7 +6,8 @@
 // Failure classes (ARCHITECTURE.md):
 //  - worker lost: its leases are re-queued; the retry budget is untouched (the loss is counted for
 //    poison detection);
-//  - task error: retried with exponential backoff up to max_attempts (a lease that expires on a live
+//  - task error: retried with exponential backoff up to max_attempts (a lease that expires on a
+//  live
 //    but slow worker counts as an error, and the task moves on to another worker);
 //  - bad input: the task fails at once with the reason;
 //  - poison: a task that loses `poison_threshold` workers is quarantined and its job fails with the
@@ -63,7 +64,8 @@ struct Outgoing {
 };
 
 struct SchedulerCounters {
-  int64_t committed = 0, errors = 0, failed = 0, lost = 0, quarantined = 0, handed_back = 0, lease_expired = 0;
+  int64_t committed = 0, errors = 0, failed = 0, lost = 0, quarantined = 0, handed_back = 0,
+          lease_expired = 0;
   int64_t duplicates = 0, workers_lost = 0, bytes_committed = 0;
 };
 
@@ -77,8 +79,8 @@ class Scheduler {
   // Validates and plans the pipeline, journals the job; returns its id. A pipeline with `schedule:`
   // is registered as a recurring schedule instead (returns 0, the first run happens at its time)
   // unless `run_now`.
-  Result<int64_t> Submit(const std::string& yaml, const std::vector<std::string>& overrides, const std::string& origin,
-                         bool run_now = false);
+  Result<int64_t> Submit(const std::string& yaml, const std::vector<std::string>& overrides,
+                         const std::string& origin, bool run_now = false);
   Status Cancel(int64_t job_id);
 
   // Workers.
@@ -88,7 +90,8 @@ class Scheduler {
   void OnDisconnect(const std::string& identity);
   bool KnowsWorker(const std::string& identity) const { return workers_.count(identity) > 0; }
 
-  // A result from `identity` (which may differ from the worker that got the lease, after reconnects).
+  // A result from `identity` (which may differ from the worker that got the lease, after
+  // reconnects).
   void OnResult(const std::string& identity, const wire::TaskResult& result);
 
   // Time passes: lease expiry, dead workers, backoff release, schedules. Then dispatch.
@@ -137,8 +140,8 @@ class Scheduler {
     StageSpec spec;
     std::vector<Task> tasks;  // shards, then the reduce task if any
     int committed = 0, failed = 0, running = 0;
-    std::deque<int> ready;    // pending tasks that may start now
-    std::set<int> waiting;    // pending tasks held back (backoff, or a reduce before its shards)
+    std::deque<int> ready;  // pending tasks that may start now
+    std::set<int> waiting;  // pending tasks held back (backoff, or a reduce before its shards)
     std::deque<double> commit_times;  // recent commits, for throughput and ETA
     std::vector<std::string> failures;
     bool started = false;
@@ -173,7 +176,8 @@ class Scheduler {
   // Gangs: all ranks start together on distinct workers; a failing rank stops its gang.
   void DispatchGangs();
   void StopGang(Job* job, size_t stage, int failed_rank, const std::string& why);
-  void Commit(Job* job, size_t stage, int task, const Attempt& attempt, const wire::TaskResult& result);
+  void Commit(Job* job, size_t stage, int task, const Attempt& attempt,
+              const wire::TaskResult& result);
   void TaskError(Job* job, size_t stage, int task, const std::string& message, bool bad_input);
   void TaskLost(Job* job, size_t stage, int task, const std::string& message);
   void StageProgress(Job* job, size_t stage);

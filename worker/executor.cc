@@ -53,9 +53,10 @@ std::vector<wire::OutputFile> ScanOutputs(const std::string& dir) {
   std::error_code ec;
   if (!std::filesystem::exists(dir, ec)) return outputs;
   std::vector<std::filesystem::path> files;
-  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec); !ec && it != std::filesystem::recursive_directory_iterator();
-       it.increment(ec)) {
-    if (it->is_symlink()) continue;  // links to the user's data (the dataset stage) are not task outputs
+  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec);
+       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
+    if (it->is_symlink())
+      continue;  // links to the user's data (the dataset stage) are not task outputs
     if (it->is_regular_file()) files.push_back(it->path());
   }
   std::sort(files.begin(), files.end());
@@ -83,23 +84,24 @@ std::string TaskSpecToJson(const wire::TaskSpec& spec) {
     params = nlohmann::json::parse(spec.params_json().empty() ? "{}" : spec.params_json());
   } catch (...) {
   }
-  return nlohmann::json{{"job_id", spec.job_id()},
-                        {"job_name", spec.job_name()},
-                        {"stage", spec.stage()},
-                        {"kind", spec.kind()},
-                        {"index", spec.index()},
-                        {"count", spec.count()},
-                        {"reduce", spec.reduce()},
-                        {"params", params},
-                        {"output_dir", spec.output_dir()},
-                        {"inputs", inputs},
-                        {"shard_dirs", std::vector<std::string>(spec.shard_dirs().begin(), spec.shard_dirs().end())},
-                        {"seed", spec.seed()},
-                        {"threads", spec.threads()},
-                        {"attempt", spec.attempt()},
-                        {"world_size", std::max(1, spec.world_size())},
-                        {"rendezvous", spec.rendezvous()},
-                        {"state_dir", spec.state_dir()}}
+  return nlohmann::json{
+      {"job_id", spec.job_id()},
+      {"job_name", spec.job_name()},
+      {"stage", spec.stage()},
+      {"kind", spec.kind()},
+      {"index", spec.index()},
+      {"count", spec.count()},
+      {"reduce", spec.reduce()},
+      {"params", params},
+      {"output_dir", spec.output_dir()},
+      {"inputs", inputs},
+      {"shard_dirs", std::vector<std::string>(spec.shard_dirs().begin(), spec.shard_dirs().end())},
+      {"seed", spec.seed()},
+      {"threads", spec.threads()},
+      {"attempt", spec.attempt()},
+      {"world_size", std::max(1, spec.world_size())},
+      {"rendezvous", spec.rendezvous()},
+      {"state_dir", spec.state_dir()}}
       .dump();
 }
 

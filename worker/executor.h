@@ -1,15 +1,14 @@
-// Stage executors: what a worker runs for each stage kind. Built-in kinds register here; plugins add
-// theirs through the C ABI (plugin_host.h). A task writes its outputs into ctx.output_dir (the
+// Stage executors: what a worker runs for each stage kind. Built-in kinds register here; plugins
+// add theirs through the C ABI (plugin_host.h). A task writes its outputs into ctx.output_dir (the
 // attempt's staging directory); the worker checksums every file there and the coordinator renames
 // the directory into place on commit.
 #pragma once
-
-#include <nlohmann/json.hpp>
 
 #include <atomic>
 #include <functional>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -26,7 +25,9 @@ struct TaskReport {
 
   static TaskReport Ok() { return {}; }
   static TaskReport Error(std::string message) { return {Outcome::kError, std::move(message), {}}; }
-  static TaskReport BadInput(std::string message) { return {Outcome::kBadInput, std::move(message), {}}; }
+  static TaskReport BadInput(std::string message) {
+    return {Outcome::kBadInput, std::move(message), {}};
+  }
 };
 
 struct TaskContext {

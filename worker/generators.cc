@@ -13,10 +13,12 @@ Result<std::string> ResolveCheckpoint(const std::string& path) {
   for (const std::string& candidate : {path, path + "/model", path + "/task-00000/model"}) {
     if (fs::exists(candidate + "/model.json")) return candidate;
   }
-  return NotFound(path + ": not a checkpoint (no model.json in it, in model/ or in task-00000/model/)");
+  return NotFound(path +
+                  ": not a checkpoint (no model.json in it, in model/ or in task-00000/model/)");
 }
 
-Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string& path, const nlohmann::json& options) {
+Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string& path,
+                                   const nlohmann::json& options) {
   MP_ASSIGN_OR_RETURN(const std::string dir, ResolveCheckpoint(path));
   MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(dir + "/model.json"));
   nlohmann::json meta;
@@ -28,14 +30,19 @@ Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string&
   const std::string name = meta.value("name", std::string());
   if (name.empty()) return DataLoss(dir + "/model.json: no model name");
   const mp_object_factory* factory = plugins.FindFactory("generator", name);
-  if (!factory) return NotFound(dir + ": model '" + name + "' needs its plugin, which is not loaded (see `motionpipe plugins list`)");
+  if (!factory)
+    return NotFound(dir + ": model '" + name +
+                    "' needs its plugin, which is not loaded (see `motionpipe plugins list`)");
   nlohmann::json config = options.is_object() ? options : nlohmann::json::object();
   config["checkpoint"] = dir;
   char error[2048] = {0};
   void* object = factory->create(config.dump().c_str(), error, sizeof error);
-  if (!object) return InvalidArgument(dir + ": " + std::string(error[0] ? error : "the plugin could not load it"));
+  if (!object)
+    return InvalidArgument(dir + ": " +
+                           std::string(error[0] ? error : "the plugin could not load it"));
   // The plugin made the object, so the plugin's factory destroys it.
-  return GeneratorPtr(static_cast<plugin::Generator*>(object), [factory](plugin::Generator* g) { factory->destroy(g); });
+  return GeneratorPtr(static_cast<plugin::Generator*>(object),
+                      [factory](plugin::Generator* g) { factory->destroy(g); });
 }
 
 }  // namespace motionpipe::worker

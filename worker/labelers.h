@@ -1,10 +1,9 @@
-// Labelers by name for workers and the CLI: the built-in ones (core/labels) first, then factories of
-// kind "labeler" from loaded plugins (e.g. `learned` from plugins/labelers).
+// Labelers by name for workers and the CLI: the built-in ones (core/labels) first, then factories
+// of kind "labeler" from loaded plugins (e.g. `learned` from plugins/labelers).
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "motionpipe/labels/labeler.h"
@@ -12,7 +11,8 @@
 
 namespace motionpipe::worker {
 
-Result<std::unique_ptr<labels::Labeler>> MakeLabeler(const std::string& name, const nlohmann::json& config,
+Result<std::unique_ptr<labels::Labeler>> MakeLabeler(const std::string& name,
+                                                     const nlohmann::json& config,
                                                      const PluginHost* plugins);
 
 }  // namespace motionpipe::worker

@@ -27,8 +27,9 @@ struct Statement {
 
 std::string Regression::Describe() const {
   char text[512];
-  std::snprintf(text, sizeof text, "%s %s regressed: %.4g against its best %.4g (margin %.4g, best checkpoint %s)", method.c_str(),
-                metric.c_str(), value, best, margin, best_checkpoint.c_str());
+  std::snprintf(text, sizeof text,
+                "%s %s regressed: %.4g against its best %.4g (margin %.4g, best checkpoint %s)",
+                method.c_str(), metric.c_str(), value, best, margin, best_checkpoint.c_str());
   return text;
 }
 
@@ -40,10 +41,14 @@ std::string HashText(const std::string& text) {
   return out;
 }
 
-Result<std::vector<Regression>> AppendAndCompare(const std::string& path, const std::vector<MetricRecord>& records, double margin) {
+Result<std::vector<Regression>> AppendAndCompare(const std::string& path,
+                                                 const std::vector<MetricRecord>& records,
+                                                 double margin) {
   Db db;
-  if (sqlite3_open_v2(path.c_str(), &db.db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
-    return IoError(path + ": cannot open the evaluation history: " + (db.db ? sqlite3_errmsg(db.db) : "out of memory"));
+  if (sqlite3_open_v2(path.c_str(), &db.db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) !=
+      SQLITE_OK) {
+    return IoError(path + ": cannot open the evaluation history: " +
+                   (db.db ? sqlite3_errmsg(db.db) : "out of memory"));
   }
   sqlite3_busy_timeout(db.db, 10000);
   const auto exec = [&](const char* sql) -> Status {
@@ -56,26 +61,34 @@ Result<std::vector<Regression>> AppendAndCompare(const std::string& path, const 
     return Status::Ok();
   };
   MP_RETURN_IF_ERROR(exec("PRAGMA journal_mode=WAL"));
-  MP_RETURN_IF_ERROR(exec("CREATE TABLE IF NOT EXISTS history (id INTEGER PRIMARY KEY, time INTEGER, job TEXT, method TEXT, metric TEXT, "
-                          "value REAL, higher_is_better INTEGER, checkpoint TEXT, config_hash TEXT, data_hash TEXT)"));
+  MP_RETURN_IF_ERROR(exec(
+      "CREATE TABLE IF NOT EXISTS history (id INTEGER PRIMARY KEY, time INTEGER, job TEXT, method "
+      "TEXT, metric TEXT, "
+      "value REAL, higher_is_better INTEGER, checkpoint TEXT, config_hash TEXT, data_hash TEXT)"));
   MP_RETURN_IF_ERROR(exec("BEGIN IMMEDIATE"));
   std::vector<Regression> regressions;
   for (const MetricRecord& r : records) {
     Statement best;
-    const char* query = r.higher_is_better ? "SELECT value, checkpoint FROM history WHERE method = ? AND metric = ? ORDER BY value DESC LIMIT 1"
-                                           : "SELECT value, checkpoint FROM history WHERE method = ? AND metric = ? ORDER BY value ASC LIMIT 1";
-    if (sqlite3_prepare_v2(db.db, query, -1, &best.stmt, nullptr) != SQLITE_OK) return DataLoss(path + ": " + sqlite3_errmsg(db.db));
+    const char* query = r.higher_is_better ? "SELECT value, checkpoint FROM history WHERE method = "
+                                             "? AND metric = ? ORDER BY value DESC LIMIT 1"
+                                           : "SELECT value, checkpoint FROM history WHERE method = "
+                                             "? AND metric = ? ORDER BY value ASC LIMIT 1";
+    if (sqlite3_prepare_v2(db.db, query, -1, &best.stmt, nullptr) != SQLITE_OK)
+      return DataLoss(path + ": " + sqlite3_errmsg(db.db));
     sqlite3_bind_text(best.stmt, 1, r.method.c_str(), -1, SQLITE_TRANSIENT);
     sqlite3_bind_text(best.stmt, 2, r.metric.c_str(), -1, SQLITE_TRANSIENT);
     if (sqlite3_step(best.stmt) == SQLITE_ROW) {
       const double value = sqlite3_column_double(best.stmt, 0);
       const unsigned char* checkpoint = sqlite3_column_text(best.stmt, 1);
       const bool worse = r.higher_is_better ? r.value < value - margin : r.value > value + margin;
-      if (worse) regressions.push_back({r.method, r.metric, r.value, value, margin, checkpoint ? reinterpret_cast<const char*>(checkpoint) : ""});
+      if (worse)
+        regressions.push_back({r.method, r.metric, r.value, value, margin,
+                               checkpoint ? reinterpret_cast<const char*>(checkpoint) : ""});
     }
     Statement insert;
     if (sqlite3_prepare_v2(db.db,
-                           "INSERT INTO history (time, job, method, metric, value, higher_is_better, checkpoint, config_hash, data_hash) "
+                           "INSERT INTO history (time, job, method, metric, value, "
+                           "higher_is_better, checkpoint, config_hash, data_hash) "
                            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                            -1, &insert.stmt, nullptr) != SQLITE_OK) {
       return DataLoss(path + ": " + sqlite3_errmsg(db.db));
@@ -101,12 +114,14 @@ Result<std::vector<Regression>> AppendAndCompare(const std::string& path, const 
 Result<std::vector<MetricRecord>> ReadHistory(const std::string& path) {
   Db db;
   if (sqlite3_open_v2(path.c_str(), &db.db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
-    return IoError(path + ": cannot open the evaluation history: " + (db.db ? sqlite3_errmsg(db.db) : "out of memory"));
+    return IoError(path + ": cannot open the evaluation history: " +
+                   (db.db ? sqlite3_errmsg(db.db) : "out of memory"));
   }
   sqlite3_busy_timeout(db.db, 10000);
   Statement rows;
   if (sqlite3_prepare_v2(db.db,
-                         "SELECT time, job, method, metric, value, higher_is_better, checkpoint, config_hash, data_hash FROM history ORDER BY id",
+                         "SELECT time, job, method, metric, value, higher_is_better, checkpoint, "
+                         "config_hash, data_hash FROM history ORDER BY id",
                          -1, &rows.stmt, nullptr) != SQLITE_OK) {
     return DataLoss(path + ": not an evaluation history: " + sqlite3_errmsg(db.db));
   }

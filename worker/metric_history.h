@@ -14,8 +14,8 @@
 namespace motionpipe::worker {
 
 struct MetricRecord {
-  std::string method;      // e.g. "mdt_editor/mdt"
-  std::string metric;      // e.g. "generated_to_target.R@1"
+  std::string method;  // e.g. "mdt_editor/mdt"
+  std::string metric;  // e.g. "generated_to_target.R@1"
   double value = 0;
   bool higher_is_better = true;
   std::string checkpoint, config_hash, data_hash, job;
@@ -32,7 +32,9 @@ struct Regression {
 // Appends the records to the history at `path` (created if missing) and returns the ones that
 // regressed against the best earlier record of the same method and metric: lower than best - margin
 // (or higher than best + margin when lower is better). The comparison uses only earlier records.
-Result<std::vector<Regression>> AppendAndCompare(const std::string& path, const std::vector<MetricRecord>& records, double margin);
+Result<std::vector<Regression>> AppendAndCompare(const std::string& path,
+                                                 const std::vector<MetricRecord>& records,
+                                                 double margin);
 
 // Every record of the history at `path`, oldest first (the report's history plots).
 Result<std::vector<MetricRecord>> ReadHistory(const std::string& path);

@@ -34,19 +34,25 @@ class PluginStage : public StageExecutor {
       const PluginHost* plugins;
       const TaskContext* ctx;
     } host{&report, plugin_, plugins_, &ctx};
-    mp_task_io io{json.c_str(), &cancel_flag, &host,
+    mp_task_io io{json.c_str(),
+                  &cancel_flag,
+                  &host,
                   [](void* h, const char* name, double value) {
                     Host* self = static_cast<Host*>(h);
                     self->report->metrics[name] = value;
                     if (self->ctx->on_metric) self->ctx->on_metric(name, value);
                   },
                   [](void* h, int level, const char* message) {
-                    const LogLevel l = level <= 0 ? LogLevel::kDebug : level == 1 ? LogLevel::kInfo : level == 2 ? LogLevel::kWarn : LogLevel::kError;
+                    const LogLevel l = level <= 0   ? LogLevel::kDebug
+                                       : level == 1 ? LogLevel::kInfo
+                                       : level == 2 ? LogLevel::kWarn
+                                                    : LogLevel::kError;
                     LogLine(l, "plugin " + static_cast<Host*>(h)->plugin, message);
                   },
                   [](void* h, const char* kind, const char* name) -> const mp_object_factory* {
                     const PluginHost* plugins = static_cast<Host*>(h)->plugins;
-                    return plugins ? plugins->FindFactory(kind ? kind : "", name ? name : "") : nullptr;
+                    return plugins ? plugins->FindFactory(kind ? kind : "", name ? name : "")
+                                   : nullptr;
                   }};
     // The plugin reads a plain int; mirror the atomic cancel flag into it from a watcher.
     std::atomic<bool> done{false};
@@ -69,7 +75,9 @@ class PluginStage : public StageExecutor {
     }
     done = true;
     watcher.join();
-    report.outcome = rc == MP_TASK_OK ? Outcome::kOk : rc == MP_TASK_BAD_INPUT ? Outcome::kBadInput : Outcome::kError;
+    report.outcome = rc == MP_TASK_OK          ? Outcome::kOk
+                     : rc == MP_TASK_BAD_INPUT ? Outcome::kBadInput
+                                               : Outcome::kError;
     report.message = error;
     return report;
   }
@@ -86,7 +94,8 @@ Status PluginHost::LoadFile(const std::string& path) {
   std::error_code ec;
   const std::string canonical = std::filesystem::weakly_canonical(path, ec).string();
   for (const LoadedPlugin& loaded : plugins_) {
-    if (loaded.canonical_path == canonical) return Status::Ok();  // the same file found twice: already loaded
+    if (loaded.canonical_path == canonical)
+      return Status::Ok();  // the same file found twice: already loaded
   }
   const auto refuse = [&](const std::string& why) {
     problems_.push_back({path, why});
@@ -108,10 +117,12 @@ Status PluginHost::LoadFile(const std::string& path) {
   }
   if (!plugin) return refuse("its entry point returned nothing");
   if (plugin->abi_version != MOTIONPIPE_PLUGIN_ABI_VERSION) {
-    return refuse("plugin ABI version " + std::to_string(plugin->abi_version) + ", this host speaks version " +
-                  std::to_string(MOTIONPIPE_PLUGIN_ABI_VERSION) + ": rebuild the plugin against this motionpipe");
+    return refuse("plugin ABI version " + std::to_string(plugin->abi_version) +
+                  ", this host speaks version " + std::to_string(MOTIONPIPE_PLUGIN_ABI_VERSION) +
+                  ": rebuild the plugin against this motionpipe");
   }
-  if (plugin->struct_size < sizeof(mp_plugin)) return refuse("plugin struct too small (built against an older header)");
+  if (plugin->struct_size < sizeof(mp_plugin))
+    return refuse("plugin struct too small (built against an older header)");
   LoadedPlugin loaded;
   loaded.path = path;
   loaded.canonical_path = canonical;
@@ -120,16 +131,19 @@ Status PluginHost::LoadFile(const std::string& path) {
   loaded.plugin = plugin;
   for (uint32_t k = 0; k < plugin->num_stage_kinds; ++k) {
     const mp_stage_kind& kind = plugin->stage_kinds[k];
-    if (!kind.kind || !kind.run) return refuse("stage kind " + std::to_string(k) + " has no name or run function");
+    if (!kind.kind || !kind.run)
+      return refuse("stage kind " + std::to_string(k) + " has no name or run function");
     loaded.stage_kinds.push_back(kind.kind);
   }
   for (uint32_t k = 0; k < plugin->num_factories; ++k) {
     const mp_object_factory& f = plugin->factories[k];
-    if (!f.kind || !f.name || !f.create || !f.destroy) return refuse("factory " + std::to_string(k) + " is incomplete");
+    if (!f.kind || !f.name || !f.create || !f.destroy)
+      return refuse("factory " + std::to_string(k) + " is incomplete");
     loaded.objects.push_back(std::string(f.kind) + "/" + f.name);
   }
   for (const LoadedPlugin& other : plugins_) {
-    if (other.name == loaded.name) return refuse("a plugin named '" + loaded.name + "' is already loaded from " + other.path);
+    if (other.name == loaded.name)
+      return refuse("a plugin named '" + loaded.name + "' is already loaded from " + other.path);
   }
   plugins_.push_back(std::move(loaded));
   return Status::Ok();
@@ -149,12 +163,15 @@ void PluginHost::LoadDirectory(const std::string& dir) {
 void PluginHost::RegisterExecutors(ExecutorRegistry* registry) const {
   for (const LoadedPlugin& loaded : plugins_) {
     for (uint32_t k = 0; k < loaded.plugin->num_stage_kinds; ++k) {
-      registry->Register(loaded.plugin->stage_kinds[k].kind, std::make_unique<PluginStage>(&loaded.plugin->stage_kinds[k], loaded.name, this));
+      registry->Register(
+          loaded.plugin->stage_kinds[k].kind,
+          std::make_unique<PluginStage>(&loaded.plugin->stage_kinds[k], loaded.name, this));
     }
   }
 }
 
-const mp_object_factory* PluginHost::FindFactory(const std::string& kind, const std::string& name) const {
+const mp_object_factory* PluginHost::FindFactory(const std::string& kind,
+                                                 const std::string& name) const {
   for (const LoadedPlugin& loaded : plugins_) {
     for (uint32_t k = 0; k < loaded.plugin->num_factories; ++k) {
       const mp_object_factory& f = loaded.plugin->factories[k];
@@ -171,7 +188,8 @@ std::vector<std::string> DefaultPluginDirs() {
     size_t start = 0;
     while (start <= value.size()) {
       const size_t colon = value.find(':', start);
-      const std::string part = value.substr(start, colon == std::string::npos ? std::string::npos : colon - start);
+      const std::string part =
+          value.substr(start, colon == std::string::npos ? std::string::npos : colon - start);
       if (!part.empty()) dirs.push_back(part);
       if (colon == std::string::npos) break;
       start = colon + 1;

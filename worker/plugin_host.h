@@ -1,7 +1,7 @@
-// Loads plugin libraries through the one C ABI entry point (plugins/api/motionpipe_plugin.h): dlopen
-// with RTLD_LOCAL, ABI version checked before anything else is touched, never unloaded. A bad plugin
-// (cannot load, missing symbol, wrong ABI, throws in its entry point) is reported and skipped; the
-// host keeps going.
+// Loads plugin libraries through the one C ABI entry point (plugins/api/motionpipe_plugin.h):
+// dlopen with RTLD_LOCAL, ABI version checked before anything else is touched, never unloaded. A
+// bad plugin (cannot load, missing symbol, wrong ABI, throws in its entry point) is reported and
+// skipped; the host keeps going.
 #pragma once
 
 #include <string>

@@ -1,7 +1,5 @@
 #include "report.h"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -9,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <regex>
 #include <set>
@@ -27,12 +26,13 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// ---- the papers' numbers (REFERENCE.md 3.4 and 4.6) -----------------------------------------------
+// ---- the papers' numbers (REFERENCE.md 3.4 and 4.6)
+// -----------------------------------------------
 
 struct PaperEditRow {
-  const char* row;                       // as the paper names it
-  std::vector<std::string> methods;      // the `method` strings of our eval stages that are this row
-  double r1, r2, r3, avg_rank;           // generated-to-target, batches of 32
+  const char* row;                   // as the paper names it
+  std::vector<std::string> methods;  // the `method` strings of our eval stages that are this row
+  double r1, r2, r3, avg_rank;       // generated-to-target, batches of 32
 };
 
 const std::vector<PaperEditRow>& PaperTable1() {
@@ -40,7 +40,12 @@ const std::vector<PaperEditRow>& PaperTable1() {
       {"MDM", {"mdm", "mdt_editor/mdm"}, 4.03, 7.56, 10.48, 15.55},
       {"MDM-BP", {"mdm-bp"}, 39.10, 50.09, 54.84, 6.46},
       {"TMED", {"tmed", "mdt_editor/tmed"}, 62.90, 76.51, 83.06, 2.71},
-      {"SimMotionEdit (MDT)", {"mdt (simmotionedit)", "mdt", "simmotionedit", "mdt_editor/mdt"}, 70.62, 82.92, 88.12, 2.38},
+      {"SimMotionEdit (MDT)",
+       {"mdt (simmotionedit)", "mdt", "simmotionedit", "mdt_editor/mdt"},
+       70.62,
+       82.92,
+       88.12,
+       2.38},
       {"w/o auxiliary loss", {"w/o aux loss", "mdt_no_aux"}, 67.21, 78.75, 86.33, 2.49},
       {"w/o SNR filtering", {"w/o snr filtering", "mdt_no_filter"}, 66.88, 80.42, 85.83, 2.46},
   };
@@ -56,7 +61,9 @@ struct PaperGenRow {
 const std::vector<PaperGenRow>& PaperTables23() {
   static const std::vector<PaperGenRow> rows = {
       {"Single-action", {"single-action", "single"}, 0.601},
-      {"Single-action + GPT compositing", {"single-action + gpt compositing", "compositing"}, 0.618},
+      {"Single-action + GPT compositing",
+       {"single-action + gpt compositing", "compositing"},
+       0.618},
       {"SINC-STE", {"sinc-ste", "ste"}, 0.614},
       {"SINC, real singles + pairs", {"sinc (real singles + pairs)", "sinc_real"}, 0.640},
       {"SINC + synthetic pairs (GPT labels)", {"sinc (+ synthetic, labels)", "sinc"}, 0.644},
@@ -66,11 +73,13 @@ const std::vector<PaperGenRow>& PaperTables23() {
 }
 
 std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return s;
 }
 
-// ---- what the job directory holds -----------------------------------------------------------------
+// ---- what the job directory holds
+// -----------------------------------------------------------------
 
 struct Run {
   std::string stage;  // e.g. eval_edit_mdt-s2
@@ -83,16 +92,19 @@ struct Method {
   std::string paper_row;  // empty when the papers have no such row
   int paper_index = 1000;
   std::vector<Run> runs;  // seed replicates, replicate 1 first
-  bool yardstick = false;  // a reference row (copy, ground truth, shuffled, untrained): never "best"
+  bool yardstick =
+      false;  // a reference row (copy, ground truth, shuffled, untrained): never "best"
   bool untrained = false;  // the untrained model's row (eval param yardstick: untrained)
 };
 
 // The yardstick rows an evaluation computed beside its method (metrics "yardsticks": key -> the
 // same metrics as a method's), taken from the first method that has them: every evaluation of a job
 // scores the same test split, and its seed replicates give the rows' spread.
-std::vector<Method> YardstickRows(const std::vector<const Method*>& methods, const std::vector<std::pair<std::string, std::string>>& keys) {
+std::vector<Method> YardstickRows(const std::vector<const Method*>& methods,
+                                  const std::vector<std::pair<std::string, std::string>>& keys) {
   for (const Method* m : methods) {
-    if (m->untrained || m->runs.empty() || !m->runs.front().metrics.contains("yardsticks")) continue;
+    if (m->untrained || m->runs.empty() || !m->runs.front().metrics.contains("yardsticks"))
+      continue;
     std::vector<Method> out;
     for (const auto& [key, label] : keys) {
       Method row;
@@ -122,7 +134,8 @@ std::string RowName(const Method& m) { return m.paper_row.empty() ? m.name : m.p
 struct TrainCurve {
   std::string stage;
   std::vector<double> steps, losses;
-  std::vector<double> val_steps, val_losses;  // the held-out split's loss (val_losses.csv), if validated
+  std::vector<double> val_steps,
+      val_losses;  // the held-out split's loss (val_losses.csv), if validated
   double seconds = 0;
 };
 
@@ -141,7 +154,8 @@ std::optional<json> ReadJson(const std::string& path) {
 }
 
 // losses.csv (or val_losses.csv): a header with `step` and `column` columns.
-std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string& path, const char* loss_column = "loss") {
+std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string& path,
+                                    const char* loss_column = "loss") {
   std::ifstream in(path);
   std::string line;
   if (!in || !std::getline(in, line)) return std::nullopt;
@@ -171,7 +185,8 @@ std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string&
   return curve;
 }
 
-// ---- statistics over seeds ------------------------------------------------------------------------
+// ---- statistics over seeds
+// ------------------------------------------------------------------------
 
 struct Stat {
   double mean = 0, sd = 0;
@@ -197,7 +212,8 @@ std::vector<double> Values(const Method& m, const std::string& pointer) {
   std::vector<double> values;
   for (const Run& r : m.runs) {
     const json::json_pointer p(pointer);
-    if (r.metrics.contains(p) && r.metrics[p].is_number()) values.push_back(r.metrics[p].get<double>());
+    if (r.metrics.contains(p) && r.metrics[p].is_number())
+      values.push_back(r.metrics[p].get<double>());
   }
   return values;
 }
@@ -214,17 +230,27 @@ std::string Escape(const std::string& text) {
   std::string out;
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
 }
 
-// ---- HTML tables ----------------------------------------------------------------------------------
+// ---- HTML tables
+// ----------------------------------------------------------------------------------
 
 struct Column {
   std::string group, name, pointer;
@@ -238,8 +264,10 @@ struct PaperCell {
 };
 
 // Methods as rows; each cell "mean ± sd" over the seeds; the best mean of each column in bold.
-std::string MetricTable(const std::string& caption, const std::vector<const Method*>& methods, const std::vector<Column>& columns,
-                        const std::vector<std::string>& paper_columns, const std::vector<PaperCell>& paper, int paper_decimals) {
+std::string MetricTable(const std::string& caption, const std::vector<const Method*>& methods,
+                        const std::vector<Column>& columns,
+                        const std::vector<std::string>& paper_columns,
+                        const std::vector<PaperCell>& paper, int paper_decimals) {
   std::vector<std::vector<Stat>> stats(methods.size());
   for (size_t m = 0; m < methods.size(); ++m) {
     for (const Column& c : columns) stats[m].push_back(Collect(*methods[m], c.pointer));
@@ -249,14 +277,16 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
     for (size_t m = 0; m < methods.size(); ++m) {
       if (stats[m][c].n == 0 || methods[m]->yardstick) continue;
       const int b = best[c];
-      if (b < 0 || (columns[c].higher_is_better ? stats[m][c].mean > stats[static_cast<size_t>(b)][c].mean
-                                                : stats[m][c].mean < stats[static_cast<size_t>(b)][c].mean)) {
+      if (b < 0 || (columns[c].higher_is_better
+                        ? stats[m][c].mean > stats[static_cast<size_t>(b)][c].mean
+                        : stats[m][c].mean < stats[static_cast<size_t>(b)][c].mean)) {
         best[c] = static_cast<int>(m);
       }
     }
   }
   std::ostringstream html;
-  html << "<table>\n<caption>" << caption << "</caption>\n<thead><tr><th rowspan=\"2\">Method</th><th rowspan=\"2\">seeds</th>";
+  html << "<table>\n<caption>" << caption
+       << "</caption>\n<thead><tr><th rowspan=\"2\">Method</th><th rowspan=\"2\">seeds</th>";
   // Group header.
   for (size_t c = 0; c < columns.size();) {
     size_t span = 1;
@@ -264,16 +294,19 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
     html << "<th colspan=\"" << span << "\">" << Escape(columns[c].group) << "</th>";
     c += span;
   }
-  if (!paper_columns.empty()) html << "<th class=\"paper\" colspan=\"" << paper_columns.size() << "\">paper</th>";
+  if (!paper_columns.empty())
+    html << "<th class=\"paper\" colspan=\"" << paper_columns.size() << "\">paper</th>";
   html << "</tr>\n<tr>";
-  for (const Column& c : columns) html << "<th>" << Escape(c.name) << (c.higher_is_better ? " &uarr;" : " &darr;") << "</th>";
+  for (const Column& c : columns)
+    html << "<th>" << Escape(c.name) << (c.higher_is_better ? " &uarr;" : " &darr;") << "</th>";
   for (const std::string& p : paper_columns) html << "<th class=\"paper\">" << Escape(p) << "</th>";
   html << "</tr></thead>\n<tbody>\n";
   for (size_t m = 0; m < methods.size(); ++m) {
     const Method& method = *methods[m];
     const std::string name = Escape(RowName(method));
-    html << "<tr" << (method.yardstick ? " class=\"yardstick\"" : "") << "><td>" << (method.yardstick ? "<i>" + name + "</i>" : name) << "</td><td>"
-         << method.runs.size() << "</td>";
+    html << "<tr" << (method.yardstick ? " class=\"yardstick\"" : "") << "><td>"
+         << (method.yardstick ? "<i>" + name + "</i>" : name) << "</td><td>" << method.runs.size()
+         << "</td>";
     for (size_t c = 0; c < columns.size(); ++c) {
       const Stat& s = stats[m][c];
       if (s.n == 0) {
@@ -281,13 +314,17 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
         continue;
       }
       std::string cell = Format(s.mean, columns[c].decimals);
-      if (s.n > 1) cell += " <span class=\"sd\">&plusmn; " + Format(s.sd, columns[c].decimals) + "</span>";
-      const bool bold = columns[c].bold_best && best[c] == static_cast<int>(m) && methods.size() > 1;
+      if (s.n > 1)
+        cell += " <span class=\"sd\">&plusmn; " + Format(s.sd, columns[c].decimals) + "</span>";
+      const bool bold =
+          columns[c].bold_best && best[c] == static_cast<int>(m) && methods.size() > 1;
       html << "<td>" << (bold ? "<b>" + cell + "</b>" : cell) << "</td>";
     }
     for (size_t p = 0; p < paper_columns.size(); ++p) {
-      const auto& value = m < paper.size() && p < paper[m].values.size() ? paper[m].values[p] : std::nullopt;
-      html << "<td class=\"paper\">" << (value ? Format(*value, paper_decimals) : "&ndash;") << "</td>";
+      const auto& value =
+          m < paper.size() && p < paper[m].values.size() ? paper[m].values[p] : std::nullopt;
+      html << "<td class=\"paper\">" << (value ? Format(*value, paper_decimals) : "&ndash;")
+           << "</td>";
     }
     html << "</tr>\n";
   }
@@ -300,54 +337,73 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
 bool AllBatched(const std::vector<const Method*>& edits) {
   for (const Method* m : edits) {
     for (const Run& r : m->runs) {
-      if (r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) <= 0) return false;
+      if (r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) <= 0)
+        return false;
     }
   }
   return true;
 }
 
-// ---- claims ---------------------------------------------------------------------------------------
+// ---- claims
+// ---------------------------------------------------------------------------------------
 
 std::string StatText(const Stat& s, int decimals) {
-  return Format(s.mean, decimals) + (s.n > 1 ? " ± " + Format(s.sd, decimals) : "") + " (n=" + std::to_string(s.n) + ")";
+  return Format(s.mean, decimals) + (s.n > 1 ? " ± " + Format(s.sd, decimals) : "") +
+         " (n=" + std::to_string(s.n) + ")";
 }
 
 // A paper's claim "better beats worse" on `pointer` (issue 15's calibration): not decidable while a
 // compared model does not beat the untrained row, or with fewer than 3 seeds a side; it holds when
 // the difference of the means beats two standard errors, does not hold when the reverse does.
-ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better, const Method* worse, const Method* untrained,
-                   const std::string& pointer, const std::string& metric_name, bool higher_is_better, int decimals) {
+ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better,
+                   const Method* worse, const Method* untrained, const std::string& pointer,
+                   const std::string& metric_name, bool higher_is_better, int decimals) {
   ClaimCheck out{paper, claim, "not measured", ""};
   if (!better || !worse) {
     out.detail = "a method of the comparison is not in this job";
     return out;
   }
   const std::vector<double> a_values = Values(*better, pointer), b_values = Values(*worse, pointer);
-  const std::vector<double> u_values = untrained ? Values(*untrained, pointer) : std::vector<double>{};
+  const std::vector<double> u_values =
+      untrained ? Values(*untrained, pointer) : std::vector<double>{};
   if (a_values.empty() || b_values.empty()) {
     out.detail = "no " + metric_name + " for one of the methods";
     return out;
   }
   const Stat a = Summarise(a_values), b = Summarise(b_values);
   const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
-  const double se = std::sqrt((a.n > 1 ? a.sd * a.sd / a.n : 0) + (b.n > 1 ? b.sd * b.sd / b.n : 0));
-  out.detail = metric_name + ": " + StatText(a, decimals) + " vs " + StatText(b, decimals) + "; difference " + Format(diff, decimals) +
-               ", 2 standard errors " + Format(2 * se, decimals);
+  const double se =
+      std::sqrt((a.n > 1 ? a.sd * a.sd / a.n : 0) + (b.n > 1 ? b.sd * b.sd / b.n : 0));
+  out.detail = metric_name + ": " + StatText(a, decimals) + " vs " + StatText(b, decimals) +
+               "; difference " + Format(diff, decimals) + ", 2 standard errors " +
+               Format(2 * se, decimals);
   if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarise(u_values), decimals);
   switch (DecideClaim(a_values, b_values, u_values, higher_is_better)) {
-    case ClaimVerdict::kHolds: out.verdict = "holds"; break;
-    case ClaimVerdict::kDoesNotHold: out.verdict = "does not hold"; break;
-    case ClaimVerdict::kWithinErrors: out.verdict = "not decided: the difference is within two standard errors"; break;
-    case ClaimVerdict::kFewSeeds:
-      out.verdict = std::string("not decidable: fewer than 3 seeds (the means go ") + (diff > 0 ? "the claimed way)" : "the other way)");
+    case ClaimVerdict::kHolds:
+      out.verdict = "holds";
       break;
-    case ClaimVerdict::kBetterNotTrained: out.verdict = "not decidable: " + RowName(*better) + " does not beat its untrained row"; break;
-    case ClaimVerdict::kWorseNotTrained: out.verdict = "not decidable: " + RowName(*worse) + " does not beat its untrained row"; break;
+    case ClaimVerdict::kDoesNotHold:
+      out.verdict = "does not hold";
+      break;
+    case ClaimVerdict::kWithinErrors:
+      out.verdict = "not decided: the difference is within two standard errors";
+      break;
+    case ClaimVerdict::kFewSeeds:
+      out.verdict = std::string("not decidable: fewer than 3 seeds (the means go ") +
+                    (diff > 0 ? "the claimed way)" : "the other way)");
+      break;
+    case ClaimVerdict::kBetterNotTrained:
+      out.verdict = "not decidable: " + RowName(*better) + " does not beat its untrained row";
+      break;
+    case ClaimVerdict::kWorseNotTrained:
+      out.verdict = "not decidable: " + RowName(*worse) + " does not beat its untrained row";
+      break;
   }
   return out;
 }
 
-// ---- the evaluators' own quality -------------------------------------------------------------------
+// ---- the evaluators' own quality
+// -------------------------------------------------------------------
 
 // The first run of `methods` (the untrained row last) whose metrics hold `pointer`.
 const json* FirstWith(const std::vector<const Method*>& methods, const std::string& pointer) {
@@ -363,44 +419,66 @@ const json* FirstWith(const std::vector<const Method*>& methods, const std::stri
 }
 
 // What the evaluators can tell apart (issue 15): the TMR's text-to-motion and motion-to-text
-// retrieval of the held-out single actions and two-action spans, its retrieval of each test target's
-// own source, and the TEMOS evaluator's score of a motion with itself and with a shuffled partner.
-std::string EvaluatorSection(const std::vector<const Method*>& edits, const std::vector<const Method*>& gens, int* tables) {
+// retrieval of the held-out single actions and two-action spans, its retrieval of each test
+// target's own source, and the TEMOS evaluator's score of a motion with itself and with a shuffled
+// partner.
+std::string EvaluatorSection(const std::vector<const Method*>& edits,
+                             const std::vector<const Method*>& gens, int* tables) {
   std::ostringstream rows;
-  const auto cell = [](const json& j, const char* key) { return j.contains(key) && j[key].is_number() ? Format(j[key].get<double>(), 1) : "&ndash;"; };
+  const auto cell = [](const json& j, const char* key) {
+    return j.contains(key) && j[key].is_number() ? Format(j[key].get<double>(), 1) : "&ndash;";
+  };
   if (const json* m = FirstWith(gens, "/evaluator_quality")) {
-    for (const auto& [kind, label] : {std::pair{"singles", "TMR: test single actions"}, std::pair{"pairs", "TMR: test two-action spans (\"A while B\")"}}) {
+    for (const auto& [kind, label] :
+         {std::pair{"singles", "TMR: test single actions"},
+          std::pair{"pairs", "TMR: test two-action spans (\"A while B\")"}}) {
       if (!(*m)["evaluator_quality"].contains(kind)) continue;
       const json& q = (*m)["evaluator_quality"][kind];
-      rows << "<tr><td>" << label << "</td><td>" << q.value("motions", 0) << "</td><td>" << cell(q["text_to_motion"], "R@1") << "</td><td>"
-           << cell(q["text_to_motion"], "R@3") << "</td><td>" << cell(q["motion_to_text"], "R@1") << "</td><td>" << cell(q["motion_to_text"], "R@3")
-           << "</td><td>" << q["text_to_motion"].value("queries", 0) << " queries in batches</td></tr>\n";
+      rows << "<tr><td>" << label << "</td><td>" << q.value("motions", 0) << "</td><td>"
+           << cell(q["text_to_motion"], "R@1") << "</td><td>" << cell(q["text_to_motion"], "R@3")
+           << "</td><td>" << cell(q["motion_to_text"], "R@1") << "</td><td>"
+           << cell(q["motion_to_text"], "R@3") << "</td><td>"
+           << q["text_to_motion"].value("queries", 0) << " queries in batches</td></tr>\n";
     }
   }
   if (const json* m = FirstWith(edits, "/target_to_source/batches")) {
     const json& q = (*m)["target_to_source"]["batches"];
-    rows << "<tr><td>TMR: each test target retrieves its own source (motion-to-motion)</td><td>" << m->value("motions", 0) << "</td><td>"
-         << cell(q, "R@1") << "</td><td>" << cell(q, "R@3") << "</td><td>&ndash;</td><td>&ndash;</td><td>AvgR " << cell(q, "AvgR") << "</td></tr>\n";
+    rows << "<tr><td>TMR: each test target retrieves its own source (motion-to-motion)</td><td>"
+         << m->value("motions", 0) << "</td><td>" << cell(q, "R@1") << "</td><td>" << cell(q, "R@3")
+         << "</td><td>&ndash;</td><td>&ndash;</td><td>AvgR " << cell(q, "AvgR") << "</td></tr>\n";
   }
   if (const json* m = FirstWith(gens, "/yardsticks/shuffled/temos_score")) {
-    const auto score = [&](const char* key) { return Format((*m)["yardsticks"][key]["temos_score"].get<double>(), 3); };
-    rows << "<tr><td>TEMOS evaluator: score of a test motion with itself / with a shuffled test motion of its length class</td><td>"
-         << m->value("motions", 0) << "</td><td colspan=\"4\">" << score("truth") << " / " << score("shuffled")
-         << "</td><td>a generated motion's score means something only between these two</td></tr>\n";
+    const auto score = [&](const char* key) {
+      return Format((*m)["yardsticks"][key]["temos_score"].get<double>(), 3);
+    };
+    rows
+        << "<tr><td>TEMOS evaluator: score of a test motion with itself / with a shuffled test "
+           "motion of its length class</td><td>"
+        << m->value("motions", 0) << "</td><td colspan=\"4\">" << score("truth") << " / "
+        << score("shuffled")
+        << "</td><td>a generated motion's score means something only between these two</td></tr>\n";
   }
   if (rows.str().empty()) return "";
   ++*tables;
-  return "<h2>The evaluators</h2>\n<p>A score is only as good as the evaluator behind it: what the evaluators tell apart on the "
-         "held-out test split, measured in this job (R@k in percent).</p>\n<table>\n<caption>Evaluator quality</caption>\n<thead><tr>"
-         "<th>evaluator and test set</th><th>motions</th><th>text→motion R@1</th><th>text→motion R@3</th><th>motion→text R@1</th>"
-         "<th>motion→text R@3</th><th></th></tr></thead>\n<tbody>\n" + rows.str() + "</tbody></table>\n";
+  return "<h2>The evaluators</h2>\n<p>A score is only as good as the evaluator behind it: what the "
+         "evaluators tell apart on the "
+         "held-out test split, measured in this job (R@k in "
+         "percent).</p>\n<table>\n<caption>Evaluator quality</caption>\n<thead><tr>"
+         "<th>evaluator and test set</th><th>motions</th><th>text→motion R@1</th><th>text→motion "
+         "R@3</th><th>motion→text R@1</th>"
+         "<th>motion→text R@3</th><th></th></tr></thead>\n<tbody>\n" +
+         rows.str() + "</tbody></table>\n";
 }
 
-// ---- pictures -------------------------------------------------------------------------------------
+// ---- pictures
+// -------------------------------------------------------------------------------------
 
-std::string DataUri(const std::string& mime, const std::string& bytes) { return "data:" + mime + ";base64," + Base64(bytes); }
+std::string DataUri(const std::string& mime, const std::string& bytes) {
+  return "data:" + mime + ";base64," + Base64(bytes);
+}
 
-std::string ImgTag(const std::string& mime, const std::string& bytes, const std::string& alt, int* images) {
+std::string ImgTag(const std::string& mime, const std::string& bytes, const std::string& alt,
+                   int* images) {
   ++*images;
   return "<img alt=\"" + Escape(alt) + "\" src=\"" + DataUri(mime, bytes) + "\">";
 }
@@ -435,7 +513,8 @@ std::string CurvesPng(const std::string& title, const std::vector<const TrainCur
   return image.EncodePng();
 }
 
-std::string HistoryPng(const std::string& metric, const std::map<std::string, std::vector<double>>& by_method) {
+std::string HistoryPng(const std::string& metric,
+                       const std::map<std::string, std::vector<double>>& by_method) {
   render::Image image(520, 280);
   render::Panel panel(&image, 0, 0, 520, 280);
   double x_max = 1, y_min = 1e300, y_max = -1e300;
@@ -467,7 +546,8 @@ std::string HistoryPng(const std::string& metric, const std::map<std::string, st
 }
 
 // A GIF of the panels, through a temporary file next to the report.
-Result<std::string> PreviewGif(const std::vector<render::MotionPanel>& panels, int size, const std::string& scratch) {
+Result<std::string> PreviewGif(const std::vector<render::MotionPanel>& panels, int size,
+                               const std::string& scratch) {
   render::RenderOptions options;
   options.panel_width = options.panel_height = size;
   options.fps = 10;
@@ -478,7 +558,8 @@ Result<std::string> PreviewGif(const std::vector<render::MotionPanel>& panels, i
   return bytes;
 }
 
-std::optional<Motion> PreviewMotion(const std::string& dir, const std::string& role, std::string* text) {
+std::optional<Motion> PreviewMotion(const std::string& dir, const std::string& role,
+                                    std::string* text) {
   const std::string path = dir + "/preview.npz";
   if (!fs::exists(path)) return std::nullopt;
   auto clips = ReadClips(path);
@@ -508,20 +589,26 @@ code { background: #f3f3f3; padding: 0 3px; }
 }  // namespace
 
 std::string Base64(std::string_view bytes) {
-  static const char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  static const char kAlphabet[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
   std::string out;
   out.reserve((bytes.size() + 2) / 3 * 4);
   size_t i = 0;
   for (; i + 2 < bytes.size(); i += 3) {
-    const uint32_t v = (static_cast<uint8_t>(bytes[i]) << 16) | (static_cast<uint8_t>(bytes[i + 1]) << 8) | static_cast<uint8_t>(bytes[i + 2]);
-    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += kAlphabet[(v >> 6) & 63], out += kAlphabet[v & 63];
+    const uint32_t v = (static_cast<uint8_t>(bytes[i]) << 16) |
+                       (static_cast<uint8_t>(bytes[i + 1]) << 8) |
+                       static_cast<uint8_t>(bytes[i + 2]);
+    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += kAlphabet[(v >> 6) & 63],
+        out += kAlphabet[v & 63];
   }
   if (i + 1 == bytes.size()) {
     const uint32_t v = static_cast<uint8_t>(bytes[i]) << 16;
     out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += "==";
   } else if (i + 2 == bytes.size()) {
-    const uint32_t v = (static_cast<uint8_t>(bytes[i]) << 16) | (static_cast<uint8_t>(bytes[i + 1]) << 8);
-    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += kAlphabet[(v >> 6) & 63], out += '=';
+    const uint32_t v =
+        (static_cast<uint8_t>(bytes[i]) << 16) | (static_cast<uint8_t>(bytes[i + 1]) << 8);
+    out += kAlphabet[v >> 18], out += kAlphabet[(v >> 12) & 63], out += kAlphabet[(v >> 6) & 63],
+        out += '=';
   }
   return out;
 }
@@ -532,14 +619,15 @@ namespace {
 // spreads of whichever side has 2+ values; with one value each, by any margin).
 bool BeatsUntrained(const Stat& model, const Stat& untrained, bool higher_is_better) {
   const double diff = higher_is_better ? model.mean - untrained.mean : untrained.mean - model.mean;
-  const double se = std::sqrt((model.n > 1 ? model.sd * model.sd / model.n : 0) + (untrained.n > 1 ? untrained.sd * untrained.sd / untrained.n : 0));
+  const double se = std::sqrt((model.n > 1 ? model.sd * model.sd / model.n : 0) +
+                              (untrained.n > 1 ? untrained.sd * untrained.sd / untrained.n : 0));
   return diff > 0 && diff > 2 * se;
 }
 
 }  // namespace
 
-ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse, const std::vector<double>& untrained,
-                         bool higher_is_better) {
+ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
+                         const std::vector<double>& untrained, bool higher_is_better) {
   const Stat a = Summarise(better), b = Summarise(worse);
   if (!untrained.empty()) {
     const Stat u = Summarise(untrained);
@@ -563,7 +651,8 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   // Every stage directory: evaluation metrics, training curves, showcases.
   std::vector<std::string> stages;
   for (const auto& entry : fs::directory_iterator(job)) {
-    if (entry.is_directory() && entry.path().filename().string()[0] != '.') stages.push_back(entry.path().filename().string());
+    if (entry.is_directory() && entry.path().filename().string()[0] != '.')
+      stages.push_back(entry.path().filename().string());
   }
   std::sort(stages.begin(), stages.end());
   std::map<std::string, Method> edit_methods, gen_methods;
@@ -573,17 +662,20 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     const std::string task = job + "/" + stage + "/task-00000";
     if (auto metrics = ReadJson(task + "/metrics.json")) {
       const std::string method = metrics->value("method", stage);
-      const bool edit = metrics->contains("generated_to_target"), gen = metrics->contains("temos_score");
+      const bool edit = metrics->contains("generated_to_target"),
+                 gen = metrics->contains("temos_score");
       if (edit || gen) {
         Method& m = (edit ? edit_methods : gen_methods)[method];
         m.name = method;
-        if (metrics->value("yardstick", std::string()) == "untrained") m.untrained = m.yardstick = true;
+        if (metrics->value("yardstick", std::string()) == "untrained")
+          m.untrained = m.yardstick = true;
         m.runs.push_back({stage, task, *metrics});
       }
     }
     if (auto curve = ReadCurve(stage, task + "/losses.csv")) {
       if (auto rank = ReadJson(task + "/rank-0.json")) curve->seconds = rank->value("seconds", 0.0);
-      if (auto val = ReadCurve(stage, task + "/val_losses.csv", "val_loss")) curve->val_steps = val->steps, curve->val_losses = val->losses;
+      if (auto val = ReadCurve(stage, task + "/val_losses.csv", "val_loss"))
+        curve->val_steps = val->steps, curve->val_losses = val->losses;
       curves.push_back(std::move(*curve));
     }
     if (auto showcase = ReadJson(task + "/showcase.json")) showcases.push_back({stage, *showcase});
@@ -599,18 +691,25 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
           m.paper_index = static_cast<int>(r);
         }
       }
-      std::sort(m.runs.begin(), m.runs.end(), [](const Run& a, const Run& b) { return a.stage < b.stage; });
+      std::sort(m.runs.begin(), m.runs.end(),
+                [](const Run& a, const Run& b) { return a.stage < b.stage; });
       out.push_back(&m);
     }
-    std::stable_sort(out.begin(), out.end(), [](const Method* a, const Method* b) { return a->paper_index < b->paper_index; });
+    std::stable_sort(out.begin(), out.end(), [](const Method* a, const Method* b) {
+      return a->paper_index < b->paper_index;
+    });
     return out;
   };
   const std::vector<const Method*> edits = order(edit_methods, PaperTable1());
   const std::vector<const Method*> gens = order(gen_methods, PaperTables23());
   // The tables' rows: the yardsticks first (issue 15), then the methods.
-  const std::vector<Method> edit_yardsticks = YardstickRows(edits, {{"copy", "source as the edit (copy)"}, {"target", "target as the edit (upper bound)"}});
-  const std::vector<Method> gen_yardsticks = YardstickRows(gens, {{"truth", "ground truth"}, {"shuffled", "shuffled ground truth (same length class)"}});
-  const auto with_yardsticks = [](const std::vector<Method>& yardsticks, const std::vector<const Method*>& methods) {
+  const std::vector<Method> edit_yardsticks = YardstickRows(
+      edits,
+      {{"copy", "source as the edit (copy)"}, {"target", "target as the edit (upper bound)"}});
+  const std::vector<Method> gen_yardsticks = YardstickRows(
+      gens, {{"truth", "ground truth"}, {"shuffled", "shuffled ground truth (same length class)"}});
+  const auto with_yardsticks = [](const std::vector<Method>& yardsticks,
+                                  const std::vector<const Method*>& methods) {
     std::vector<const Method*> rows;
     for (const Method& y : yardsticks) rows.push_back(&y);
     if (const Method* u = UntrainedRow(methods)) rows.push_back(u);
@@ -623,7 +722,8 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   const std::vector<const Method*> gen_rows = with_yardsticks(gen_yardsticks, gens);
   summary.edit_methods = static_cast<int>(edits.size());
   summary.generation_methods = static_cast<int>(gens.size());
-  const auto by_row = [](const std::vector<const Method*>& methods, const std::string& row) -> const Method* {
+  const auto by_row = [](const std::vector<const Method*>& methods,
+                         const std::string& row) -> const Method* {
     for (const Method* m : methods) {
       if (m->paper_row == row) return m;
     }
@@ -631,29 +731,37 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   };
 
   std::ostringstream body;
-  const std::string title = options.title.empty() ? fs::path(job).lexically_normal().filename().string() : options.title;
+  const std::string title =
+      options.title.empty() ? fs::path(job).lexically_normal().filename().string() : options.title;
   const std::time_t now = std::time(nullptr);
   char stamp[64];
   std::strftime(stamp, sizeof stamp, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
-  body << "<h1>motionpipe report: " << Escape(title) << "</h1>\n<p>Job directory <code>" << Escape(fs::absolute(job).string())
-       << "</code>, written " << stamp << ". Every number below comes from this job's stages; cells are the mean &plusmn; the "
-       << "standard deviation over seed replicates (the <i>seeds</i> column), the best of each column is bold, and the papers' own "
-       << "numbers stand in grey beside them for reference. They were measured on different data (MotionFix / BABEL with AMASS, "
+  body << "<h1>motionpipe report: " << Escape(title) << "</h1>\n<p>Job directory <code>"
+       << Escape(fs::absolute(job).string()) << "</code>, written " << stamp
+       << ". Every number below comes from this job's stages; cells are the mean &plusmn; the "
+       << "standard deviation over seed replicates (the <i>seeds</i> column), the best of each "
+          "column is bold, and the papers' own "
+       << "numbers stand in grey beside them for reference. They were measured on different data "
+          "(MotionFix / BABEL with AMASS, "
        << "models trained for days); compare orderings, not values.</p>\n";
 
   // ---- SimMotionEdit Table 1.
   if (!edits.empty()) {
     const bool batches = AllBatched(edits);
     const std::string protocol = batches ? "batches" : "all";
-    const auto retrieval = [&](const std::string& group, const std::string& key, const std::string& proto) {
+    const auto retrieval = [&](const std::string& group, const std::string& key,
+                               const std::string& proto) {
       std::vector<Column> out;
-      for (const char* k : {"R@1", "R@2", "R@3"}) out.push_back({group, k, "/" + key + "/" + proto + "/" + k, 2, true});
+      for (const char* k : {"R@1", "R@2", "R@3"})
+        out.push_back({group, k, "/" + key + "/" + proto + "/" + k, 2, true});
       out.push_back({group, "AvgR", "/" + key + "/" + proto + "/AvgR", 2, false});
       return out;
     };
     std::vector<Column> columns = retrieval("generated-to-target", "generated_to_target", protocol);
-    for (const Column& c : retrieval("generated-to-source", "generated_to_source", protocol)) columns.push_back(c);
-    columns.push_back({"towards the target", "R@1 to target − to source", "/towards_target/" + protocol + "/R@1", 2, true});
+    for (const Column& c : retrieval("generated-to-source", "generated_to_source", protocol))
+      columns.push_back(c);
+    columns.push_back({"towards the target", "R@1 to target − to source",
+                       "/towards_target/" + protocol + "/R@1", 2, true});
     columns.push_back({"", "motions", "/motions", 0, true, false});
     std::vector<PaperCell> paper;
     for (const Method* m : edit_rows) {
@@ -664,19 +772,29 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       paper.push_back(cell);
     }
     const int64_t batch = edits.front()->runs.front().metrics.value("batch", int64_t{32});
-    body << "<h2>Text-based motion editing (SimMotionEdit, Table 1)</h2>\n<p>Motion-to-motion retrieval with the TMR evaluator: "
-         << "each edited motion's rank among the targets (and sources) by cosine similarity, ties averaged; R@k in percent, AvgR the "
+    body << "<h2>Text-based motion editing (SimMotionEdit, Table 1)</h2>\n<p>Motion-to-motion "
+            "retrieval with the TMR evaluator: "
+         << "each edited motion's rank among the targets (and sources) by cosine similarity, ties "
+            "averaged; R@k in percent, AvgR the "
          << "mean rank. Protocol: "
-         << (batches ? "seeded batches of " + std::to_string(batch) + ", remainder dropped (the paper's, with 32)"
-                     : "the whole test set (fewer motions than a batch of " + std::to_string(batch) + ")")
-         << ". The paper's GT row is 100 / 100 / 100 / 1.00 by construction. The rows in italics are yardsticks scored in the same "
-         << "evaluation: the source as the edit (a copy moves nowhere), the target as the edit (the upper bound) and the untrained "
-         << "editor (initial weights, same sampler). <i>Towards the target</i> is generated-to-target minus generated-to-source R@1: "
-         << "an edit that moves towards its target scores above 0, a copy of the source far below.</p>\n";
-    body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", edit_rows, columns, {"R@1", "R@2", "R@3", "AvgR"}, paper, 2);
+         << (batches ? "seeded batches of " + std::to_string(batch) +
+                           ", remainder dropped (the paper's, with 32)"
+                     : "the whole test set (fewer motions than a batch of " +
+                           std::to_string(batch) + ")")
+         << ". The paper's GT row is 100 / 100 / 100 / 1.00 by construction. The rows in italics "
+            "are yardsticks scored in the same "
+         << "evaluation: the source as the edit (a copy moves nowhere), the target as the edit "
+            "(the upper bound) and the untrained "
+         << "editor (initial weights, same sampler). <i>Towards the target</i> is "
+            "generated-to-target minus generated-to-source R@1: "
+         << "an edit that moves towards its target scores above 0, a copy of the source far "
+            "below.</p>\n";
+    body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", edit_rows, columns,
+                        {"R@1", "R@2", "R@3", "AvgR"}, paper, 2);
     ++summary.tables;
     if (batches) {
-      std::vector<Column> all = retrieval("generated-to-target, whole test set", "generated_to_target", "all");
+      std::vector<Column> all =
+          retrieval("generated-to-target, whole test set", "generated_to_target", "all");
       body << MetricTable("Editing: retrieval over the whole test set", edit_rows, all, {}, {}, 2);
       ++summary.tables;
     }
@@ -685,11 +803,16 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   // ---- SINC Tables 2-3.
   if (!gens.empty()) {
     std::vector<Column> columns = {{"", "TEMOS score", "/temos_score", 3, true}};
-    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"}) columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
-    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"}) columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
-    columns.push_back({"TMR retrieval", "text→gen R@1 (batches)", "/text_to_generated/batches/R@1", 1, true});
-    columns.push_back({"TMR retrieval", "text→gen R@1 (all)", "/text_to_generated/all/R@1", 1, true});
-    columns.push_back({"TMR retrieval", "gen→GT R@1 (all)", "/generated_to_truth/all/R@1", 1, true});
+    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
+      columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
+    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
+      columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
+    columns.push_back(
+        {"TMR retrieval", "text→gen R@1 (batches)", "/text_to_generated/batches/R@1", 1, true});
+    columns.push_back(
+        {"TMR retrieval", "text→gen R@1 (all)", "/text_to_generated/all/R@1", 1, true});
+    columns.push_back(
+        {"TMR retrieval", "gen→GT R@1 (all)", "/generated_to_truth/all/R@1", 1, true});
     columns.push_back({"", "motions", "/motions", 0, true, false});
     std::vector<PaperCell> paper;
     for (const Method* m : gen_rows) {
@@ -699,18 +822,26 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       }
       paper.push_back(cell);
     }
-    body << "<h2>Spatial composition of actions (SINC, Tables 2-3)</h2>\n<p>Two-action descriptions of the held-out test split "
-         << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) / 2 between the motion-encoder "
-         << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the ground-plane trajectory, root-relative "
-         << "heading-aligned joints (local) and all joints (global); retrieval by the TMR evaluator in seeded batches and over the "
-         << "whole test set. The rows in italics are yardsticks scored in the same evaluation: the ground truth itself, shuffled "
-         << "ground truth (each motion replaced by the test motion nearest to it in length) and the untrained generator.</p>\n";
-    body << MetricTable("Composition: generated motions against the ground truth", gen_rows, columns, {"TEMOS score"}, paper, 3);
+    body << "<h2>Spatial composition of actions (SINC, Tables 2-3)</h2>\n<p>Two-action "
+            "descriptions of the held-out test split "
+         << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) "
+            "/ 2 between the motion-encoder "
+         << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the "
+            "ground-plane trajectory, root-relative "
+         << "heading-aligned joints (local) and all joints (global); retrieval by the TMR "
+            "evaluator in seeded batches and over the "
+         << "whole test set. The rows in italics are yardsticks scored in the same evaluation: the "
+            "ground truth itself, shuffled "
+         << "ground truth (each motion replaced by the test motion nearest to it in length) and "
+            "the untrained generator.</p>\n";
+    body << MetricTable("Composition: generated motions against the ground truth", gen_rows,
+                        columns, {"TEMOS score"}, paper, 3);
     ++summary.tables;
     std::vector<Column> more = {{"diversity", "generated", "/diversity/generated", 3, true, false},
                                 {"diversity", "ground truth", "/diversity/truth", 3, true, false},
                                 {"", "FID", "/fid", 3, false}};
-    body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more, {}, {}, 3);
+    body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more,
+                        {}, {}, 3);
     ++summary.tables;
   }
 
@@ -718,13 +849,19 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
 
   // ---- plausibility of everything, ground truth included.
   if (!edits.empty() || !gens.empty()) {
-    body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; these are the measurable "
-         << "proxies, for the generated motions and for their ground truth alike: the fraction of contact frames whose foot slides, "
-         << "the mean floor penetration, the fraction of frames floating above the floor, and the mean jerk.</p>\n<table>\n"
-         << "<caption>Plausibility (lower is better; mean over the methods' seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
-         << "<th>foot skate</th><th>penetration (m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
+    body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; "
+            "these are the measurable "
+         << "proxies, for the generated motions and for their ground truth alike: the fraction of "
+            "contact frames whose foot slides, "
+         << "the mean floor penetration, the fraction of frames floating above the floor, and the "
+            "mean jerk.</p>\n<table>\n"
+         << "<caption>Plausibility (lower is better; mean over the methods' "
+            "seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
+         << "<th>foot skate</th><th>penetration "
+            "(m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
     const auto row = [&](const std::string& name, const Method& m, const std::string& side) {
-      body << "<tr><td>" << Escape(name) << "</td><td>" << Format(Collect(m, "/motions").mean, 0) << "</td>";
+      body << "<tr><td>" << Escape(name) << "</td><td>" << Format(Collect(m, "/motions").mean, 0)
+           << "</td>";
       for (const char* k : {"foot_skate_ratio", "penetration_mean_m", "float_ratio", "jerk_mean"}) {
         const Stat s = Collect(m, "/plausibility/" + side + "/" + k);
         body << "<td>" << (s.n ? Format(s.mean, 3) : "&ndash;") << "</td>";
@@ -732,9 +869,11 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       body << "</tr>\n";
     };
     if (!edits.empty()) row("editing targets (ground truth)", *edits.front(), "target");
-    for (const Method* m : edits) row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
+    for (const Method* m : edits)
+      row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
     if (!gens.empty()) row("composition ground truth", *gens.front(), "truth");
-    for (const Method* m : gens) row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
+    for (const Method* m : gens)
+      row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
     body << "</tbody></table>\n";
     ++summary.tables;
   }
@@ -747,30 +886,47 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     const Method* mdt = by_row(edits, "SimMotionEdit (MDT)");
     const Method* edit_untrained = UntrainedRow(edits);
     const std::string se = "SimMotionEdit", r1_name = "generated-to-target R@1";
-    summary.claims.push_back(Compare(se, "MDT beats TMED", mdt, by_row(edits, "TMED"), edit_untrained, edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "MDT beats MDM-BP", mdt, by_row(edits, "MDM-BP"), edit_untrained, edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "MDT beats MDM", mdt, by_row(edits, "MDM"), edit_untrained, edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "removing the auxiliary similarity loss hurts", mdt, by_row(edits, "w/o auxiliary loss"), edit_untrained,
+    summary.claims.push_back(Compare(se, "MDT beats TMED", mdt, by_row(edits, "TMED"),
+                                     edit_untrained, edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "MDT beats MDM-BP", mdt, by_row(edits, "MDM-BP"),
+                                     edit_untrained, edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "MDT beats MDM", mdt, by_row(edits, "MDM"), edit_untrained,
                                      edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "removing MotionSNR filtering hurts", mdt, by_row(edits, "w/o SNR filtering"), edit_untrained, edit_pointer,
-                                     r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "removing the auxiliary similarity loss hurts", mdt,
+                                     by_row(edits, "w/o auxiliary loss"), edit_untrained,
+                                     edit_pointer, r1_name, true, 2));
+    summary.claims.push_back(Compare(se, "removing MotionSNR filtering hurts", mdt,
+                                     by_row(edits, "w/o SNR filtering"), edit_untrained,
+                                     edit_pointer, r1_name, true, 2));
     const Method* sinc = by_row(gens, "SINC + synthetic pairs (GPT labels)");
     const Method* gen_untrained = UntrainedRow(gens);
-    summary.claims.push_back(Compare("SINC", "synthetic pairs help SINC", sinc, by_row(gens, "SINC, real singles + pairs"), gen_untrained,
+    summary.claims.push_back(Compare("SINC", "synthetic pairs help SINC", sinc,
+                                     by_row(gens, "SINC, real singles + pairs"), gen_untrained,
                                      "/temos_score", "TEMOS score", true, 3));
-    summary.claims.push_back(Compare("SINC", "label-guided compositions beat random ones", sinc, by_row(gens, "SINC + random compositions"),
-                                     gen_untrained, "/temos_score", "TEMOS score", true, 3));
-    summary.claims.push_back(Compare("SINC", "GPT compositing improves the single-action model", by_row(gens, "Single-action + GPT compositing"),
-                                     by_row(gens, "Single-action"), gen_untrained, "/temos_score", "TEMOS score", true, 3));
-    body << "<h2>The papers' claims, checked on this job</h2>\n<p>A claim is <i>not decidable</i> while a compared model does not "
-         << "beat its untrained row (by more than two standard errors), or with fewer than 3 seeds a side. Otherwise it "
-         << "<i>holds</i> when the difference of the means goes the claimed way by more than two standard errors over the seeds, "
-         << "<i>does not hold</i> when it goes the other way by as much, and is <i>not decided</i> in between.</p>\n"
-         << "<table>\n<caption>Claims</caption>\n<thead><tr><th>paper</th><th>claim</th><th>verdict</th><th>numbers</th></tr></thead>\n<tbody>\n";
+    summary.claims.push_back(Compare("SINC", "label-guided compositions beat random ones", sinc,
+                                     by_row(gens, "SINC + random compositions"), gen_untrained,
+                                     "/temos_score", "TEMOS score", true, 3));
+    summary.claims.push_back(Compare("SINC", "GPT compositing improves the single-action model",
+                                     by_row(gens, "Single-action + GPT compositing"),
+                                     by_row(gens, "Single-action"), gen_untrained, "/temos_score",
+                                     "TEMOS score", true, 3));
+    body << "<h2>The papers' claims, checked on this job</h2>\n<p>A claim is <i>not decidable</i> "
+            "while a compared model does not "
+         << "beat its untrained row (by more than two standard errors), or with fewer than 3 seeds "
+            "a side. Otherwise it "
+         << "<i>holds</i> when the difference of the means goes the claimed way by more than two "
+            "standard errors over the seeds, "
+         << "<i>does not hold</i> when it goes the other way by as much, and is <i>not decided</i> "
+            "in between.</p>\n"
+         << "<table>\n<caption>Claims</caption>\n<thead><tr><th>paper</th><th>claim</"
+            "th><th>verdict</th><th>numbers</th></tr></thead>\n<tbody>\n";
     for (const ClaimCheck& c : summary.claims) {
-      const std::string cls = c.verdict.rfind("holds", 0) == 0 ? "holds" : c.verdict.rfind("does not", 0) == 0 ? "fails" : "unknown";
-      body << "<tr><td>" << Escape(c.paper) << "</td><td>" << Escape(c.claim) << "</td><td class=\"" << cls << "\">" << Escape(c.verdict)
-           << "</td><td>" << Escape(c.detail) << "</td></tr>\n";
+      const std::string cls = c.verdict.rfind("holds", 0) == 0      ? "holds"
+                              : c.verdict.rfind("does not", 0) == 0 ? "fails"
+                                                                    : "unknown";
+      body << "<tr><td>" << Escape(c.paper) << "</td><td>" << Escape(c.claim) << "</td><td class=\""
+           << cls << "\">" << Escape(c.verdict) << "</td><td>" << Escape(c.detail)
+           << "</td></tr>\n";
     }
     body << "</tbody></table>\n";
     ++summary.tables;
@@ -783,31 +939,39 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       std::vector<render::MotionPanel> panels;
       std::string text;
       const std::string first = edits.front()->runs.front().dir;
-      if (auto source = PreviewMotion(first, "source", &text)) panels.push_back({*source, "source", text});
-      if (auto target = PreviewMotion(first, "target", nullptr)) panels.push_back({*target, "target", ""});
+      if (auto source = PreviewMotion(first, "source", &text))
+        panels.push_back({*source, "source", text});
+      if (auto target = PreviewMotion(first, "target", nullptr))
+        panels.push_back({*target, "target", ""});
       for (const Method* m : edits) {
-        if (auto edited = PreviewMotion(m->runs.front().dir, "edited", nullptr)) panels.push_back({*edited, m->paper_row.empty() ? m->name : m->paper_row, ""});
+        if (auto edited = PreviewMotion(m->runs.front().dir, "edited", nullptr))
+          panels.push_back({*edited, m->paper_row.empty() ? m->name : m->paper_row, ""});
       }
       if (panels.size() > 2) {
         auto gif = PreviewGif(panels, options.panel_size, scratch);
         if (!gif.ok()) return gif.status();
-        body << "<h2>Previews</h2>\n<figure>" << ImgTag("image/gif", *gif, "editing preview", &summary.images)
-             << "<figcaption>The first test triplet: source, target and each method's edit (seed 1), instruction \"" << Escape(text)
-             << "\".</figcaption></figure>\n";
+        body << "<h2>Previews</h2>\n<figure>"
+             << ImgTag("image/gif", *gif, "editing preview", &summary.images)
+             << "<figcaption>The first test triplet: source, target and each method's edit (seed "
+                "1), instruction \""
+             << Escape(text) << "\".</figcaption></figure>\n";
       }
     }
     if (!gens.empty()) {
       std::vector<render::MotionPanel> panels;
       std::string text;
-      if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text)) panels.push_back({*truth, "ground truth", text});
+      if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text))
+        panels.push_back({*truth, "ground truth", text});
       for (const Method* m : gens) {
-        if (auto g = PreviewMotion(m->runs.front().dir, "generated", nullptr)) panels.push_back({*g, m->paper_row.empty() ? m->name : m->paper_row, ""});
+        if (auto g = PreviewMotion(m->runs.front().dir, "generated", nullptr))
+          panels.push_back({*g, m->paper_row.empty() ? m->name : m->paper_row, ""});
       }
       if (panels.size() > 1) {
         auto gif = PreviewGif(panels, options.panel_size, scratch);
         if (!gif.ok()) return gif.status();
         body << "<figure>" << ImgTag("image/gif", *gif, "composition preview", &summary.images)
-             << "<figcaption>The first test pair, \"" << Escape(text) << "\": ground truth and each method's generation (seed 1).</figcaption></figure>\n";
+             << "<figcaption>The first test pair, \"" << Escape(text)
+             << "\": ground truth and each method's generation (seed 1).</figcaption></figure>\n";
       }
     }
   }
@@ -821,18 +985,26 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       const std::string file = item.value("image", std::string());
       auto bytes = ReadFile(dir + "/" + file);
       if (file.empty() || !bytes.ok()) continue;
-      const std::string mime = file.size() > 4 && file.substr(file.size() - 4) == ".png" ? "image/png" : "image/gif";
-      body << "<figure>" << ImgTag(mime, *bytes, item.value("caption", file), &summary.images) << "<figcaption>"
-           << Escape(item.value("caption", file)) << "</figcaption></figure>\n";
+      const std::string mime =
+          file.size() > 4 && file.substr(file.size() - 4) == ".png" ? "image/png" : "image/gif";
+      body << "<figure>" << ImgTag(mime, *bytes, item.value("caption", file), &summary.images)
+           << "<figcaption>" << Escape(item.value("caption", file)) << "</figcaption></figure>\n";
     }
     if (showcase.contains("table") && showcase["table"].contains("columns")) {
       const json& table = showcase["table"];
-      body << "<table>\n<caption>" << Escape(table.value("caption", stage)) << "</caption>\n<thead><tr>";
-      for (const json& c : table["columns"]) body << "<th>" << Escape(c.get<std::string>()) << "</th>";
+      body << "<table>\n<caption>" << Escape(table.value("caption", stage))
+           << "</caption>\n<thead><tr>";
+      for (const json& c : table["columns"])
+        body << "<th>" << Escape(c.get<std::string>()) << "</th>";
       body << "</tr></thead>\n<tbody>\n";
       for (const json& row : table.value("rows", json::array())) {
         body << "<tr>";
-        for (const json& v : row) body << "<td>" << Escape(v.is_string() ? v.get<std::string>() : v.is_number_float() ? Format(v.get<double>(), 3) : v.dump()) << "</td>";
+        for (const json& v : row)
+          body << "<td>"
+               << Escape(v.is_string()         ? v.get<std::string>()
+                         : v.is_number_float() ? Format(v.get<double>(), 3)
+                                               : v.dump())
+               << "</td>";
         body << "</tr>\n";
       }
       body << "</tbody></table>\n";
@@ -845,24 +1017,32 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     std::map<std::string, std::vector<const TrainCurve*>> groups;
     for (const TrainCurve& c : curves) groups[BaseStage(c.stage)].push_back(&c);
     summary.train_stages = static_cast<int>(curves.size());
-    body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), seed replicates overlaid, and the "
-         << "loss on fixed batches of the held-out split where the stage validates (val_losses.csv).</p>\n"
-         << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</th><th>first loss</th><th>last loss</th>"
-         << "<th>held-out loss: last</th><th>held-out loss: best (step)</th><th>seconds</th></tr></thead>\n<tbody>\n";
+    body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), "
+            "seed replicates overlaid, and the "
+         << "loss on fixed batches of the held-out split where the stage validates "
+            "(val_losses.csv).</p>\n"
+         << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</"
+            "th><th>first loss</th><th>last loss</th>"
+         << "<th>held-out loss: last</th><th>held-out loss: best "
+            "(step)</th><th>seconds</th></tr></thead>\n<tbody>\n";
     for (const TrainCurve& c : curves) {
       std::string last_val = "&ndash;", best_val = "&ndash;";
       if (!c.val_losses.empty()) {
-        const size_t best = static_cast<size_t>(std::min_element(c.val_losses.begin(), c.val_losses.end()) - c.val_losses.begin());
+        const size_t best = static_cast<size_t>(
+            std::min_element(c.val_losses.begin(), c.val_losses.end()) - c.val_losses.begin());
         last_val = Format(c.val_losses.back(), 4);
         best_val = Format(c.val_losses[best], 4) + " (" + Format(c.val_steps[best] + 1, 0) + ")";
       }
-      body << "<tr><td>" << Escape(c.stage) << "</td><td>" << Format(c.steps.back() + 1, 0) << "</td><td>" << Format(c.losses.front(), 4)
-           << "</td><td>" << Format(c.losses.back(), 4) << "</td><td>" << last_val << "</td><td>" << best_val << "</td><td>"
-           << Format(c.seconds, 1) << "</td></tr>\n";
+      body << "<tr><td>" << Escape(c.stage) << "</td><td>" << Format(c.steps.back() + 1, 0)
+           << "</td><td>" << Format(c.losses.front(), 4) << "</td><td>"
+           << Format(c.losses.back(), 4) << "</td><td>" << last_val << "</td><td>" << best_val
+           << "</td><td>" << Format(c.seconds, 1) << "</td></tr>\n";
     }
     body << "</tbody></table>\n<div class=\"grid\">\n";
     ++summary.tables;
-    for (const auto& [name, group] : groups) body << ImgTag("image/png", CurvesPng(name, group), "training curve " + name, &summary.images) << "\n";
+    for (const auto& [name, group] : groups)
+      body << ImgTag("image/png", CurvesPng(name, group), "training curve " + name, &summary.images)
+           << "\n";
     body << "</div>\n";
   }
 
@@ -870,16 +1050,25 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   if (!options.history.empty()) {
     auto history = ReadHistory(options.history);
     if (!history.ok()) return history.status();
-    std::map<std::string, std::map<std::string, std::vector<double>>> series;  // metric -> method -> values
+    std::map<std::string, std::map<std::string, std::vector<double>>>
+        series;  // metric -> method -> values
     for (const MetricRecord& r : *history) series[r.metric][r.method].push_back(r.value);
-    body << "<h2>Evaluation history</h2>\n<p><code>" << Escape(options.history) << "</code>: " << history->size()
-         << " records; each evaluation run appends its headline metrics with the checkpoint and the config and data hashes.</p>\n<div class=\"grid\">\n";
-    for (const auto& [metric, by_method] : series) body << ImgTag("image/png", HistoryPng(metric, by_method), "history " + metric, &summary.images) << "\n";
+    body << "<h2>Evaluation history</h2>\n<p><code>" << Escape(options.history)
+         << "</code>: " << history->size()
+         << " records; each evaluation run appends its headline metrics with the checkpoint and "
+            "the config and data hashes.</p>\n<div class=\"grid\">\n";
+    for (const auto& [metric, by_method] : series)
+      body << ImgTag("image/png", HistoryPng(metric, by_method), "history " + metric,
+                     &summary.images)
+           << "\n";
     body << "</div>\n";
   }
 
-  const std::string html = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>motionpipe report: " + Escape(title) +
-                           "</title>\n" + kStyle + "\n</head>\n<body>\n" + body.str() + "</body>\n</html>\n";
+  const std::string html =
+      "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>motionpipe "
+      "report: " +
+      Escape(title) + "</title>\n" + kStyle + "\n</head>\n<body>\n" + body.str() +
+      "</body>\n</html>\n";
   MP_RETURN_IF_ERROR(WriteFileAtomic(summary.path, html));
   return summary;
 }

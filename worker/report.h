@@ -1,10 +1,11 @@
 // The HTML report of a job (`motionpipe report JOB_DIR`, the `report` stage): one self-contained
 // file with the evaluation stages' metrics laid out as SimMotionEdit's Table 1 (editing: motion-to-
-// motion retrieval) and SINC's Tables 2-3 (composition: TEMOS score, APE/AVE, retrieval), methods as
-// rows, mean ± standard deviation over seed replicates, the best of each column in bold and the
-// papers' own numbers beside them; the claims each paper makes, checked against these runs; physical
-// plausibility; training curves and the metric history as plots; rendered previews (GIFs) of the
-// edits and generations; the CMU showcase when the job has one. Images are embedded as data: URIs.
+// motion retrieval) and SINC's Tables 2-3 (composition: TEMOS score, APE/AVE, retrieval), methods
+// as rows, mean ± standard deviation over seed replicates, the best of each column in bold and the
+// papers' own numbers beside them; the claims each paper makes, checked against these runs;
+// physical plausibility; training curves and the metric history as plots; rendered previews (GIFs)
+// of the edits and generations; the CMU showcase when the job has one. Images are embedded as data:
+// URIs.
 #pragma once
 
 #include <string>
@@ -25,7 +26,8 @@ struct ReportOptions {
 
 struct ClaimCheck {
   std::string paper, claim;
-  std::string verdict;  // "holds", "does not hold", "not decided: ...", "not decidable: ...", "not measured"
+  std::string verdict;  // "holds", "does not hold", "not decided: ...", "not decidable: ...", "not
+                        // measured"
   std::string detail;   // the numbers behind the verdict
 };
 
@@ -43,9 +45,16 @@ Result<ReportSummary> WriteReport(const ReportOptions& options);
 // row) by more than two standard errors, or with fewer than 3 seeds a side; otherwise it holds when
 // the difference of the means goes the claimed way by more than two standard errors of the
 // difference, does not hold when it goes the other way by as much, and is within them in between.
-enum class ClaimVerdict { kHolds, kDoesNotHold, kWithinErrors, kFewSeeds, kBetterNotTrained, kWorseNotTrained };
-ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse, const std::vector<double>& untrained,
-                         bool higher_is_better);
+enum class ClaimVerdict {
+  kHolds,
+  kDoesNotHold,
+  kWithinErrors,
+  kFewSeeds,
+  kBetterNotTrained,
+  kWorseNotTrained
+};
+ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
+                         const std::vector<double>& untrained, bool higher_is_better);
 
 // Base64 (RFC 4648, with padding): the report's data: URIs.
 std::string Base64(std::string_view bytes);

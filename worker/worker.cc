@@ -6,7 +6,6 @@
 #include <prometheus/histogram.h>
 #include <prometheus/registry.h>
 #include <unistd.h>
-#include <zmq.hpp>
 
 #include <chrono>
 #include <condition_variable>
@@ -17,6 +16,7 @@
 #include <mutex>
 #include <random>
 #include <thread>
+#include <zmq.hpp>
 
 #include "executor.h"
 #include "motionpipe.pb.h"
@@ -40,17 +40,26 @@ double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 
 struct Metrics {
   std::shared_ptr<prometheus::Registry> registry = std::make_shared<prometheus::Registry>();
-  prometheus::Family<prometheus::Counter>& tasks =
-      prometheus::BuildCounter().Name("motionpipe_worker_tasks_total").Help("Tasks finished by outcome").Register(*registry);
-  prometheus::Histogram& duration = prometheus::BuildHistogram()
-                                        .Name("motionpipe_worker_task_duration_seconds")
-                                        .Help("Time to run one task")
-                                        .Register(*registry)
-                                        .Add({}, prometheus::Histogram::BucketBoundaries{0.001, 0.01, 0.1, 1, 10, 60, 600, 3600});
-  prometheus::Gauge& busy =
-      prometheus::BuildGauge().Name("motionpipe_worker_busy").Help("1 while a task runs").Register(*registry).Add({});
-  prometheus::Gauge& queued =
-      prometheus::BuildGauge().Name("motionpipe_worker_queued_tasks").Help("Leased tasks waiting to run").Register(*registry).Add({});
+  prometheus::Family<prometheus::Counter>& tasks = prometheus::BuildCounter()
+                                                       .Name("motionpipe_worker_tasks_total")
+                                                       .Help("Tasks finished by outcome")
+                                                       .Register(*registry);
+  prometheus::Histogram& duration =
+      prometheus::BuildHistogram()
+          .Name("motionpipe_worker_task_duration_seconds")
+          .Help("Time to run one task")
+          .Register(*registry)
+          .Add({}, prometheus::Histogram::BucketBoundaries{0.001, 0.01, 0.1, 1, 10, 60, 600, 3600});
+  prometheus::Gauge& busy = prometheus::BuildGauge()
+                                .Name("motionpipe_worker_busy")
+                                .Help("1 while a task runs")
+                                .Register(*registry)
+                                .Add({});
+  prometheus::Gauge& queued = prometheus::BuildGauge()
+                                  .Name("motionpipe_worker_queued_tasks")
+                                  .Help("Leased tasks waiting to run")
+                                  .Register(*registry)
+                                  .Add({});
   prometheus::Counter& bytes = prometheus::BuildCounter()
                                    .Name("motionpipe_worker_bytes_written_total")
                                    .Help("Bytes of task outputs written")
@@ -61,21 +70,24 @@ struct Metrics {
                                         .Help("Reconnections to the coordinator")
                                         .Register(*registry)
                                         .Add({});
-  prometheus::Counter& heartbeats_missed = prometheus::BuildCounter()
-                                               .Name("motionpipe_worker_heartbeats_missed_total")
-                                               .Help("Times the coordinator went silent for the liveness period")
-                                               .Register(*registry)
-                                               .Add({});
-  prometheus::Family<prometheus::Counter>& dropped = prometheus::BuildCounter()
-                                                         .Name("motionpipe_worker_messages_dropped_total")
-                                                         .Help("Malformed or unexpected messages dropped, by reason")
-                                                         .Register(*registry);
+  prometheus::Counter& heartbeats_missed =
+      prometheus::BuildCounter()
+          .Name("motionpipe_worker_heartbeats_missed_total")
+          .Help("Times the coordinator went silent for the liveness period")
+          .Register(*registry)
+          .Add({});
+  prometheus::Family<prometheus::Counter>& dropped =
+      prometheus::BuildCounter()
+          .Name("motionpipe_worker_messages_dropped_total")
+          .Help("Malformed or unexpected messages dropped, by reason")
+          .Register(*registry);
   // Live values a running task reports (training losses, learning rate, steps): one series per
   // stage kind and metric name, both bounded sets.
-  prometheus::Family<prometheus::Gauge>& task_values = prometheus::BuildGauge()
-                                                           .Name("motionpipe_worker_task_value")
-                                                           .Help("The latest value of a metric the running task reports")
-                                                           .Register(*registry);
+  prometheus::Family<prometheus::Gauge>& task_values =
+      prometheus::BuildGauge()
+          .Name("motionpipe_worker_task_value")
+          .Help("The latest value of a metric the running task reports")
+          .Register(*registry);
 };
 
 struct Job {
@@ -97,7 +109,8 @@ struct Channel {
 
 class WorkerProcess {
  public:
-  WorkerProcess(const WorkerOptions& options, ExecutorRegistry* registry, const PluginHost* plugins, Metrics* metrics)
+  WorkerProcess(const WorkerOptions& options, ExecutorRegistry* registry, const PluginHost* plugins,
+                Metrics* metrics)
       : options_(options), registry_(registry), plugins_(plugins), metrics_(metrics) {}
 
   Status Run(std::atomic<bool>* stop, bool handle_signals);
@@ -158,7 +171,8 @@ void WorkerProcess::ExecutorLoop() {
       TaskContext ctx;
       ctx.spec = job.spec;
       try {
-        ctx.params = nlohmann::json::parse(job.spec.params_json().empty() ? "{}" : job.spec.params_json());
+        ctx.params =
+            nlohmann::json::parse(job.spec.params_json().empty() ? "{}" : job.spec.params_json());
       } catch (const nlohmann::json::exception& e) {
         ctx.params = nlohmann::json::object();
       }
@@ -168,7 +182,7 @@ void WorkerProcess::ExecutorLoop() {
         metrics_->task_values.Add({{"kind", kind}, {"name", name}}).Set(value);
       };
       TaskReport report = RunTask(*executor, ctx);
-      result.set_outcome(report.outcome == Outcome::kOk       ? wire::TaskResult::OK
+      result.set_outcome(report.outcome == Outcome::kOk         ? wire::TaskResult::OK
                          : report.outcome == Outcome::kBadInput ? wire::TaskResult::BAD_INPUT
                                                                 : wire::TaskResult::ERROR);
       result.set_message(report.message);
@@ -191,7 +205,8 @@ void WorkerProcess::ExecutorLoop() {
     const double seconds = Seconds(Clock::now() - started);
     result.set_seconds(seconds);
     metrics_->duration.Observe(seconds);
-    metrics_->tasks.Add({{"outcome", wire::TaskResult::Outcome_Name(result.outcome())}}).Increment();
+    metrics_->tasks.Add({{"outcome", wire::TaskResult::Outcome_Name(result.outcome())}})
+        .Increment();
     metrics_->busy.Set(0);
     {
       std::lock_guard<std::mutex> lock(channel_.mutex);
@@ -211,7 +226,8 @@ void WorkerProcess::Connect() {
   // A new identity per connection: the coordinator sees a fresh worker, and whatever it thought the
   // old connection held was already re-queued when it went silent.
   // name#pid.nonce.incarnation: unique even when a restarted process gets the same name (and pid).
-  dealer_->set(zmq::sockopt::routing_id, name_ + "#" + std::to_string(::getpid()) + "." + nonce_ + "." + std::to_string(++incarnation_));
+  dealer_->set(zmq::sockopt::routing_id, name_ + "#" + std::to_string(::getpid()) + "." + nonce_ +
+                                             "." + std::to_string(++incarnation_));
   if (!keys_.secret_key.empty()) net::ConfigureCurveClient(*dealer_, keys_, server_key_);
   dealer_->connect(options_.coordinator);
   last_received_ = Clock::now();
@@ -275,7 +291,8 @@ void WorkerProcess::HandleMessage(const net::Envelope& envelope) {
       wire::Cancel cancel;
       if (!net::ParseBody(envelope.body, &cancel)) return;
       std::lock_guard<std::mutex> lock(channel_.mutex);
-      if (const auto it = channel_.cancels.find(cancel.attempt_id()); it != channel_.cancels.end()) it->second->store(1);
+      if (const auto it = channel_.cancels.find(cancel.attempt_id()); it != channel_.cancels.end())
+        it->second->store(1);
       break;
     }
     case MessageType::kDisconnect: {
@@ -289,7 +306,8 @@ void WorkerProcess::HandleMessage(const net::Envelope& envelope) {
     }
     default:
       metrics_->dropped.Add({{"reason", "type"}}).Increment();
-      MP_LOG(kWarn, "worker") << "dropped an unexpected " << net::MessageTypeName(envelope.type) << " message";
+      MP_LOG(kWarn, "worker") << "dropped an unexpected " << net::MessageTypeName(envelope.type)
+                              << " message";
   }
 }
 
@@ -323,7 +341,8 @@ void WorkerProcess::HandBackQueued() {
 Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
   char host[256] = {0};
   ::gethostname(host, sizeof(host) - 1);
-  name_ = options_.name.empty() ? std::string(host) + ":" + std::to_string(::getpid()) : options_.name;
+  name_ =
+      options_.name.empty() ? std::string(host) + ":" + std::to_string(::getpid()) : options_.name;
   {
     std::random_device rd;
     char hex[17];
@@ -332,7 +351,9 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
   }
   if (!options_.curve_keys.empty()) {
     MP_ASSIGN_OR_RETURN(keys_, net::LoadKeyFile(options_.curve_keys));
-    if (keys_.secret_key.empty()) return InvalidArgument(options_.curve_keys + ": no secret-key (a worker needs its own key pair)");
+    if (keys_.secret_key.empty())
+      return InvalidArgument(options_.curve_keys +
+                             ": no secret-key (a worker needs its own key pair)");
     server_key_ = options_.server_key;
     if (server_key_.size() != 40) {  // a key file rather than the key itself
       MP_ASSIGN_OR_RETURN(const net::CurveKeyPair server, net::LoadKeyFile(options_.server_key));
@@ -348,8 +369,9 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
   wake_rx_->bind("inproc://worker-wake");
   std::thread executor([this] { ExecutorLoop(); });
   Connect();
-  MP_LOG(kInfo, "worker") << name_ << " connecting to " << options_.coordinator << " with " << registry_->Kinds().size()
-                          << " stage kinds, " << options_.threads << " thread(s), credit " << options_.credit;
+  MP_LOG(kInfo, "worker") << name_ << " connecting to " << options_.coordinator << " with "
+                          << registry_->Kinds().size() << " stage kinds, " << options_.threads
+                          << " thread(s), credit " << options_.credit;
   const double heartbeat = options_.heartbeat_seconds;
   Clock::time_point drain_started;
   std::vector<zmq::message_t> frames;
@@ -357,7 +379,8 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
     if (!draining_ && ((stop && stop->load()) || g_signal.load())) {
       draining_ = true;
       drain_started = Clock::now();
-      MP_LOG(kInfo, "worker") << name_ << " draining (" << (g_signal ? "signal" : "stop requested") << ")";
+      MP_LOG(kInfo, "worker") << name_ << " draining (" << (g_signal ? "signal" : "stop requested")
+                              << ")";
       wire::Drain drain;
       drain.set_reason("shutting down");
       Send(MessageType::kDrain, drain);
@@ -382,8 +405,10 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
         break;
       }
     }
-    zmq::pollitem_t items[] = {{dealer_->handle(), 0, ZMQ_POLLIN, 0}, {wake_rx_->handle(), 0, ZMQ_POLLIN, 0}};
-    net::Poll(items, 2, std::chrono::milliseconds(static_cast<int>(std::max(10.0, heartbeat * 250))));
+    zmq::pollitem_t items[] = {{dealer_->handle(), 0, ZMQ_POLLIN, 0},
+                               {wake_rx_->handle(), 0, ZMQ_POLLIN, 0}};
+    net::Poll(items, 2,
+              std::chrono::milliseconds(static_cast<int>(std::max(10.0, heartbeat * 250))));
     if (items[1].revents & ZMQ_POLLIN) {
       zmq::message_t m;
       while (wake_rx_->recv(m, zmq::recv_flags::dontwait)) {
@@ -399,7 +424,8 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
         const net::DropReason reason = net::DecodeFrames(frames, false, &envelope);
         if (reason != net::DropReason::kNone) {
           metrics_->dropped.Add({{"reason", net::DropReasonName(reason)}}).Increment();
-          MP_LOG(kWarn, "worker") << "dropped a malformed message (" << net::DropReasonName(reason) << ")";
+          MP_LOG(kWarn, "worker") << "dropped a malformed message (" << net::DropReasonName(reason)
+                                  << ")";
           continue;
         }
         HandleMessage(envelope);
@@ -408,16 +434,20 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
     const auto now = Clock::now();
     if (Seconds(now - last_sent_) >= heartbeat) {
       wire::Heartbeat hb;
-      hb.set_sent_unix_ms(std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+      hb.set_sent_unix_ms(std::chrono::duration_cast<std::chrono::milliseconds>(
+                              std::chrono::system_clock::now().time_since_epoch())
+                              .count());
       Send(MessageType::kHeartbeat, hb);
     }
     // A silent coordinator: reconnect (with backoff) under a new identity.
     if (Seconds(now - last_received_) > options_.liveness * heartbeat * backoff_) {
       metrics_->heartbeats_missed.Increment();
       metrics_->reconnects.Increment();
-      MP_LOG(kWarn, "worker") << "coordinator silent for " << static_cast<int>(Seconds(now - last_received_))
+      MP_LOG(kWarn, "worker") << "coordinator silent for "
+                              << static_cast<int>(Seconds(now - last_received_))
                               << " s; reconnecting";
-      backoff_ = std::min(backoff_ * 2, options_.reconnect_max_seconds / std::max(1e-3, options_.liveness * heartbeat));
+      backoff_ = std::min(backoff_ * 2, options_.reconnect_max_seconds /
+                                            std::max(1e-3, options_.liveness * heartbeat));
       HandBackQueued();
       Connect();
     }

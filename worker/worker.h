@@ -19,9 +19,9 @@ namespace motionpipe::worker {
 
 struct WorkerOptions {
   std::string coordinator = "tcp://127.0.0.1:5555";
-  std::string name;        // default: hostname:pid
-  int threads = 1;         // thread budget of one task
-  int credit = 2;          // tasks leased at once (1 running + prefetched)
+  std::string name;  // default: hostname:pid
+  int threads = 1;   // thread budget of one task
+  int credit = 2;    // tasks leased at once (1 running + prefetched)
   double heartbeat_seconds = 1.0;
   int liveness = 3;
   double reconnect_max_seconds = 30;

@@ -13,9 +13,10 @@
 namespace motionpipe::plugin {
 
 struct GenerateRequest {
-  std::vector<std::string> texts;  // one text, or the actions of a composition (compositing baselines)
-  double seconds = 4;              // text-to-motion duration (editors keep the source's length)
-  int64_t frames = 0;              // > 0: exactly this many frames (overrides seconds and the source)
+  std::vector<std::string>
+      texts;           // one text, or the actions of a composition (compositing baselines)
+  double seconds = 4;  // text-to-motion duration (editors keep the source's length)
+  int64_t frames = 0;  // > 0: exactly this many frames (overrides seconds and the source)
   double fps = 30;
   uint64_t seed = 1;
   const Motion* source = nullptr;  // editing models: the motion to edit
@@ -39,11 +40,13 @@ class Generator {
     return out;
   }
   // Embeddings in the model's latent space (evaluators): of motions and of texts.
-  virtual Result<std::vector<std::vector<float>>> EncodeMotions(const std::vector<Motion>& motions) {
+  virtual Result<std::vector<std::vector<float>>> EncodeMotions(
+      const std::vector<Motion>& motions) {
     (void)motions;
     return Unimplemented(Name() + " does not encode motions");
   }
-  virtual Result<std::vector<std::vector<float>>> EncodeTexts(const std::vector<std::string>& texts) {
+  virtual Result<std::vector<std::vector<float>>> EncodeTexts(
+      const std::vector<std::string>& texts) {
     (void)texts;
     return Unimplemented(Name() + " does not encode texts");
   }

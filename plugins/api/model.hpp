@@ -5,10 +5,9 @@
 
 #include <torch/torch.h>
 
-#include <nlohmann/json.hpp>
-
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -23,10 +22,11 @@ struct Batch {
 };
 
 struct DataContext {
-  nlohmann::json config;                // the stage's params.data
-  std::vector<std::string> input_dirs;  // committed directories of the stage's inputs, results first
-  std::string split = "train";          // "train" or "val"
-  std::string state_dir;                // survives attempts: a place for derived files (a tokenizer)
+  nlohmann::json config;  // the stage's params.data
+  std::vector<std::string>
+      input_dirs;               // committed directories of the stage's inputs, results first
+  std::string split = "train";  // "train" or "val"
+  std::string state_dir;        // survives attempts: a place for derived files (a tokenizer)
   int rank = 0, world_size = 1;
   uint64_t seed = 1;
 };

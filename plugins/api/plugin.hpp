@@ -2,10 +2,9 @@
 // JSON, run a stage function with exceptions turned into task errors, and define the entry point.
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <cstdio>
 #include <exception>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "motionpipe_plugin.h"
@@ -58,7 +57,8 @@ int RunStage(const mp_task_io* io, char* error, size_t error_size, Fn fn) {
 // An object factory's create(): builds the object from its JSON configuration with `make`;
 // exceptions become the factory's error message, prefixed with the plugin's name.
 template <typename Make>
-void* CreateFromJson(const char* plugin_name, const char* config_json, char* error, size_t error_size, Make make) {
+void* CreateFromJson(const char* plugin_name, const char* config_json, char* error,
+                     size_t error_size, Make make) {
   try {
     return make(nlohmann::json::parse(config_json ? config_json : "{}"));
   } catch (const std::exception& e) {

@@ -46,7 +46,8 @@ constexpr char kEnd[] = "</w>";
 // A word as its initial symbols: characters, the last one carrying the end-of-word mark.
 std::vector<std::string> Symbols(const std::string& word) {
   std::vector<std::string> symbols;
-  for (size_t k = 0; k < word.size(); ++k) symbols.push_back(std::string(1, word[k]) + (k + 1 == word.size() ? kEnd : ""));
+  for (size_t k = 0; k < word.size(); ++k)
+    symbols.push_back(std::string(1, word[k]) + (k + 1 == word.size() ? kEnd : ""));
   return symbols;
 }
 
@@ -56,9 +57,9 @@ std::vector<std::string> Symbols(const std::string& word) {
 // SentencePiece bundles its own protobuf, which clashes with the protobuf LibTorch and the wire
 // protocol load into the same process, so the tokenizer is our own.)
 struct Tokenizer::Impl {
-  std::vector<std::pair<std::string, std::string>> merges;   // in order of rank
+  std::vector<std::pair<std::string, std::string>> merges;  // in order of rank
   std::map<std::pair<std::string, std::string>, size_t> rank;
-  std::map<std::string, int64_t> ids;                        // symbol -> id (0 padding, 1 unknown)
+  std::map<std::string, int64_t> ids;  // symbol -> id (0 padding, 1 unknown)
 };
 
 Tokenizer::Tokenizer() : impl_(std::make_unique<Impl>()) {}
@@ -104,7 +105,8 @@ void Tokenizer::Train(const std::vector<std::string>& texts, int vocab) {
     symbols.insert(merged);
     merges.push_back({best.first, best.second});
   }
-  const nlohmann::json model = {{"format", "motionpipe.bpe/1"}, {"merges", merges}, {"symbols", symbols}};
+  const nlohmann::json model = {
+      {"format", "motionpipe.bpe/1"}, {"merges", merges}, {"symbols", symbols}};
   Load(model.dump());
 }
 
@@ -124,7 +126,9 @@ void Tokenizer::Load(const std::string& serialized) {
   serialized_ = serialized;
 }
 
-int Tokenizer::vocab_size() const { return impl_->ids.empty() ? 0 : static_cast<int>(impl_->ids.size()) + 2; }
+int Tokenizer::vocab_size() const {
+  return impl_->ids.empty() ? 0 : static_cast<int>(impl_->ids.size()) + 2;
+}
 
 std::vector<int64_t> Tokenizer::Encode(const std::string& text, int max_tokens) const {
   if (impl_->ids.empty()) throw std::runtime_error("the tokenizer has not been trained or loaded");
@@ -163,28 +167,36 @@ TextEncoderOptions TextEncoderOptions::FromJson(const nlohmann::json& j) {
   o.vocab = j.value("vocab", o.vocab);
   o.max_tokens = j.value("max_tokens", o.max_tokens);
   o.table = j.value("table", o.table);
-  if (o.kind != "learned" && o.kind != "precomputed") throw std::invalid_argument("text_encoder.kind must be learned or precomputed");
-  if (o.dim % o.heads != 0) throw std::invalid_argument("text_encoder.dim must be divisible by text_encoder.heads");
+  if (o.kind != "learned" && o.kind != "precomputed")
+    throw std::invalid_argument("text_encoder.kind must be learned or precomputed");
+  if (o.dim % o.heads != 0)
+    throw std::invalid_argument("text_encoder.dim must be divisible by text_encoder.heads");
   return o;
 }
 
 nlohmann::json TextEncoderOptions::ToJson() const {
-  return {{"kind", kind}, {"dim", dim}, {"layers", layers}, {"heads", heads}, {"ff", ff},
-          {"dropout", dropout}, {"vocab", vocab}, {"max_tokens", max_tokens}, {"table", table}};
+  return {{"kind", kind},  {"dim", dim},         {"layers", layers}, {"heads", heads},
+          {"ff", ff},      {"dropout", dropout}, {"vocab", vocab},   {"max_tokens", max_tokens},
+          {"table", table}};
 }
 
 torch::Tensor PositionalEncoding(int64_t length, int64_t dim) {
   auto position = torch::arange(length, torch::kFloat32).unsqueeze(1);
-  auto div = torch::exp(torch::arange(0, dim, 2, torch::kFloat32) * (-std::log(10000.0) / static_cast<double>(dim)));
+  auto div = torch::exp(torch::arange(0, dim, 2, torch::kFloat32) *
+                        (-std::log(10000.0) / static_cast<double>(dim)));
   auto pe = torch::zeros({length, dim});
-  pe.index_put_({torch::indexing::Slice(), torch::indexing::Slice(0, torch::indexing::None, 2)}, torch::sin(position * div));
-  pe.index_put_({torch::indexing::Slice(), torch::indexing::Slice(1, torch::indexing::None, 2)}, torch::cos(position * div));
+  pe.index_put_({torch::indexing::Slice(), torch::indexing::Slice(0, torch::indexing::None, 2)},
+                torch::sin(position * div));
+  pe.index_put_({torch::indexing::Slice(), torch::indexing::Slice(1, torch::indexing::None, 2)},
+                torch::cos(position * div));
   return pe.unsqueeze(1);
 }
 
 TextEncoderImpl::TextEncoderImpl(const TextEncoderOptions& options) : options_(options) {
   if (options_.kind == "learned") {
-    embed_ = register_module("embed", torch::nn::Embedding(torch::nn::EmbeddingOptions(options_.vocab + 2, options_.dim).padding_idx(0)));
+    embed_ = register_module(
+        "embed", torch::nn::Embedding(
+                     torch::nn::EmbeddingOptions(options_.vocab + 2, options_.dim).padding_idx(0)));
     // Vaswani et al.'s scale: entries N(0, 1/dim), multiplied by sqrt(dim) in forward(), give token
     // features of unit spread like the positional encodings. torch's default N(0, 1) would reach a
     // spread of sqrt(dim) (11 at 128) and saturate the first layer's softmax, so that its query and
@@ -193,7 +205,9 @@ TextEncoderImpl::TextEncoderImpl(const TextEncoderOptions& options) : options_(o
     embed_->weight.normal_(0.0, 1.0 / std::sqrt(static_cast<double>(options_.dim)));
     embed_->weight[0].zero_();
   }
-  encoder_ = register_module("encoder", Encoder(TransformerOptions{options_.dim, options_.heads, options_.ff, options_.layers, options_.dropout}));
+  encoder_ = register_module("encoder",
+                             Encoder(TransformerOptions{options_.dim, options_.heads, options_.ff,
+                                                        options_.layers, options_.dropout}));
   separator_ = register_parameter("separator", torch::randn({options_.dim}) * 0.02);
 }
 
@@ -203,7 +217,9 @@ void TextEncoderImpl::Fit(const std::vector<std::string>& texts) {
     return;
   }
   if (!table_.empty()) return;
-  if (options_.table.empty()) throw std::invalid_argument("text_encoder.table: the npz of precomputed embeddings is required");
+  if (options_.table.empty())
+    throw std::invalid_argument(
+        "text_encoder.table: the npz of precomputed embeddings is required");
   auto npz = ReadNpz(options_.table);
   if (!npz.ok()) throw std::invalid_argument(npz.status().message());
   auto texts_a = GetShaped(*npz, "texts", {-1}, options_.table);
@@ -213,16 +229,19 @@ void TextEncoderImpl::Fit(const std::vector<std::string>& texts) {
   if (!emb.ok()) throw std::invalid_argument(emb.status().message());
   auto names = (*texts_a)->ToStrings(options_.table);
   auto values = (*emb)->ToFloat32(options_.table);
-  if (!names.ok() || !values.ok()) throw std::invalid_argument(options_.table + ": texts must be strings and embeddings numbers");
+  if (!names.ok() || !values.ok())
+    throw std::invalid_argument(options_.table + ": texts must be strings and embeddings numbers");
   table_dim_ = (*emb)->shape[1];
   for (int64_t k = 0; k < n; ++k) {
-    table_[(*names)[static_cast<size_t>(k)]] =
-        std::vector<float>(values->begin() + k * table_dim_, values->begin() + (k + 1) * table_dim_);
+    table_[(*names)[static_cast<size_t>(k)]] = std::vector<float>(
+        values->begin() + k * table_dim_, values->begin() + (k + 1) * table_dim_);
   }
   project_ = register_module("project", torch::nn::Linear(table_dim_, options_.dim));
 }
 
-bool TextEncoderImpl::fitted() const { return options_.kind == "learned" ? tokenizer_.vocab_size() > 0 : !table_.empty(); }
+bool TextEncoderImpl::fitted() const {
+  return options_.kind == "learned" ? tokenizer_.vocab_size() > 0 : !table_.empty();
+}
 
 torch::Tensor TextEncoderImpl::TokenIds(const std::vector<std::string>& texts) const {
   const auto n = static_cast<int64_t>(texts.size());
@@ -235,7 +254,8 @@ torch::Tensor TextEncoderImpl::TokenIds(const std::vector<std::string>& texts) c
   auto tokens = torch::zeros({n, longest}, torch::kInt64);
   auto acc = tokens.accessor<int64_t, 2>();
   for (int64_t i = 0; i < n; ++i) {
-    for (size_t k = 0; k < ids[static_cast<size_t>(i)].size(); ++k) acc[i][static_cast<int64_t>(k)] = ids[static_cast<size_t>(i)][k];
+    for (size_t k = 0; k < ids[static_cast<size_t>(i)].size(); ++k)
+      acc[i][static_cast<int64_t>(k)] = ids[static_cast<size_t>(i)][k];
   }
   return tokens;
 }
@@ -246,16 +266,20 @@ TextFeatures TextEncoderImpl::forward(const std::vector<std::string>& texts) {
     std::vector<float> flat;
     for (const auto& t : texts) {
       const auto it = table_.find(t);
-      if (it == table_.end()) throw std::invalid_argument("precomputed text encoder: no embedding for '" + t + "' in " + options_.table);
+      if (it == table_.end())
+        throw std::invalid_argument("precomputed text encoder: no embedding for '" + t + "' in " +
+                                    options_.table);
       flat.insert(flat.end(), it->second.begin(), it->second.end());
     }
-    auto x = project_->forward(torch::tensor(flat).view({n, table_dim_})).unsqueeze(0);  // [1, N, dim]
+    auto x =
+        project_->forward(torch::tensor(flat).view({n, table_dim_})).unsqueeze(0);  // [1, N, dim]
     return {encoder_->forward(x, {}), torch::zeros({n, 1}, torch::kBool)};
   }
   const auto tokens = TokenIds(texts);
   const int64_t longest = tokens.size(1);
   const auto padding = tokens.eq(0);
-  auto x = embed_->forward(tokens).transpose(0, 1) * std::sqrt(static_cast<double>(options_.dim));  // [L, N, dim]
+  auto x = embed_->forward(tokens).transpose(0, 1) *
+           std::sqrt(static_cast<double>(options_.dim));  // [L, N, dim]
   x = x + PositionalEncoding(longest, options_.dim);
   return {encoder_->forward(x, padding), padding};
 }
@@ -309,14 +333,16 @@ void TextEncoderImpl::SaveExtras(const std::string& dir) const {
 void TextEncoderImpl::LoadExtras(const std::string& dir) {
   if (options_.kind == "learned") {
     auto bytes = ReadFile(dir + "/tokenizer.model");
-    if (!bytes.ok()) throw std::invalid_argument(dir + ": no tokenizer.model (" + bytes.status().message() + ")");
+    if (!bytes.ok())
+      throw std::invalid_argument(dir + ": no tokenizer.model (" + bytes.status().message() + ")");
     tokenizer_.Load(*bytes);
   } else {
     Fit({});
   }
 }
 
-void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, const std::string& state_dir, int rank) {
+void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts,
+               const std::string& state_dir, int rank) {
   if (encoder->options().kind != "learned") {
     encoder->Fit({});
     return;
@@ -335,13 +361,15 @@ void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, cons
     return;
   }
   for (int waited = 0; !std::filesystem::exists(path); ++waited) {
-    if (waited > 6000) throw std::runtime_error("rank " + std::to_string(rank) + ": rank 0 never wrote " + path);
+    if (waited > 6000)
+      throw std::runtime_error("rank " + std::to_string(rank) + ": rank 0 never wrote " + path);
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   encoder->LoadExtras(state_dir);
 }
 
-std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& from, const std::vector<std::string>& input_dirs, bool freeze) {
+std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& from,
+                                      const std::vector<std::string>& input_dirs, bool freeze) {
   namespace fs = std::filesystem;
   std::string dir;
   if (from == "input") {
@@ -350,7 +378,9 @@ std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& f
         if (dir.empty() && fs::exists(candidate + "/model.json")) dir = candidate;
       }
     }
-    if (dir.empty()) throw std::invalid_argument("text_encoder_from: input, but no stage input holds a checkpoint (model/model.json)");
+    if (dir.empty())
+      throw std::invalid_argument(
+          "text_encoder_from: input, but no stage input holds a checkpoint (model/model.json)");
   } else {
     dir = fs::exists(from + "/model/model.json") ? from + "/model" : from;
   }
@@ -360,12 +390,14 @@ std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& f
   try {
     theirs = nlohmann::json::parse(*text).at("config").at("model").at("text_encoder");
   } catch (const nlohmann::json::exception& e) {
-    throw std::invalid_argument("text_encoder_from " + dir + "/model.json: no config.model.text_encoder (" + e.what() + ")");
+    throw std::invalid_argument("text_encoder_from " + dir +
+                                "/model.json: no config.model.text_encoder (" + e.what() + ")");
   }
   TextEncoder pretrained(TextEncoderOptions::FromJson(theirs));
   const nlohmann::json ours = encoder->options().ToJson();
   if (pretrained->options().ToJson() != ours) {
-    throw std::invalid_argument("text_encoder_from " + dir + ": its text encoder is " + pretrained->options().ToJson().dump() + ", this model's is " +
+    throw std::invalid_argument("text_encoder_from " + dir + ": its text encoder is " +
+                                pretrained->options().ToJson().dump() + ", this model's is " +
                                 ours.dump() + " (use the same text_encoder settings)");
   }
   try {
@@ -374,7 +406,9 @@ std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& f
     archive.read("text_encoder", sub);
     pretrained->load(sub);
   } catch (const c10::Error& e) {
-    throw std::invalid_argument("text_encoder_from " + dir + "/model.pt: no text encoder weights of these settings (" + e.what_without_backtrace() + ")");
+    throw std::invalid_argument("text_encoder_from " + dir +
+                                "/model.pt: no text encoder weights of these settings (" +
+                                e.what_without_backtrace() + ")");
   }
   torch::NoGradGuard no_grad;
   auto source = pretrained->named_parameters();
@@ -382,7 +416,8 @@ std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& f
   auto source_buffers = pretrained->named_buffers();
   for (auto& item : encoder->named_buffers()) item.value().copy_(source_buffers[item.key()]);
   encoder->LoadExtras(dir);
-  for (auto& item : encoder->named_parameters()) item.value().set_requires_grad(!freeze || item.key() == "separator");
+  for (auto& item : encoder->named_parameters())
+    item.value().set_requires_grad(!freeze || item.key() == "separator");
   return dir;
 }
 

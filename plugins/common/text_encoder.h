@@ -1,6 +1,7 @@
 // Text encoders for the models (plugin kind `text_encoder`). CLIP and DistilBERT weights cannot be
 // had offline, so:
-//   learned      a byte-pair-encoding tokenizer trained on the training texts + token embeddings + a small
+//   learned      a byte-pair-encoding tokenizer trained on the training texts + token embeddings +
+//   a small
 //                transformer encoder; trained with the model, or pre-trained contrastively (the TMR
 //                configuration of temos_sinc) and loaded frozen from that checkpoint;
 //   precomputed  an npz of texts and their embeddings (CLIP, DistilBERT computed elsewhere): the
@@ -10,10 +11,9 @@
 
 #include <torch/torch.h>
 
-#include <nlohmann/json.hpp>
-
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -46,7 +46,7 @@ struct TextFeatures {
 };
 
 struct TextEncoderOptions {
-  std::string kind = "learned";   // learned | precomputed
+  std::string kind = "learned";  // learned | precomputed
   int64_t dim = 256;
   int64_t layers = 2;
   int64_t heads = 4;
@@ -54,7 +54,7 @@ struct TextEncoderOptions {
   double dropout = 0.1;
   int vocab = 1000;
   int max_tokens = 32;
-  std::string table;              // precomputed: npz with `texts` <U (N,) and `embeddings` f4 (N, D)
+  std::string table;  // precomputed: npz with `texts` <U (N,) and `embeddings` f4 (N, D)
   static TextEncoderOptions FromJson(const nlohmann::json& j);
   nlohmann::json ToJson() const;
 };
@@ -81,16 +81,17 @@ class TextEncoderImpl : public torch::nn::Module {
   std::map<std::string, std::vector<float>> table_;
   int64_t table_dim_ = 0;
   torch::nn::Embedding embed_{nullptr};
-  torch::nn::Linear project_{nullptr};      // precomputed embeddings -> dim
+  torch::nn::Linear project_{nullptr};  // precomputed embeddings -> dim
   Encoder encoder_{nullptr};
   torch::Tensor separator_;
 };
 TORCH_MODULE(TextEncoder);
 
 // Fits a training run's text encoder once for all its ranks: rank 0 trains the tokenizer (or loads
-// the table) and writes it into state_dir, the other ranks and resumed runs load that file, so every
-// rank has the same vocabulary. An empty state_dir fits locally.
-void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, const std::string& state_dir, int rank);
+// the table) and writes it into state_dir, the other ranks and resumed runs load that file, so
+// every rank has the same vocabulary. An empty state_dir fits locally.
+void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts,
+               const std::string& state_dir, int rank);
 
 // Copies the text encoder of a trained checkpoint (its tokenizer and weights) into `encoder`: the
 // role DistilBERT/CLIP play in the papers, taken here by a TMR trained contrastively on motions
@@ -99,7 +100,8 @@ void FitShared(TextEncoder& encoder, const std::vector<std::string>& texts, cons
 // `input_dirs` that holds one. The checkpoint's text_encoder settings must equal `encoder`'s; an
 // error names the directory and both. When `freeze`, every weight but SINC-STE's separator (this
 // model's own) stops training. Returns the checkpoint directory used.
-std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& from, const std::vector<std::string>& input_dirs, bool freeze);
+std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& from,
+                                      const std::vector<std::string>& input_dirs, bool freeze);
 
 // Sinusoidal positional encodings [length, 1, dim].
 torch::Tensor PositionalEncoding(int64_t length, int64_t dim);

@@ -3,10 +3,9 @@
 // torch::set_num_threads and spins on sched_yield beside the worker's threads), and the allocator.
 #pragma once
 
-#include <torch/torch.h>
-
 #include <dlfcn.h>
 #include <malloc.h>
+#include <torch/torch.h>
 
 #include <algorithm>
 
@@ -31,7 +30,8 @@ inline void SetTorchThreads(int threads) {
   torch::set_num_threads(threads);
   using SetBlasThreads = void (*)(int);
   // The BLAS came in with LibTorch into this plugin's local scope: look for it by name as well.
-  void* handles[] = {RTLD_DEFAULT, dlopen("libblas.so.3", RTLD_LAZY | RTLD_NOLOAD), dlopen("libopenblas.so.0", RTLD_LAZY | RTLD_NOLOAD)};
+  void* handles[] = {RTLD_DEFAULT, dlopen("libblas.so.3", RTLD_LAZY | RTLD_NOLOAD),
+                     dlopen("libopenblas.so.0", RTLD_LAZY | RTLD_NOLOAD)};
   for (void* handle : handles) {
     if (!handle) continue;
     if (auto* set = reinterpret_cast<SetBlasThreads>(dlsym(handle, "openblas_set_num_threads"))) {

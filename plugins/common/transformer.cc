@@ -21,7 +21,8 @@ uint64_t SplitMix(uint64_t& state) {
 torch::Tensor DropoutMask(at::IntArrayRef sizes, double p) {
   auto mask = torch::empty(sizes, torch::kFloat32);
   // The stream's seed comes from torch's generator, so torch::manual_seed makes masks repeatable.
-  uint64_t seed = static_cast<uint64_t>(torch::randint(std::numeric_limits<int64_t>::max(), {1}, torch::kInt64).item<int64_t>());
+  uint64_t seed = static_cast<uint64_t>(
+      torch::randint(std::numeric_limits<int64_t>::max(), {1}, torch::kInt64).item<int64_t>());
   uint64_t s[4];
   for (auto& word : s) word = SplitMix(seed);
   const float keep_value = static_cast<float>(1.0 / (1.0 - p));
@@ -45,8 +46,11 @@ torch::Tensor Dropout(const torch::Tensor& x, double p, bool training) {
   return x * DropoutMask(x.sizes(), p);
 }
 
-SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout) : dim_(dim), heads_(heads), dropout_(dropout) {
-  if (dim % heads != 0) throw std::invalid_argument("attention: dim " + std::to_string(dim) + " is not divisible by heads " + std::to_string(heads));
+SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout)
+    : dim_(dim), heads_(heads), dropout_(dropout) {
+  if (dim % heads != 0)
+    throw std::invalid_argument("attention: dim " + std::to_string(dim) +
+                                " is not divisible by heads " + std::to_string(heads));
   in_proj_ = register_module("in_proj", torch::nn::Linear(dim, 3 * dim));
   out_proj_ = register_module("out_proj", torch::nn::Linear(dim, dim));
   // torch::nn::MultiheadAttention's initialisation: Xavier-uniform input projection, zero biases.
@@ -59,14 +63,19 @@ SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout)
 torch::Tensor SelfAttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
   const int64_t length = x.size(0), n = x.size(1), head_dim = dim_ / heads_;
   // [L, N, 3, H, Dh] -> q, k, v as [N*H, L, Dh]
-  const auto split = in_proj_->forward(x).view({length, n, 3, heads_, head_dim}).permute({2, 1, 3, 0, 4}).reshape({3, n * heads_, length, head_dim});
+  const auto split = in_proj_->forward(x)
+                         .view({length, n, 3, heads_, head_dim})
+                         .permute({2, 1, 3, 0, 4})
+                         .reshape({3, n * heads_, length, head_dim});
   const auto q = split[0] * (1.0 / std::sqrt(static_cast<double>(head_dim)));
   const auto k = split[1];
   const auto v = split[2];
   torch::Tensor scores;
   if (padding.defined()) {
-    // A large negative bias on ignored keys (finite: a row with every key ignored stays finite), per example, broadcast over heads and queries.
-    const auto bias = torch::zeros({n, 1, 1, length}).masked_fill(padding.view({n, 1, 1, length}), -1e9)
+    // A large negative bias on ignored keys (finite: a row with every key ignored stays finite),
+    // per example, broadcast over heads and queries.
+    const auto bias = torch::zeros({n, 1, 1, length})
+                          .masked_fill(padding.view({n, 1, 1, length}), -1e9)
                           .expand({n, heads_, 1, length})
                           .reshape({n * heads_, 1, length});
     scores = torch::baddbmm(bias, q, k.transpose(1, 2));
@@ -74,7 +83,10 @@ torch::Tensor SelfAttentionImpl::forward(const torch::Tensor& x, const torch::Te
     scores = torch::bmm(q, k.transpose(1, 2));
   }
   auto weights = Dropout(torch::softmax(scores, -1), dropout_, is_training());
-  const auto out = torch::bmm(weights, v).view({n, heads_, length, head_dim}).permute({2, 0, 1, 3}).reshape({length, n, dim_});
+  const auto out = torch::bmm(weights, v)
+                       .view({n, heads_, length, head_dim})
+                       .permute({2, 0, 1, 3})
+                       .reshape({length, n, dim_});
   return out_proj_->forward(out);
 }
 
@@ -120,7 +132,8 @@ OneTokenDecoderLayerImpl::OneTokenDecoderLayerImpl(const TransformerOptions& o) 
   out_proj_->bias.zero_();
 }
 
-torch::Tensor OneTokenDecoderLayerImpl::forward(const torch::Tensor& x, const torch::Tensor& memory, const torch::Tensor& padding) {
+torch::Tensor OneTokenDecoderLayerImpl::forward(const torch::Tensor& x, const torch::Tensor& memory,
+                                                const torch::Tensor& padding) {
   const bool train = is_training();
   const int64_t length = x.size(0), n = x.size(1), heads = o_.heads, head_dim = o_.dim / o_.heads;
   auto h = norm1_->forward(x + Dropout(attention_->forward(x, padding), o_.dropout, train));
@@ -130,9 +143,10 @@ torch::Tensor OneTokenDecoderLayerImpl::forward(const torch::Tensor& x, const to
   if (train && o_.dropout > 0) {
     // out_proj applied per head: u[n,h,:] = W_o[:, h] v[n,h]; then sum_h w[t,n,h] u[n,h,:] + b.
     const auto w_o = out_proj_->weight.view({o_.dim, heads, head_dim});
-    const auto u = torch::einsum("nhk,dhk->nhd", {v.view({n, heads, head_dim}), w_o});          // [N, H, dim]
-    const auto w = DropoutMask({n, length, heads}, o_.dropout);                               // [N, T, H]
-    cross = torch::bmm(w, u).transpose(0, 1) + out_proj_->bias;                               // [T, N, dim]
+    const auto u =
+        torch::einsum("nhk,dhk->nhd", {v.view({n, heads, head_dim}), w_o});  // [N, H, dim]
+    const auto w = DropoutMask({n, length, heads}, o_.dropout);              // [N, T, H]
+    cross = torch::bmm(w, u).transpose(0, 1) + out_proj_->bias;              // [T, N, dim]
   } else {
     cross = out_proj_->forward(v).unsqueeze(0).expand({length, n, o_.dim});
   }
@@ -146,8 +160,10 @@ OneTokenDecoderImpl::OneTokenDecoderImpl(const TransformerOptions& o) {
   for (int64_t k = 0; k < o.layers; ++k) layers_->push_back(OneTokenDecoderLayer(o));
 }
 
-torch::Tensor OneTokenDecoderImpl::forward(torch::Tensor x, const torch::Tensor& memory, const torch::Tensor& padding) {
-  for (const auto& layer : *layers_) x = layer->as<OneTokenDecoderLayer>()->forward(x, memory, padding);
+torch::Tensor OneTokenDecoderImpl::forward(torch::Tensor x, const torch::Tensor& memory,
+                                           const torch::Tensor& padding) {
+  for (const auto& layer : *layers_)
+    x = layer->as<OneTokenDecoderLayer>()->forward(x, memory, padding);
   return x;
 }
 

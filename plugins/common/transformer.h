@@ -1,8 +1,10 @@
-// Transformer layers for the model plugins: the arithmetic of torch::nn::TransformerEncoderLayer and
-// TransformerDecoderLayer (post-norm, GELU, sequence first), written out so that training is cheaper:
+// Transformer layers for the model plugins: the arithmetic of torch::nn::TransformerEncoderLayer
+// and TransformerDecoderLayer (post-norm, GELU, sequence first), written out so that training is
+// cheaper:
 //  - dropout masks come from a xoshiro256+ stream seeded by torch's generator (torch's bernoulli_
 //    draws a 64-bit mt19937 number per element, ~9% of a TEMOS step), same distribution;
-//  - cross-attention to a memory of one token (TEMOS's decoder: memory = the latent z) is computed in
+//  - cross-attention to a memory of one token (TEMOS's decoder: memory = the latent z) is computed
+//  in
 //    closed form: softmax over one key is 1, so each head's output is its value projection of z,
 //    scaled by the head's attention-dropout draw; no query/key projections or softmax are needed.
 #pragma once
@@ -63,12 +65,14 @@ class OneTokenDecoderLayerImpl : public torch::nn::Module {
  public:
   explicit OneTokenDecoderLayerImpl(const TransformerOptions& o);
   // x [T, N, dim], memory [N, dim], padding [N, T].
-  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& memory, const torch::Tensor& padding);
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& memory,
+                        const torch::Tensor& padding);
 
  private:
   TransformerOptions o_;
   SelfAttention attention_{nullptr};
-  torch::nn::Linear value_{nullptr}, out_proj_{nullptr};  // cross-attention: value and output projections
+  torch::nn::Linear value_{nullptr},
+      out_proj_{nullptr};  // cross-attention: value and output projections
   torch::nn::Linear linear1_{nullptr}, linear2_{nullptr};
   torch::nn::LayerNorm norm1_{nullptr}, norm2_{nullptr}, norm3_{nullptr};
 };

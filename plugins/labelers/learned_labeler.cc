@@ -57,9 +57,11 @@ std::vector<int64_t> Features(const std::string& text) {
   std::vector<int64_t> ids;
   for (size_t k = 0; k < words.size(); ++k) {
     ids.push_back(static_cast<int64_t>(Fnv1a("w:" + words[k]) % kBuckets));
-    if (k + 1 < words.size()) ids.push_back(static_cast<int64_t>(Fnv1a("b:" + words[k] + " " + words[k + 1]) % kBuckets));
+    if (k + 1 < words.size())
+      ids.push_back(static_cast<int64_t>(Fnv1a("b:" + words[k] + " " + words[k + 1]) % kBuckets));
     const std::string padded = "<" + words[k] + ">";
-    for (size_t c = 0; c + 3 <= padded.size(); ++c) ids.push_back(static_cast<int64_t>(Fnv1a("c:" + padded.substr(c, 3)) % kBuckets));
+    for (size_t c = 0; c + 3 <= padded.size(); ++c)
+      ids.push_back(static_cast<int64_t>(Fnv1a("c:" + padded.substr(c, 3)) % kBuckets));
   }
   if (ids.empty()) ids.push_back(0);
   return ids;
@@ -67,7 +69,9 @@ std::vector<int64_t> Features(const std::string& text) {
 
 struct ClassifierImpl : torch::nn::Module {
   ClassifierImpl(int64_t dim, int64_t hidden)
-      : embed(register_module("embed", torch::nn::EmbeddingBag(torch::nn::EmbeddingBagOptions(kBuckets, dim).mode(torch::kMean)))),
+      : embed(register_module(
+            "embed", torch::nn::EmbeddingBag(
+                         torch::nn::EmbeddingBagOptions(kBuckets, dim).mode(torch::kMean)))),
         fc1(register_module("fc1", torch::nn::Linear(dim, hidden))),
         fc2(register_module("fc2", torch::nn::Linear(hidden, motionpipe::kNumBodyParts))) {}
   torch::Tensor forward(const torch::Tensor& ids, const torch::Tensor& offsets) {
@@ -79,7 +83,8 @@ struct ClassifierImpl : torch::nn::Module {
 TORCH_MODULE(Classifier);
 
 // Packs texts for EmbeddingBag: concatenated ids + start offsets.
-std::pair<torch::Tensor, torch::Tensor> Pack(const std::vector<std::vector<int64_t>>& features, const std::vector<size_t>& rows) {
+std::pair<torch::Tensor, torch::Tensor> Pack(const std::vector<std::vector<int64_t>>& features,
+                                             const std::vector<size_t>& rows) {
   std::vector<int64_t> ids, offsets;
   for (const size_t r : rows) {
     offsets.push_back(static_cast<int64_t>(ids.size()));
@@ -90,7 +95,10 @@ std::pair<torch::Tensor, torch::Tensor> Pack(const std::vector<std::vector<int64
 
 class LearnedLabeler : public labels::Labeler {
  public:
-  LearnedLabeler(Classifier model, double threshold) : model_(std::move(model)), threshold_(threshold) { model_->eval(); }
+  LearnedLabeler(Classifier model, double threshold)
+      : model_(std::move(model)), threshold_(threshold) {
+    model_->eval();
+  }
   std::string Name() const override { return "learned"; }
   Result<std::vector<PartSet>> Label(const std::vector<labels::LabelInput>& inputs) override {
     torch::NoGradGuard no_grad;
@@ -126,7 +134,8 @@ std::string ModelPath(const std::string& model) {
 
 Result<Classifier> LoadClassifier(const std::string& model) {
   const std::string weights = ModelPath(model);
-  const std::string meta_path = std::filesystem::path(weights).parent_path().string() + "/" + kMetaName;
+  const std::string meta_path =
+      std::filesystem::path(weights).parent_path().string() + "/" + kMetaName;
   MP_ASSIGN_OR_RETURN(const std::string meta_text, motionpipe::ReadFile(meta_path));
   const nlohmann::json meta = nlohmann::json::parse(meta_text, nullptr, false);
   if (!meta.is_object()) return motionpipe::DataLoss(meta_path + ": not JSON");
@@ -134,7 +143,8 @@ Result<Classifier> LoadClassifier(const std::string& model) {
   try {
     torch::load(net, weights);
   } catch (const c10::Error& e) {
-    return motionpipe::DataLoss(weights + ": cannot load the classifier: " + e.what_without_backtrace());
+    return motionpipe::DataLoss(weights +
+                                ": cannot load the classifier: " + e.what_without_backtrace());
   }
   return net;
 }
@@ -144,7 +154,9 @@ void* Create(const char* config_json, char* error, size_t error_size) {
     const nlohmann::json config = nlohmann::json::parse(config_json ? config_json : "{}");
     const std::string model = config.value("model", std::string());
     if (model.empty()) {
-      std::snprintf(error, error_size, "learned labeler: config.model must name the trained model (learned_labeler.pt or its directory)");
+      std::snprintf(error, error_size,
+                    "learned labeler: config.model must name the trained model (learned_labeler.pt "
+                    "or its directory)");
       return nullptr;
     }
     auto net = LoadClassifier(model);
@@ -153,7 +165,8 @@ void* Create(const char* config_json, char* error, size_t error_size) {
       return nullptr;
     }
     torch::set_num_threads(std::max(1, config.value("threads", 1)));
-    return static_cast<labels::Labeler*>(new LearnedLabeler(std::move(*net), config.value("threshold", 0.5)));
+    return static_cast<labels::Labeler*>(
+        new LearnedLabeler(std::move(*net), config.value("threshold", 0.5)));
   } catch (const std::exception& e) {
     std::snprintf(error, error_size, "learned labeler: %s", e.what());
     return nullptr;
@@ -189,9 +202,12 @@ void Train(const motionpipe::plugin::Task& task) {
   for (const auto& t : texts) features.push_back(Features(t));
   std::vector<float> y(texts.size() * motionpipe::kNumBodyParts);
   for (size_t k = 0; k < texts.size(); ++k) {
-    for (int p2 = 0; p2 < motionpipe::kNumBodyParts; ++p2) y[k * motionpipe::kNumBodyParts + static_cast<size_t>(p2)] = ((targets[k] >> p2) & 1u) ? 1.f : 0.f;
+    for (int p2 = 0; p2 < motionpipe::kNumBodyParts; ++p2)
+      y[k * motionpipe::kNumBodyParts + static_cast<size_t>(p2)] =
+          ((targets[k] >> p2) & 1u) ? 1.f : 0.f;
   }
-  const torch::Tensor target_all = torch::tensor(y).view({static_cast<int64_t>(texts.size()), motionpipe::kNumBodyParts});
+  const torch::Tensor target_all =
+      torch::tensor(y).view({static_cast<int64_t>(texts.size()), motionpipe::kNumBodyParts});
 
   Classifier net(dim, hidden);
   torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(lr));
@@ -205,30 +221,42 @@ void Train(const motionpipe::plugin::Task& task) {
     loss_sum = 0;
     int steps = 0;
     for (size_t start = 0; start < order.size(); start += static_cast<size_t>(batch)) {
-      std::vector<size_t> rows(order.begin() + static_cast<std::ptrdiff_t>(start),
-                               order.begin() + static_cast<std::ptrdiff_t>(std::min(order.size(), start + static_cast<size_t>(batch))));
+      std::vector<size_t> rows(
+          order.begin() + static_cast<std::ptrdiff_t>(start),
+          order.begin() + static_cast<std::ptrdiff_t>(
+                              std::min(order.size(), start + static_cast<size_t>(batch))));
       auto [ids, offsets] = Pack(features, rows);
       std::vector<int64_t> index(rows.begin(), rows.end());
       const torch::Tensor target = target_all.index_select(0, torch::tensor(index, torch::kInt64));
       optimizer.zero_grad();
-      const torch::Tensor loss = torch::binary_cross_entropy_with_logits(net->forward(ids, offsets), target);
+      const torch::Tensor loss =
+          torch::binary_cross_entropy_with_logits(net->forward(ids, offsets), target);
       loss.backward();
       optimizer.step();
       loss_sum += loss.item<double>();
       ++steps;
     }
     loss_sum /= std::max(1, steps);
-    task.Log(MP_LOG_INFO, "labeler.train epoch " + std::to_string(epoch + 1) + "/" + std::to_string(epochs) +
-                              " loss " + std::to_string(loss_sum));
+    task.Log(MP_LOG_INFO, "labeler.train epoch " + std::to_string(epoch + 1) + "/" +
+                              std::to_string(epochs) + " loss " + std::to_string(loss_sum));
   }
   std::filesystem::create_directories(task.output_dir());
   const std::string weights = task.output_dir() + "/" + kWeightsName;
   torch::save(net, weights + ".tmp");
   std::filesystem::rename(weights + ".tmp", weights);
-  const nlohmann::json meta = {{"dim", dim},       {"hidden", hidden}, {"buckets", kBuckets}, {"epochs", epochs},
-                               {"lr", lr},         {"batch", batch},   {"seed", seed},        {"texts", texts.size()},
-                               {"final_loss", loss_sum}, {"source", gpt}, {"split", "train (IsHeldOut == false)"}};
-  const Status s = motionpipe::WriteFileAtomic(task.output_dir() + "/" + kMetaName, meta.dump(1) + "\n");
+  const nlohmann::json meta = {{"dim", dim},
+                               {"hidden", hidden},
+                               {"buckets", kBuckets},
+                               {"epochs", epochs},
+                               {"lr", lr},
+                               {"batch", batch},
+                               {"seed", seed},
+                               {"texts", texts.size()},
+                               {"final_loss", loss_sum},
+                               {"source", gpt},
+                               {"split", "train (IsHeldOut == false)"}};
+  const Status s =
+      motionpipe::WriteFileAtomic(task.output_dir() + "/" + kMetaName, meta.dump(1) + "\n");
   if (!s.ok()) throw std::runtime_error(s.message());
   task.Metric("final_loss", loss_sum);
   task.Metric("texts", static_cast<double>(texts.size()));
@@ -236,13 +264,24 @@ void Train(const motionpipe::plugin::Task& task) {
 
 const mp_stage_kind kKinds[] = {
     {"labeler.train", "train the learned body-part labeler on GPT-labelled texts",
-     [](const mp_task_io* io, char* error, size_t size) { return motionpipe::plugin::RunStage(io, error, size, Train); }},
+     [](const mp_task_io* io, char* error, size_t size) {
+       return motionpipe::plugin::RunStage(io, error, size, Train);
+     }},
 };
 
 const mp_object_factory kFactories[] = {{"labeler", "learned", Create, Destroy}};
 
-const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION, sizeof(mp_plugin), "labelers", "1.0.0", 1, kKinds, 1, kFactories};
+const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION,
+                           sizeof(mp_plugin),
+                           "labelers",
+                           "1.0.0",
+                           1,
+                           kKinds,
+                           1,
+                           kFactories};
 
 }  // namespace
 
-extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) { return &kPlugin; }
+extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) {
+  return &kPlugin;
+}

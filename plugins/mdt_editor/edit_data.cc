@@ -16,18 +16,22 @@ EditDataOptions EditDataOptions::FromContext(const plugin::DataContext& context)
   const auto& j = context.config;
   EditDataOptions o;
   o.filter = j.value("filter", o.filter);
-  if (o.filter != "input" && o.filter != "none") throw std::invalid_argument("data.filter must be input or none");
-  o.split = context.split == "val" ? j.value("val_split", std::string("val")) : j.value("split", o.split);
+  if (o.filter != "input" && o.filter != "none")
+    throw std::invalid_argument("data.filter must be input or none");
+  o.split =
+      context.split == "val" ? j.value("val_split", std::string("val")) : j.value("split", o.split);
   o.max_frames = j.value("max_frames", o.max_frames);
   if (o.max_frames < 2) throw std::invalid_argument("data.max_frames must be at least 2");
   return o;
 }
 
 FeatureMatrix EditFeatures(const Motion& motion, const float* joints) {
-  return joints ? EncodeMotionFix207WithJoints(motion, joints) : EncodeMotionFix207(Skeleton::Smpl22(), motion);
+  return joints ? EncodeMotionFix207WithJoints(motion, joints)
+                : EncodeMotionFix207(Skeleton::Smpl22(), motion);
 }
 
-EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::string>& input_dirs) : options_(options) {
+EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::string>& input_dirs)
+    : options_(options) {
   // The filter's kept triplets and curves, by (file, row).
   std::map<std::pair<std::string, int64_t>, int64_t> curve_of;
   std::vector<std::pair<std::string, int64_t>> kept;
@@ -52,13 +56,18 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
         if (!fs::is_directory(folder)) continue;
         for (const auto& entry : fs::directory_iterator(folder)) {
           const std::string name = entry.path().filename().string();
-          if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz") paths.push_back(entry.path().string());
+          if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz")
+            paths.push_back(entry.path().string());
         }
       }
     }
-    if (paths.empty()) throw std::invalid_argument("data.filter: none needs an input with triplet files (a corpus stage)");
+    if (paths.empty())
+      throw std::invalid_argument(
+          "data.filter: none needs an input with triplet files (a corpus stage)");
   } else {
-    if (curves_.empty()) throw std::invalid_argument("no similarity.npz in the inputs: give a filter stage as input (or data.filter: none)");
+    if (curves_.empty())
+      throw std::invalid_argument(
+          "no similarity.npz in the inputs: give a filter stage as input (or data.filter: none)");
     for (const auto& [file, row] : kept) paths.push_back(file);
   }
   std::sort(paths.begin(), paths.end());
@@ -79,33 +88,43 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
       }
     }
   } else {
-    for (const auto& key : kept) items_.push_back({file_index.at(key.first), key.second - files_[file_index.at(key.first)].first_row, curve_of.at(key)});
+    for (const auto& key : kept)
+      items_.push_back({file_index.at(key.first),
+                        key.second - files_[file_index.at(key.first)].first_row, curve_of.at(key)});
   }
   for (const Item& item : items_) {
     const auto& c = files_[item.file];
     if (c.source.joints != kNumJoints || c.target.joints != kNumJoints) {
-      throw std::invalid_argument(c.origin + ": triplet " + c.ids[static_cast<size_t>(item.row)] + " is not an SMPL-22 body");
+      throw std::invalid_argument(c.origin + ": triplet " + c.ids[static_cast<size_t>(item.row)] +
+                                  " is not an SMPL-22 body");
     }
   }
-  if (items_.empty()) throw std::invalid_argument("no editing triplets in split '" + options_.split + "' of the inputs");
+  if (items_.empty())
+    throw std::invalid_argument("no editing triplets in split '" + options_.split +
+                                "' of the inputs");
 }
 
 FeatureMatrix EditDataset::Features(const Item& item, bool source) const {
   const TripletColumns& c = files_[item.file];
   const TripletColumns::Side& side = source ? c.source : c.target;
-  const int64_t begin = side.offsets[static_cast<size_t>(item.row)], end = side.offsets[static_cast<size_t>(item.row) + 1];
+  const int64_t begin = side.offsets[static_cast<size_t>(item.row)],
+                end = side.offsets[static_cast<size_t>(item.row) + 1];
   Motion m;
   m.fps = c.fps[static_cast<size_t>(item.row)];
   m.poses.assign(side.poses + begin * kNumJoints * 3, side.poses + end * kNumJoints * 3);
   m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
-  const float* joints = side.positions && side.position_joints == kNumJoints ? side.positions + begin * kNumJoints * 3 : nullptr;
+  const float* joints = side.positions && side.position_joints == kNumJoints
+                            ? side.positions + begin * kNumJoints * 3
+                            : nullptr;
   return EditFeatures(m, joints);
 }
 
 namespace {
 
 // [T, N, D] padded by repeating each example's last frame, and the padding mask [N, T].
-std::pair<torch::Tensor, torch::Tensor> Pad(const std::vector<FeatureMatrix>& features, const torch::Tensor& mean, const torch::Tensor& stddev) {
+std::pair<torch::Tensor, torch::Tensor> Pad(const std::vector<FeatureMatrix>& features,
+                                            const torch::Tensor& mean,
+                                            const torch::Tensor& stddev) {
   const auto n = static_cast<int64_t>(features.size());
   int64_t longest = 1;
   for (const auto& f : features) longest = std::max(longest, f.rows);
@@ -113,10 +132,13 @@ std::pair<torch::Tensor, torch::Tensor> Pad(const std::vector<FeatureMatrix>& fe
   auto padding = torch::zeros({n, longest}, torch::kBool);
   for (int64_t i = 0; i < n; ++i) {
     const auto& f = features[static_cast<size_t>(i)];
-    auto x = (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}) - mean) / (2.0 * (stddev + 1e-5));
+    auto x = (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}) - mean) /
+             (2.0 * (stddev + 1e-5));
     out.select(1, i).narrow(0, 0, f.rows).copy_(x);
     if (f.rows < longest) {
-      out.select(1, i).narrow(0, f.rows, longest - f.rows).copy_(x[f.rows - 1].expand({longest - f.rows, f.cols}));
+      out.select(1, i)
+          .narrow(0, f.rows, longest - f.rows)
+          .copy_(x[f.rows - 1].expand({longest - f.rows, f.cols}));
       padding[i].narrow(0, f.rows, longest - f.rows).fill_(true);
     }
   }
@@ -132,8 +154,10 @@ plugin::Batch EditDataset::Get(const std::vector<int64_t>& indices, uint64_t) {
     const Item& item = items_[static_cast<size_t>(index)];
     FeatureMatrix s = Features(item, true), t = Features(item, false);
     // Crop both to max_frames (the first frames: the curve is indexed by source frame).
-    if (s.rows > options_.max_frames) s.rows = options_.max_frames, s.data.resize(static_cast<size_t>(s.rows * s.cols));
-    if (t.rows > options_.max_frames) t.rows = options_.max_frames, t.data.resize(static_cast<size_t>(t.rows * t.cols));
+    if (s.rows > options_.max_frames)
+      s.rows = options_.max_frames, s.data.resize(static_cast<size_t>(s.rows * s.cols));
+    if (t.rows > options_.max_frames)
+      t.rows = options_.max_frames, t.data.resize(static_cast<size_t>(t.rows * t.cols));
     sources.push_back(std::move(s));
     targets.push_back(std::move(t));
     batch.texts.push_back(files_[item.file].texts[static_cast<size_t>(item.row)]);
@@ -147,15 +171,18 @@ plugin::Batch EditDataset::Get(const std::vector<int64_t>& indices, uint64_t) {
     const Item& item = items_[static_cast<size_t>(indices[static_cast<size_t>(i)])];
     if (item.curve < 0) continue;
     const auto& curve = curves_[static_cast<size_t>(item.curve)];
-    const int64_t frames = std::min<int64_t>(static_cast<int64_t>(curve.size()), sources[static_cast<size_t>(i)].rows);
+    const int64_t frames =
+        std::min<int64_t>(static_cast<int64_t>(curve.size()), sources[static_cast<size_t>(i)].rows);
     for (int64_t f = 0; f < frames; ++f) {
       const float s = curve[static_cast<size_t>(f)];
       similarity[i][f] = s;
       // eq. (10): K equal bins of S^N in [0, 1], the top bin closed.
-      classes[i][f] = std::min<int64_t>(static_cast<int64_t>(s * static_cast<float>(options_.classes)), options_.classes - 1);
+      classes[i][f] = std::min<int64_t>(
+          static_cast<int64_t>(s * static_cast<float>(options_.classes)), options_.classes - 1);
     }
   }
-  batch.tensors = {{"source", source}, {"source_padding", source_padding}, {"target", target}, {"target_padding", target_padding},
+  batch.tensors = {{"source", source},   {"source_padding", source_padding},
+                   {"target", target},   {"target_padding", target_padding},
                    {"classes", classes}, {"similarity", similarity}};
   batch.size = n;
   return batch;
@@ -186,7 +213,9 @@ std::pair<torch::Tensor, torch::Tensor> EditDataset::ComputeStats(int64_t limit)
   auto mean = torch::zeros({kMotionFixFeatureDim}), stddev = torch::ones({kMotionFixFeatureDim});
   for (int64_t c = 0; c < kMotionFixFeatureDim; ++c) {
     const double m = sum[static_cast<size_t>(c)] / static_cast<double>(count);
-    const double var = std::max(0.0, (squares[static_cast<size_t>(c)] - static_cast<double>(count) * m * m) / static_cast<double>(std::max<int64_t>(1, count - 1)));
+    const double var =
+        std::max(0.0, (squares[static_cast<size_t>(c)] - static_cast<double>(count) * m * m) /
+                          static_cast<double>(std::max<int64_t>(1, count - 1)));
     mean[c] = m;
     // A column constant over the training motions (the procedural corpus never turns some joints:
     // 55 of 207 columns) carries nothing to normalise, and (x - mean) / (2 (0 + 1e-5)) would turn
@@ -199,7 +228,8 @@ std::pair<torch::Tensor, torch::Tensor> EditDataset::ComputeStats(int64_t limit)
 
 std::vector<std::string> EditDataset::AllTexts() const {
   std::vector<std::string> texts;
-  for (const Item& item : items_) texts.push_back(files_[item.file].texts[static_cast<size_t>(item.row)]);
+  for (const Item& item : items_)
+    texts.push_back(files_[item.file].texts[static_cast<size_t>(item.row)]);
   return texts;
 }
 

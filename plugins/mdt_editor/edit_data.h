@@ -1,6 +1,6 @@
-// Editing triplets for training (SimMotionEdit sec. 3.2): the filter stage's kept triplets with their
-// similarity curves, or (the "without SNR filtering" ablation) every triplet of the corpus, the
-// similarity task then masked where the filter has no curve. Motions become normalised 207-d
+// Editing triplets for training (SimMotionEdit sec. 3.2): the filter stage's kept triplets with
+// their similarity curves, or (the "without SNR filtering" ablation) every triplet of the corpus,
+// the similarity task then masked where the filter has no curve. Motions become normalised 207-d
 // features on the fly (mean/std over the training split, 2 sigma as MotionFix), cropped to
 // max_frames, padded by repeating the last frame.
 //
@@ -42,7 +42,9 @@ class EditDataset : public plugin::Dataset {
   // Mean and std (scale 2 sigma) over up to `limit` training motions (sources and targets); a
   // column constant over them gets std 1.
   std::pair<torch::Tensor, torch::Tensor> ComputeStats(int64_t limit = 400) const;
-  void SetStats(torch::Tensor mean, torch::Tensor std) { mean_ = std::move(mean), std_ = std::move(std); }
+  void SetStats(torch::Tensor mean, torch::Tensor std) {
+    mean_ = std::move(mean), std_ = std::move(std);
+  }
   std::vector<std::string> AllTexts() const;
   int64_t with_similarity() const;
 

@@ -9,7 +9,9 @@ namespace motionpipe::mdt {
 
 namespace {
 
-torch::Tensor AnyPadding(int64_t n, int64_t length) { return torch::zeros({n, length}, torch::kBool); }
+torch::Tensor AnyPadding(int64_t n, int64_t length) {
+  return torch::zeros({n, length}, torch::kBool);
+}
 
 }  // namespace
 
@@ -31,17 +33,22 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.aux = a.value("mode", o.variant == "mdt" ? o.aux : std::string("none"));
   o.classes = a.value("classes", o.classes);
   o.aux_weight = a.value("weight", o.aux_weight);
-  if (o.aux != "classes" && o.aux != "regression" && o.aux != "none") throw std::invalid_argument("aux.mode must be classes, regression or none");
-  if (o.aux != "none" && o.variant != "mdt") throw std::invalid_argument("the similarity task belongs to the mdt variant (aux.mode: none)");
-  if (o.classes < 2 || o.classes > 64) throw std::invalid_argument("aux.classes must be in [2, 64]");
+  if (o.aux != "classes" && o.aux != "regression" && o.aux != "none")
+    throw std::invalid_argument("aux.mode must be classes, regression or none");
+  if (o.aux != "none" && o.variant != "mdt")
+    throw std::invalid_argument("the similarity task belongs to the mdt variant (aux.mode: none)");
+  if (o.classes < 2 || o.classes > 64)
+    throw std::invalid_argument("aux.classes must be in [2, 64]");
   o.class_weights = a.value("class_weights", std::vector<double>());
   if (o.class_weights.empty()) {
     o.class_weights.assign(static_cast<size_t>(o.classes), 1.0);
     if (o.classes == 3) o.class_weights = {1, 0, 1};
   }
-  if (static_cast<int>(o.class_weights.size()) != o.classes) throw std::invalid_argument("aux.class_weights needs one weight per class");
+  if (static_cast<int>(o.class_weights.size()) != o.classes)
+    throw std::invalid_argument("aux.class_weights needs one weight per class");
   const nlohmann::json f = j.value("features", nlohmann::json::object());
-  const std::string text = f.value("text", std::string("enhanced")), motion = f.value("motion", std::string("enhanced"));
+  const std::string text = f.value("text", std::string("enhanced")),
+                    motion = f.value("motion", std::string("enhanced"));
   if ((text != "enhanced" && text != "raw") || (motion != "enhanced" && motion != "raw")) {
     throw std::invalid_argument("features.text and features.motion must be enhanced or raw");
   }
@@ -51,41 +58,65 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   const nlohmann::json d = j.value("diffusion", nlohmann::json::object());
   o.diffusion_steps = d.value("steps", o.diffusion_steps);
   o.snr_shift = d.value("snr_shift", o.snr_shift);
-  o.velocity_weight = j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
+  o.velocity_weight =
+      j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
   if (!(o.velocity_weight >= 0)) throw std::invalid_argument("loss.velocity must be >= 0");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
   o.preconditioning = d.value("preconditioning", o.preconditioning);
-  if (o.preconditioning != "x0" && o.preconditioning != "edm") throw std::invalid_argument("diffusion.preconditioning must be x0 or edm");
+  if (o.preconditioning != "x0" && o.preconditioning != "edm")
+    throw std::invalid_argument("diffusion.preconditioning must be x0 or edm");
   o.sigma_data = d.value("sigma_data", o.sigma_data);
   if (!(o.sigma_data > 0)) throw std::invalid_argument("diffusion.sigma_data must be positive");
   o.guidance_motion = d.value("guidance_motion", o.guidance_motion);
   o.guidance_text = d.value("guidance_text", o.variant == "mdm" ? 2.5 : o.guidance_text);
-  if (o.drop_text + o.drop_source + o.drop_both > 1) throw std::invalid_argument("diffusion: the condition dropout probabilities sum above 1");
+  if (o.drop_text + o.drop_source + o.drop_both > 1)
+    throw std::invalid_argument("diffusion: the condition dropout probabilities sum above 1");
   nlohmann::json t = m.value("text_encoder", nlohmann::json::object());
   if (!t.contains("dim")) t["dim"] = std::min<int64_t>(o.dim, 256);
   if (!t.contains("dropout")) t["dropout"] = o.dropout;
   o.text = nn::TextEncoderOptions::FromJson(t);
   o.text_encoder_from = j.value("text_encoder_from", o.text_encoder_from);
   o.freeze_text_encoder = j.value("freeze_text_encoder", o.freeze_text_encoder);
-  if (o.dim % o.heads != 0) throw std::invalid_argument("model.dim must be divisible by model.heads");
+  if (o.dim % o.heads != 0)
+    throw std::invalid_argument("model.dim must be divisible by model.heads");
   return o;
 }
 
 nlohmann::json EditorOptions::ToJson() const {
   return {{"variant", variant},
-          {"model", {{"dim", dim}, {"cond_layers", cond_layers}, {"layers", layers}, {"heads", heads}, {"ff", ff},
-                     {"sim_hidden", sim_hidden}, {"dropout", dropout}, {"text_encoder", text.ToJson()}}},
-          {"aux", {{"mode", aux}, {"classes", classes}, {"weight", aux_weight}, {"class_weights", class_weights}}},
-          {"features", {{"text", enhanced_text ? "enhanced" : "raw"}, {"motion", enhanced_motion ? "enhanced" : "raw"}}},
+          {"model",
+           {{"dim", dim},
+            {"cond_layers", cond_layers},
+            {"layers", layers},
+            {"heads", heads},
+            {"ff", ff},
+            {"sim_hidden", sim_hidden},
+            {"dropout", dropout},
+            {"text_encoder", text.ToJson()}}},
+          {"aux",
+           {{"mode", aux},
+            {"classes", classes},
+            {"weight", aux_weight},
+            {"class_weights", class_weights}}},
+          {"features",
+           {{"text", enhanced_text ? "enhanced" : "raw"},
+            {"motion", enhanced_motion ? "enhanced" : "raw"}}},
           {"adaln_text", adaln_text},
           {"text_encoder_from", text_encoder_from},
           {"freeze_text_encoder", freeze_text_encoder},
           {"loss", {{"velocity", velocity_weight}}},
-          {"diffusion", {{"steps", diffusion_steps}, {"drop_text", drop_text}, {"drop_source", drop_source}, {"drop_both", drop_both},
-                         {"guidance_motion", guidance_motion}, {"guidance_text", guidance_text},
-                         {"preconditioning", preconditioning}, {"sigma_data", sigma_data}, {"snr_shift", snr_shift}}}};
+          {"diffusion",
+           {{"steps", diffusion_steps},
+            {"drop_text", drop_text},
+            {"drop_source", drop_source},
+            {"drop_both", drop_both},
+            {"guidance_motion", guidance_motion},
+            {"guidance_text", guidance_text},
+            {"preconditioning", preconditioning},
+            {"sigma_data", sigma_data},
+            {"snr_shift", snr_shift}}}};
 }
 
 DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
@@ -98,31 +129,40 @@ DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
   modulation_->bias.zero_();
 }
 
-torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& c, const torch::Tensor& padding) {
+torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& c,
+                                    const torch::Tensor& padding) {
   const auto m = modulation_->forward(torch::silu(c)).unsqueeze(0).chunk(6, 2);  // each [1, N, d]
-  const auto norm = [&](const torch::Tensor& v) { return torch::layer_norm(v, {dim_}, {}, {}, 1e-6); };
+  const auto norm = [&](const torch::Tensor& v) {
+    return torch::layer_norm(v, {dim_}, {}, {}, 1e-6);
+  };
   auto h = x + m[2] * attention_->forward(norm(x) * (1 + m[1]) + m[0], padding);
   const auto mlp = fc2_->forward(torch::gelu(fc1_->forward(norm(h) * (1 + m[4]) + m[3]), "tanh"));
   return h + m[5] * mlp;
 }
 
-EditorNetImpl::EditorNetImpl(const EditorOptions& o) : o_(o), schedule_(o.diffusion_steps, o.snr_shift) {
+EditorNetImpl::EditorNetImpl(const EditorOptions& o)
+    : o_(o), schedule_(o.diffusion_steps, o.snr_shift) {
   const nn::TransformerOptions layer{o.dim, o.heads, o.ff, o.layers, o.dropout};
   text_encoder_ = register_module("text_encoder", nn::TextEncoder(o.text));
   text_proj_ = register_module("text_proj", torch::nn::Linear(o.text.dim, o.dim));
   target_in_ = register_module("target_in", torch::nn::Linear(kEditFeatureDim, o.dim));
   out_ = register_module("out", torch::nn::Linear(o.dim, kEditFeatureDim));
-  time_mlp_ = register_module("time_mlp", torch::nn::Sequential(torch::nn::Linear(256, o.dim), torch::nn::SiLU(), torch::nn::Linear(o.dim, o.dim)));
+  time_mlp_ = register_module(
+      "time_mlp", torch::nn::Sequential(torch::nn::Linear(256, o.dim), torch::nn::SiLU(),
+                                        torch::nn::Linear(o.dim, o.dim)));
   if (o.uses_source()) {
     source_in_ = register_module("source_in", torch::nn::Linear(kEditFeatureDim, o.dim));
     separator_ = register_parameter("separator", torch::randn({o.dim}) * 0.02);
   }
   segments_ = register_parameter("segments", torch::randn({kSegments, o.dim}) * 0.02);
   if (o.variant == "mdt") {
-    condition_ = register_module("condition", nn::Encoder(nn::TransformerOptions{o.dim, o.heads, o.ff, o.cond_layers, o.dropout}));
-    sim_head_ = register_module("sim_head", torch::nn::Sequential(torch::nn::Linear(o.dim, o.sim_hidden), torch::nn::SiLU(),
-                                                                  torch::nn::Linear(o.sim_hidden, o.sim_hidden), torch::nn::SiLU(),
-                                                                  torch::nn::Linear(o.sim_hidden, o.sim_outputs())));
+    condition_ = register_module("condition", nn::Encoder(nn::TransformerOptions{
+                                                  o.dim, o.heads, o.ff, o.cond_layers, o.dropout}));
+    sim_head_ = register_module(
+        "sim_head",
+        torch::nn::Sequential(torch::nn::Linear(o.dim, o.sim_hidden), torch::nn::SiLU(),
+                              torch::nn::Linear(o.sim_hidden, o.sim_hidden), torch::nn::SiLU(),
+                              torch::nn::Linear(o.sim_hidden, o.sim_outputs())));
     blocks_ = register_module("blocks", torch::nn::ModuleList());
     for (int64_t k = 0; k < o.layers; ++k) blocks_->push_back(DiTBlock(o.dim, o.heads, o.ff));
     final_modulation_ = register_module("final_modulation", torch::nn::Linear(o.dim, 2 * o.dim));
@@ -143,9 +183,9 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o) : o_(o), schedule_(o.diffus
 
 std::pair<torch::Tensor, nn::TextFeatures> EditorNetImpl::EncodeText(const Condition& c) {
   nn::TextFeatures f = text_encoder_->forward(c.texts);
-  auto tokens = text_proj_->forward(f.tokens);  // [L, N, d]
+  auto tokens = text_proj_->forward(f.tokens);                                    // [L, N, d]
   const auto keep = f.padding.logical_not().t().unsqueeze(2).to(tokens.dtype());  // [L, N, 1]
-  auto pooled = (tokens * keep).sum(0) / keep.sum(0).clamp_min(1.0);             // [N, d]
+  auto pooled = (tokens * keep).sum(0) / keep.sum(0).clamp_min(1.0);              // [N, d]
   if (c.drop_text.defined()) {
     const auto drop = c.drop_text.view({-1, 1}).to(tokens.dtype());
     pooled = pooled * (1 - drop);
@@ -154,10 +194,13 @@ std::pair<torch::Tensor, nn::TextFeatures> EditorNetImpl::EncodeText(const Condi
   return {pooled, {tokens, f.padding}};
 }
 
-torch::Tensor EditorNetImpl::TimeEmbedding(const torch::Tensor& t) { return time_mlp_->forward(TimestepEmbedding(t, 256)); }
+torch::Tensor EditorNetImpl::TimeEmbedding(const torch::Tensor& t) {
+  return time_mlp_->forward(TimestepEmbedding(t, 256));
+}
 
 torch::Tensor EditorNetImpl::TextCondition(const torch::Tensor& text) {
-  if (!text_cond_) throw std::logic_error("TextCondition: only the mdt variant conditions adaLN on text");
+  if (!text_cond_)
+    throw std::logic_error("TextCondition: only the mdt variant conditions adaLN on text");
   return text_cond_->forward(text);
 }
 
@@ -165,8 +208,10 @@ torch::Tensor EditorNetImpl::Place(const torch::Tensor& x, Segment segment) cons
   return x + nn::PositionalEncoding(x.size(0), o_.dim) + segments_[segment].view({1, 1, -1});
 }
 
-Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c) {
-  Prediction p = o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c) : ForwardEncoder(xt, t, target_padding, c);
+Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& t,
+                                  const torch::Tensor& target_padding, const Condition& c) {
+  Prediction p = o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c)
+                                     : ForwardEncoder(xt, t, target_padding, c);
   if (o_.preconditioning == "edm") {
     const auto [skip, out] = schedule_.Preconditioning(t, o_.sigma_data);
     p.x0 = skip * xt + out * p.x0;
@@ -184,13 +229,15 @@ torch::Tensor SourcePadding(const Condition& c) {
 
 }  // namespace
 
-Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c) {
+Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t,
+                                     const torch::Tensor& target_padding, const Condition& c) {
   const int64_t n = xt.size(1), ts = c.source.size(0), tt = xt.size(0);
   auto [text, unused] = EncodeText(c);
   (void)unused;
   const auto source_padding = SourcePadding(c);
   auto source = source_in_->forward(c.source);  // [Ts, N, d]
-  if (c.drop_source.defined()) source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
+  if (c.drop_source.defined())
+    source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
   // Condition transformer over [text token; source frames].
   auto h = torch::cat({text.unsqueeze(0), source}, 0) + nn::PositionalEncoding(ts + 1, o_.dim);
   h = condition_->forward(h, torch::cat({AnyPadding(n, 1), source_padding}, 1));
@@ -205,8 +252,10 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   auto cond = TimeEmbedding(t);
   if (o_.adaln_text) cond = cond + TextCondition(o_.enhanced_text ? enhanced_text : text);
   const auto src = o_.enhanced_motion ? enhanced_source : source;
-  auto x = torch::cat({Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
-                       Place(target_in_->forward(xt), kTarget)}, 0);
+  auto x = torch::cat(
+      {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
+       Place(target_in_->forward(xt), kTarget)},
+      0);
   const auto padding = torch::cat({source_padding, AnyPadding(n, 1), target_padding}, 1);
   for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, cond, padding);
   const auto m = final_modulation_->forward(torch::silu(cond)).unsqueeze(0).chunk(2, 2);
@@ -215,7 +264,8 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   return p;
 }
 
-Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c) {
+Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t,
+                                         const torch::Tensor& target_padding, const Condition& c) {
   const int64_t n = xt.size(1), tt = xt.size(0);
   auto [text, tokens] = EncodeText(c);
   const auto time = TimeEmbedding(t).unsqueeze(0);  // [1, N, d]
@@ -225,7 +275,8 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
     masks = {AnyPadding(n, 1)};
   } else {  // TMED: [timestep; text tokens; source; separator; noisy target]
     auto source = source_in_->forward(c.source);
-    if (c.drop_source.defined()) source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
+    if (c.drop_source.defined())
+      source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
     parts = {Place(time, kTime), Place(tokens.tokens, kText), Place(source, kSource),
              Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator)};
     masks = {AnyPadding(n, 1), tokens.padding, SourcePadding(c), AnyPadding(n, 1)};
@@ -239,40 +290,53 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
   return {out_->forward(x.narrow(0, prefix, tt)), {}};
 }
 
-torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding) {
+torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,
+                               const torch::Tensor& padding) {
   const auto keep = padding.logical_not().t().unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
   const auto frames = keep.sum(0).squeeze(1).clamp_min(1.0);                        // [N]
   const auto squared = (prediction - target).pow(2) * keep;
   std::vector<torch::Tensor> groups;
   for (const auto& g : MotionFixFeatureGroups()) {
     const std::vector<int64_t> dims = {0, 2};
-    groups.push_back(squared.narrow(2, g.begin, g.end - g.begin).sum(dims) / (frames * (g.end - g.begin)));  // [N]
+    groups.push_back(squared.narrow(2, g.begin, g.end - g.begin).sum(dims) /
+                     (frames * (g.end - g.begin)));  // [N]
   }
   return torch::stack(groups, 0).mean(0).mean();
 }
 
-torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding) {
+torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target,
+                          const torch::Tensor& padding) {
   const int64_t frames = prediction.size(0);
   if (frames < 2) return torch::zeros({}, prediction.options());
-  const auto difference = [&](const torch::Tensor& x) { return x.narrow(0, 1, frames - 1) - x.narrow(0, 0, frames - 1); };
+  const auto difference = [&](const torch::Tensor& x) {
+    return x.narrow(0, 1, frames - 1) - x.narrow(0, 0, frames - 1);
+  };
   const auto both = padding.narrow(1, 1, frames - 1).logical_or(padding.narrow(1, 0, frames - 1));
   return GroupedMaskedMse(difference(prediction), difference(target), both);
 }
 
-std::map<std::string, torch::Tensor> SimilarityLoss(const torch::Tensor& prediction, const torch::Tensor& classes, const torch::Tensor& similarity,
-                                                    const torch::Tensor& source_padding, const torch::Tensor& drop_source, const EditorOptions& o) {
+std::map<std::string, torch::Tensor> SimilarityLoss(
+    const torch::Tensor& prediction, const torch::Tensor& classes, const torch::Tensor& similarity,
+    const torch::Tensor& source_padding, const torch::Tensor& drop_source, const EditorOptions& o) {
   auto valid = classes.ge(0).logical_and(source_padding.logical_not());
   if (drop_source.defined()) valid = valid.logical_and(drop_source.view({-1, 1}).logical_not());
   const auto w = valid.to(torch::kFloat32);
   std::map<std::string, torch::Tensor> out;
   if (o.aux == "classes") {
     const auto labels = classes.clamp_min(0);
-    const auto nll = -torch::log_softmax(prediction, 2).gather(2, labels.unsqueeze(2)).squeeze(2);  // [N, Ts]
-    const auto weights = torch::tensor(o.class_weights, torch::kFloat64).to(torch::kFloat32).index_select(0, labels.view({-1})).view_as(nll) * w;
+    const auto nll =
+        -torch::log_softmax(prediction, 2).gather(2, labels.unsqueeze(2)).squeeze(2);  // [N, Ts]
+    const auto weights = torch::tensor(o.class_weights, torch::kFloat64)
+                             .to(torch::kFloat32)
+                             .index_select(0, labels.view({-1}))
+                             .view_as(nll) *
+                         w;
     out["aux"] = (nll * weights).sum() / weights.sum().clamp_min(1e-8);
-    out["aux_accuracy"] = (prediction.argmax(2).eq(labels).to(torch::kFloat32) * w).sum() / w.sum().clamp_min(1.0);
+    out["aux_accuracy"] =
+        (prediction.argmax(2).eq(labels).to(torch::kFloat32) * w).sum() / w.sum().clamp_min(1.0);
   } else {
-    out["aux"] = ((torch::sigmoid(prediction) - similarity).pow(2) * w).sum() / w.sum().clamp_min(1.0);
+    out["aux"] =
+        ((torch::sigmoid(prediction) - similarity).pow(2) * w).sum() / w.sum().clamp_min(1.0);
   }
   return out;
 }

@@ -14,7 +14,6 @@
 #include <torch/torch.h>
 
 #include <nlohmann/json.hpp>
-
 #include <utility>
 
 #include "../common/text_encoder.h"
@@ -32,22 +31,24 @@ struct EditorOptions {
   // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
   std::string aux = "classes";
   int classes = 3;
-  double aux_weight = 0.05;            // the authors' code; the paper writes L = L_aux + L_e (1.0)
-  std::vector<double> class_weights;   // default [1, 0, 1] for K = 3 (the authors' code), else ones
-  bool enhanced_text = true, enhanced_motion = true;  // DiT inputs: condition-transformer outputs or raw projections
-  bool adaln_text = true;              // the text token joins the timestep in adaLN (reference default: zeros)
+  double aux_weight = 0.05;           // the authors' code; the paper writes L = L_aux + L_e (1.0)
+  std::vector<double> class_weights;  // default [1, 0, 1] for K = 3 (the authors' code), else ones
+  bool enhanced_text = true,
+       enhanced_motion = true;  // DiT inputs: condition-transformer outputs or raw projections
+  bool adaln_text = true;  // the text token joins the timestep in adaLN (reference default: zeros)
   int64_t diffusion_steps = 300;
   // MDM's velocity loss L_vel (Tevet et al. 2023) on the normalised features' frame-to-
   // frame differences, added with this weight to the x0 loss; 0 (the reference) leaves it out.
   double velocity_weight = 0;
-  double snr_shift = 1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
+  double snr_shift =
+      1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
   // How the network's output becomes the x0 estimate. "x0": the output is x0 (REFERENCE 3.2).
   // "edm": Karras et al.'s preconditioning, x0 = c_skip x~ + c_out F, so that near t = 0 the noisy
   // target passes through instead of being rebuilt from the width-d trunk (at d = 128 < 207 the
   // plain head cannot reproduce even a clean target: x0 MSE 0.023 at t = 0 where x_t alone gives
-  // 0.0002). The loss is the same x0 MSE either way. Measured at d = 128 (issue 15), "edm" is worse:
-  // the skip passes x_t's noise, which the 128-wide trunk cannot cancel at middle steps, and the
-  // sampled edits are rough (second differences 200x the target's), so "x0" stays the default.
+  // 0.0002). The loss is the same x0 MSE either way. Measured at d = 128 (issue 15), "edm" is
+  // worse: the skip passes x_t's noise, which the 128-wide trunk cannot cancel at middle steps, and
+  // the sampled edits are rough (second differences 200x the target's), so "x0" stays the default.
   std::string preconditioning = "x0";
   double sigma_data = 0.5;  // the normalised features' spread: (x - mean) / (2 std)
   double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
@@ -78,11 +79,13 @@ struct Prediction {
 };
 
 // A DiT block with adaLN-Zero: shift/scale/gate for attention and MLP from SiLU -> Linear(d, 6d),
-// zero-initialised, so that the block starts as the identity; LayerNorms without affine; tanh-GELU MLP.
+// zero-initialised, so that the block starts as the identity; LayerNorms without affine; tanh-GELU
+// MLP.
 class DiTBlockImpl : public torch::nn::Module {
  public:
   DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff);
-  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& c, const torch::Tensor& padding);
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& c,
+                        const torch::Tensor& padding);
 
  private:
   int64_t dim_;
@@ -96,11 +99,13 @@ class EditorNetImpl : public torch::nn::Module {
   explicit EditorNetImpl(const EditorOptions& o);
   // xt [Tt, N, 207] at steps t [N], target_padding [N, Tt]. The x0 estimate, after the
   // preconditioning of the options.
-  Prediction forward(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
+  Prediction forward(const torch::Tensor& xt, const torch::Tensor& t,
+                     const torch::Tensor& target_padding, const Condition& c);
   nn::TextEncoder text_encoder() const { return text_encoder_; }
   const EditorOptions& options() const { return o_; }
   // The two terms of the MDT's adaLN condition (DiT: timestep embedding + class embedding): the
-  // timestep embedding [N, d] and the text token's contribution [N, d] (text_cond of the text token).
+  // timestep embedding [N, d] and the text token's contribution [N, d] (text_cond of the text
+  // token).
   torch::Tensor TimeEmbedding(const torch::Tensor& t);
   torch::Tensor TextCondition(const torch::Tensor& text);
 
@@ -114,8 +119,10 @@ class EditorNetImpl : public torch::nn::Module {
   // embedding: positions that do not depend on the other examples of the batch (source frame i and
   // target frame i share the sinusoid of i, which also makes copying a frame an easy alignment).
   torch::Tensor Place(const torch::Tensor& x, Segment segment) const;
-  Prediction ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
-  Prediction ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t, const torch::Tensor& target_padding, const Condition& c);
+  Prediction ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t,
+                        const torch::Tensor& target_padding, const Condition& c);
+  Prediction ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t,
+                            const torch::Tensor& target_padding, const Condition& c);
 
   EditorOptions o_;
   CosineSchedule schedule_;
@@ -131,17 +138,20 @@ TORCH_MODULE(EditorNet);
 
 // Masked MSE on x0 averaged per feature group (the 207-d layout's five), then over the groups, per
 // example, then over the examples. prediction/target [T, N, 207], padding [N, T].
-torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding);
+torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,
+                               const torch::Tensor& padding);
 
 // GroupedMaskedMse of the first differences over time (frames t and t - 1 both real).
-torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding);
+torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target,
+                          const torch::Tensor& padding);
 
 // The auxiliary similarity loss (SimMotionEdit eq. 11) on the frames that count: a curve exists
 // (classes >= 0), the frame is real (not padding) and the example's source was not dropped.
 // classes mode: cross-entropy with the class weights, averaged by weight; regression: MSE of the
 // sigmoid against S^N. Returns "aux" (and "aux_accuracy" for classes).
-std::map<std::string, torch::Tensor> SimilarityLoss(const torch::Tensor& prediction, const torch::Tensor& classes, const torch::Tensor& similarity,
-                                                    const torch::Tensor& source_padding, const torch::Tensor& drop_source, const EditorOptions& o);
+std::map<std::string, torch::Tensor> SimilarityLoss(
+    const torch::Tensor& prediction, const torch::Tensor& classes, const torch::Tensor& similarity,
+    const torch::Tensor& source_padding, const torch::Tensor& drop_source, const EditorOptions& o);
 
 // Columns of the 207-d feature that belong to each body part (SMPL-22 parts; global = pelvis
 // velocity, orientation, heading change): [6, 207] bool.

@@ -1,9 +1,12 @@
-// The mdt_editor plugin: SimMotionEdit's MDT and the diffusion baselines TMED and MDM (MDM-BP is MDM
-// sampled with body-part inpainting), trained by the train stage on editing triplets, and a generator
-// that edits motions with a trained checkpoint (DDPM or DDIM, three-way classifier-free guidance).
+// The mdt_editor plugin: SimMotionEdit's MDT and the diffusion baselines TMED and MDM (MDM-BP is
+// MDM sampled with body-part inpainting), trained by the train stage on editing triplets, and a
+// generator that edits motions with a trained checkpoint (DDPM or DDIM, three-way classifier-free
+// guidance).
 //
 // Factories: ("model", "mdt_editor") for the train stage; ("generator", "mdt_editor") loads a
 // checkpoint directory; {"body_parts": true} runs an MDM checkpoint as MDM-BP.
+#include "../api/plugin.hpp"
+
 #include <omp.h>
 #include <torch/torch.h>
 
@@ -11,7 +14,6 @@
 
 #include "../api/generator.hpp"
 #include "../api/model.hpp"
-#include "../api/plugin.hpp"
 #include "../common/threads.h"
 #include "edit_data.h"
 #include "editor.h"
@@ -27,7 +29,9 @@ namespace {
 class EditorModel : public plugin::Model {
  public:
   explicit EditorModel(const nlohmann::json& config)
-      : config_(config), options_(EditorOptions::FromJson(config)), schedule_(options_.diffusion_steps, options_.snr_shift) {
+      : config_(config),
+        options_(EditorOptions::FromJson(config)),
+        schedule_(options_.diffusion_steps, options_.snr_shift) {
     net_ = EditorNet(options_);
     mean_ = net_->register_buffer("feature_mean", torch::zeros({kEditFeatureDim}));
     std_ = net_->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
@@ -45,12 +49,15 @@ class EditorModel : public plugin::Model {
     if (context.split == "train") {
       auto encoder = net_->text_encoder();
       if (!options_.text_encoder_from.empty() && !encoder->fitted()) {
-        const std::string dir = nn::LoadPretrainedTextEncoder(encoder, options_.text_encoder_from, context.input_dirs, options_.freeze_text_encoder);
+        const std::string dir = nn::LoadPretrainedTextEncoder(
+            encoder, options_.text_encoder_from, context.input_dirs, options_.freeze_text_encoder);
         if (context.rank == 0) {
-          std::fprintf(stderr, "mdt_editor: text encoder from %s (%s)\n", dir.c_str(), options_.freeze_text_encoder ? "frozen" : "fine-tuned");
+          std::fprintf(stderr, "mdt_editor: text encoder from %s (%s)\n", dir.c_str(),
+                       options_.freeze_text_encoder ? "frozen" : "fine-tuned");
         }
       }
-      if (!encoder->fitted()) nn::FitShared(encoder, dataset->AllTexts(), context.state_dir, context.rank);
+      if (!encoder->fitted())
+        nn::FitShared(encoder, dataset->AllTexts(), context.state_dir, context.rank);
       if (!stats_ready_) {
         auto [mean, stddev] = dataset->ComputeStats();
         mean_.copy_(mean);
@@ -73,25 +80,32 @@ class EditorModel : public plugin::Model {
     const auto seeds = batch.tensors.find("example_seed");
     for (int64_t i = 0; i < n; ++i) {
       auto generator = seeds != batch.tensors.end()
-                           ? at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(seeds->second[i].item<int64_t>()))
-                           : at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(torch::randint(1LL << 62, {1}).item<int64_t>()));
-      steps[static_cast<size_t>(i)] = torch::randint(schedule_.steps(), {1}, generator).item<int64_t>();
+                           ? at::make_generator<at::CPUGeneratorImpl>(
+                                 static_cast<uint64_t>(seeds->second[i].item<int64_t>()))
+                           : at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(
+                                 torch::randint(1LL << 62, {1}).item<int64_t>()));
+      steps[static_cast<size_t>(i)] =
+          torch::randint(schedule_.steps(), {1}, generator).item<int64_t>();
       const double u = torch::rand({1}, generator).item<double>();
       const bool both = u < options_.drop_both;
-      drop_text[static_cast<size_t>(i)] = both || (u >= options_.drop_both && u < options_.drop_both + options_.drop_text);
+      drop_text[static_cast<size_t>(i)] =
+          both || (u >= options_.drop_both && u < options_.drop_both + options_.drop_text);
       drop_source[static_cast<size_t>(i)] =
-          both || (u >= options_.drop_both + options_.drop_text && u < options_.drop_both + options_.drop_text + options_.drop_source);
+          both || (u >= options_.drop_both + options_.drop_text &&
+                   u < options_.drop_both + options_.drop_text + options_.drop_source);
       noise.push_back(torch::randn({frames, kEditFeatureDim}, generator));
     }
     const auto t = torch::tensor(steps, torch::kInt64);
     const auto xt = schedule_.QSample(target, t, torch::stack(noise, 1));
     Condition c;
     c.texts = batch.texts;
-    c.drop_text = torch::tensor(std::vector<int64_t>(drop_text.begin(), drop_text.end())).to(torch::kBool);
+    c.drop_text =
+        torch::tensor(std::vector<int64_t>(drop_text.begin(), drop_text.end())).to(torch::kBool);
     if (options_.uses_source()) {
       c.source = batch.tensors.at("source");
       c.source_padding = batch.tensors.at("source_padding");
-      c.drop_source = torch::tensor(std::vector<int64_t>(drop_source.begin(), drop_source.end())).to(torch::kBool);
+      c.drop_source = torch::tensor(std::vector<int64_t>(drop_source.begin(), drop_source.end()))
+                          .to(torch::kBool);
     }
     const Prediction p = net_->forward(xt, t, batch.tensors.at("target_padding"), c);
     std::map<std::string, torch::Tensor> out;
@@ -102,8 +116,9 @@ class EditorModel : public plugin::Model {
       loss = loss + options_.velocity_weight * out["velocity"];
     }
     if (p.similarity.defined()) {
-      const auto aux = SimilarityLoss(p.similarity, batch.tensors.at("classes"), batch.tensors.at("similarity"), c.source_padding,
-                                      c.drop_source, options_);
+      const auto aux =
+          SimilarityLoss(p.similarity, batch.tensors.at("classes"), batch.tensors.at("similarity"),
+                         c.source_padding, c.drop_source, options_);
       out.insert(aux.begin(), aux.end());
       loss = loss + options_.aux_weight * out["aux"];
     }
@@ -145,23 +160,28 @@ class EditorGenerator : public plugin::Generator {
     model_->Module().load(archive);
     model_->Module().eval();
     body_parts_ = options.value("body_parts", false);
-    if (body_parts_ && model_->options().variant != "mdm") throw std::invalid_argument("body_parts (MDM-BP) runs mdm checkpoints");
+    if (body_parts_ && model_->options().variant != "mdm")
+      throw std::invalid_argument("body_parts (MDM-BP) runs mdm checkpoints");
     labeler_ = options.value("labeler", std::string("lexicon"));
     // The guidance scales g_m, g_t (three-way) or g_t (MDM): the checkpoint's unless given.
     guidance_motion_ = options.value("guidance_motion", model_->options().guidance_motion);
     guidance_text_ = options.value("guidance_text", model_->options().guidance_text);
   }
 
-  std::string Name() const override { return "mdt_editor/" + (body_parts_ ? std::string("mdm_bp") : model_->options().variant); }
+  std::string Name() const override {
+    return "mdt_editor/" + (body_parts_ ? std::string("mdm_bp") : model_->options().variant);
+  }
 
   Result<Motion> Generate(const plugin::GenerateRequest& request) override {
     MP_ASSIGN_OR_RETURN(auto motions, GenerateBatch({request}));
     return std::move(motions.front());
   }
 
-  Result<std::vector<Motion>> GenerateBatch(const std::vector<plugin::GenerateRequest>& requests) override {
+  Result<std::vector<Motion>> GenerateBatch(
+      const std::vector<plugin::GenerateRequest>& requests) override {
     if (requests.empty()) return std::vector<Motion>{};
-    nn::SetTorchThreads(omp_get_max_threads());  // the calling task's budget, for torch and the BLAS
+    nn::SetTorchThreads(
+        omp_get_max_threads());  // the calling task's budget, for torch and the BLAS
     try {
       return Edit(requests);
     } catch (const std::exception& e) {
@@ -181,23 +201,35 @@ class EditorGenerator : public plugin::Generator {
     std::vector<std::string> texts;
     for (const auto& r : requests) {
       if (r.texts.size() != 1) return InvalidArgument("an edit takes one instruction text");
-      if (r.sampler != requests[0].sampler || r.steps != requests[0].steps) return InvalidArgument("a batch shares its sampler and steps");
+      if (r.sampler != requests[0].sampler || r.steps != requests[0].steps)
+        return InvalidArgument("a batch shares its sampler and steps");
       texts.push_back(r.texts[0]);
-      if ((o.uses_source() || body_parts_) && !r.source) return InvalidArgument(Name() + " edits a source motion: give one");
+      if ((o.uses_source() || body_parts_) && !r.source)
+        return InvalidArgument(Name() + " edits a source motion: give one");
       if (r.source) {
-        if (r.source->num_frames() < 2) return InvalidArgument("the source motion needs at least 2 frames");
+        if (r.source->num_frames() < 2)
+          return InvalidArgument("the source motion needs at least 2 frames");
         const FeatureMatrix f = EditFeatures(*r.source, nullptr);
-        sources.push_back((torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}).clone() - model_->mean()) / scale);
+        sources.push_back(
+            (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}).clone() -
+             model_->mean()) /
+            scale);
       }
-      int64_t frames = r.frames > 0 ? r.frames : r.source ? r.source->num_frames() : std::lround(r.seconds * r.fps);
+      int64_t frames = r.frames > 0 ? r.frames
+                       : r.source   ? r.source->num_frames()
+                                    : std::lround(r.seconds * r.fps);
       if (body_parts_) frames = r.source->num_frames();  // inpainting keeps the source's timing
-      if (frames < 2 || frames > 10000) return InvalidArgument(std::to_string(frames) + " frames is not a sensible length");
+      if (frames < 2 || frames > 10000)
+        return InvalidArgument(std::to_string(frames) + " frames is not a sensible length");
       lengths.push_back(frames);
     }
     const int64_t tt = *std::max_element(lengths.begin(), lengths.end());
     auto target_padding = torch::zeros({n, tt}, torch::kBool);
     for (int64_t i = 0; i < n; ++i) {
-      if (lengths[static_cast<size_t>(i)] < tt) target_padding[i].narrow(0, lengths[static_cast<size_t>(i)], tt - lengths[static_cast<size_t>(i)]).fill_(true);
+      if (lengths[static_cast<size_t>(i)] < tt)
+        target_padding[i]
+            .narrow(0, lengths[static_cast<size_t>(i)], tt - lengths[static_cast<size_t>(i)])
+            .fill_(true);
     }
     torch::Tensor source, source_padding;
     if (!sources.empty()) {
@@ -209,7 +241,9 @@ class EditorGenerator : public plugin::Generator {
         const auto& s = sources[static_cast<size_t>(i)];
         source.select(1, i).narrow(0, 0, s.size(0)).copy_(s);
         if (s.size(0) < ts) {
-          source.select(1, i).narrow(0, s.size(0), ts - s.size(0)).copy_(s[s.size(0) - 1].expand({ts - s.size(0), kEditFeatureDim}));
+          source.select(1, i)
+              .narrow(0, s.size(0), ts - s.size(0))
+              .copy_(s[s.size(0) - 1].expand({ts - s.size(0), kEditFeatureDim}));
           source_padding[i].narrow(0, s.size(0), ts - s.size(0)).fill_(true);
         }
       }
@@ -217,10 +251,12 @@ class EditorGenerator : public plugin::Generator {
     // The guidance branches in one batch: mdt/tmed [u; c_m; c_tm], mdm [u; c_t].
     const int64_t branches = o.uses_source() ? 3 : 2;
     Condition c;
-    for (int64_t b = 0; b < branches; ++b) c.texts.insert(c.texts.end(), texts.begin(), texts.end());
+    for (int64_t b = 0; b < branches; ++b)
+      c.texts.insert(c.texts.end(), texts.begin(), texts.end());
     const auto flags = [&](std::vector<int> per_branch) {
       std::vector<int64_t> v;
-      for (int64_t b = 0; b < branches; ++b) v.insert(v.end(), static_cast<size_t>(n), per_branch[static_cast<size_t>(b)]);
+      for (int64_t b = 0; b < branches; ++b)
+        v.insert(v.end(), static_cast<size_t>(n), per_branch[static_cast<size_t>(b)]);
       return torch::tensor(v).to(torch::kBool);
     };
     if (o.uses_source()) {
@@ -233,9 +269,13 @@ class EditorGenerator : public plugin::Generator {
     }
     const auto padding = target_padding.repeat({branches, 1});
     const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
-      const auto x0 = model_->net()->forward(xt.repeat({1, branches, 1}), torch::full({branches * n}, t, torch::kInt64), padding, c).x0;
+      const auto x0 = model_->net()
+                          ->forward(xt.repeat({1, branches, 1}),
+                                    torch::full({branches * n}, t, torch::kInt64), padding, c)
+                          .x0;
       const auto parts = x0.chunk(branches, 1);
-      if (branches == 3) return GuideThreeWay(parts[0], parts[1], parts[2], guidance_motion_, guidance_text_);
+      if (branches == 3)
+        return GuideThreeWay(parts[0], parts[1], parts[2], guidance_motion_, guidance_text_);
       return parts[0] + guidance_text_ * (parts[1] - parts[0]);
     };
     std::function<torch::Tensor(const torch::Tensor&)> project;
@@ -260,7 +300,9 @@ class EditorGenerator : public plugin::Generator {
         }
       }
       const auto kept_source = source.narrow(0, 0, tt);
-      project = [keep, kept_source](const torch::Tensor& x0) { return torch::where(keep, kept_source, x0); };
+      project = [keep, kept_source](const torch::Tensor& x0) {
+        return torch::where(keep, kept_source, x0);
+      };
     }
     const auto& r0 = requests[0];
     auto generator = at::make_generator<at::CPUGeneratorImpl>(r0.seed);
@@ -269,7 +311,8 @@ class EditorGenerator : public plugin::Generator {
     if (r0.sampler.empty() || r0.sampler == "ddpm") {
       x = SampleDdpm(model_->schedule(), shape, denoise, generator, project);
     } else if (r0.sampler == "ddim") {
-      x = SampleDdim(model_->schedule(), shape, r0.steps > 0 ? r0.steps : 50, denoise, generator, project);
+      x = SampleDdim(model_->schedule(), shape, r0.steps > 0 ? r0.steps : 50, denoise, generator,
+                     project);
     } else {
       return InvalidArgument("sampler must be ddpm or ddim (got '" + r0.sampler + "')");
     }
@@ -279,7 +322,8 @@ class EditorGenerator : public plugin::Generator {
       const int64_t frames = lengths[static_cast<size_t>(i)];
       FeatureMatrix features(frames, kEditFeatureDim);
       const auto xi = x.select(1, i).narrow(0, 0, frames).contiguous();
-      std::memcpy(features.data.data(), xi.data_ptr<float>(), sizeof(float) * static_cast<size_t>(frames * kEditFeatureDim));
+      std::memcpy(features.data.data(), xi.data_ptr<float>(),
+                  sizeof(float) * static_cast<size_t>(frames * kEditFeatureDim));
       const auto& r = requests[static_cast<size_t>(i)];
       const MotionAnchor anchor = r.source ? AnchorOf(*r.source) : MotionAnchor{};
       Motion m = DecodeMotionFix207(features, anchor, r.source ? r.source->fps : r.fps);
@@ -300,22 +344,36 @@ class EditorGenerator : public plugin::Generator {
 const mp_object_factory kFactories[] = {
     {"model", "mdt_editor",
      [](const char* config, char* error, size_t size) {
-       return plugin::CreateFromJson("mdt_editor", config, error, size, [](const nlohmann::json& c) -> void* { return static_cast<plugin::Model*>(new EditorModel(c)); });
+       return plugin::CreateFromJson("mdt_editor", config, error, size,
+                                     [](const nlohmann::json& c) -> void* {
+                                       return static_cast<plugin::Model*>(new EditorModel(c));
+                                     });
      },
      [](void* object) { delete static_cast<plugin::Model*>(object); }},
     {"generator", "mdt_editor",
      [](const char* config, char* error, size_t size) {
-       return plugin::CreateFromJson("mdt_editor", config, error, size, [](const nlohmann::json& c) -> void* {
-         return static_cast<plugin::Generator*>(new EditorGenerator(c.at("checkpoint").get<std::string>(), c));
-       });
+       return plugin::CreateFromJson(
+           "mdt_editor", config, error, size, [](const nlohmann::json& c) -> void* {
+             return static_cast<plugin::Generator*>(
+                 new EditorGenerator(c.at("checkpoint").get<std::string>(), c));
+           });
      },
      [](void* object) { delete static_cast<plugin::Generator*>(object); }},
 };
 
-const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION, sizeof(mp_plugin), "mdt_editor", "1.0.0", 0, nullptr, 2, kFactories};
+const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION,
+                           sizeof(mp_plugin),
+                           "mdt_editor",
+                           "1.0.0",
+                           0,
+                           nullptr,
+                           2,
+                           kFactories};
 
 }  // namespace
 
 }  // namespace motionpipe::mdt
 
-extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) { return &motionpipe::mdt::kPlugin; }
+extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) {
+  return &motionpipe::mdt::kPlugin;
+}

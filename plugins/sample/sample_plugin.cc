@@ -13,12 +13,14 @@ void Checksum(const motionpipe::plugin::Task& task) {
   for (const auto& input : task.spec["inputs"]) {
     for (const auto& dir : input["dirs"]) {
       const std::string root = dir.get<std::string>();
-      if (!std::filesystem::exists(root)) throw motionpipe::plugin::BadInput("input directory " + root + " is missing");
+      if (!std::filesystem::exists(root))
+        throw motionpipe::plugin::BadInput("input directory " + root + " is missing");
       for (const auto& entry : std::filesystem::recursive_directory_iterator(root)) {
         if (!entry.is_regular_file()) continue;
         ++files;
         bytes += entry.file_size();
-        for (char c : std::filesystem::relative(entry.path(), root).string()) hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ull;
+        for (char c : std::filesystem::relative(entry.path(), root).string())
+          hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ull;
       }
     }
   }
@@ -35,13 +37,20 @@ void Echo(const motionpipe::plugin::Task& task) {
 
 const mp_stage_kind kKinds[] = {
     {"sample.checksum", "count and checksum the files of the input stages",
-     [](const mp_task_io* io, char* error, size_t size) { return motionpipe::plugin::RunStage(io, error, size, Checksum); }},
+     [](const mp_task_io* io, char* error, size_t size) {
+       return motionpipe::plugin::RunStage(io, error, size, Checksum);
+     }},
     {"sample.echo", "write the stage params back",
-     [](const mp_task_io* io, char* error, size_t size) { return motionpipe::plugin::RunStage(io, error, size, Echo); }},
+     [](const mp_task_io* io, char* error, size_t size) {
+       return motionpipe::plugin::RunStage(io, error, size, Echo);
+     }},
 };
 
-const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION, sizeof(mp_plugin), "sample", "1.0.0", 2, kKinds, 0, nullptr};
+const mp_plugin kPlugin = {
+    MOTIONPIPE_PLUGIN_ABI_VERSION, sizeof(mp_plugin), "sample", "1.0.0", 2, kKinds, 0, nullptr};
 
 }  // namespace
 
-extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) { return &kPlugin; }
+extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) {
+  return &kPlugin;
+}

@@ -3,13 +3,16 @@
 //
 //   variant  sinc        one text (the pair text when there are two actions), the SINC data mix
 //            ste         SINC-STE: each action text encoded apart, joined by a learned separator
-//            single      the single-action baseline: trained on singles only; pairs are asked with "while"
-//            compositing the single-action model + GPT-compositing at generation: each action generated
+//            single      the single-action baseline: trained on singles only; pairs are asked with
+//            "while" compositing the single-action model + GPT-compositing at generation: each
+//            action generated
 //                        alone, then composed with the labeler's body parts (SINC sec. 4.2)
 //            tmr         the TMR evaluator/text-encoder pre-training: TEMOS + contrastive InfoNCE
 //
 // Factories: ("model", "temos_sinc") for the train stage; ("generator", "temos_sinc") loads a
 // checkpoint directory written by the train stage.
+#include "../api/plugin.hpp"
+
 #include <omp.h>
 #include <torch/torch.h>
 
@@ -20,7 +23,6 @@
 
 #include "../api/generator.hpp"
 #include "../api/model.hpp"
-#include "../api/plugin.hpp"
 #include "../common/threads.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/features/temos135.h"
@@ -40,8 +42,10 @@ class SincModel : public plugin::Model {
  public:
   explicit SincModel(const nlohmann::json& config) : config_(config) {
     variant_ = config.value("variant", std::string("sinc"));
-    if (variant_ != "sinc" && variant_ != "ste" && variant_ != "single" && variant_ != "compositing" && variant_ != "tmr") {
-      throw std::invalid_argument("variant must be sinc, ste, single, compositing or tmr (got '" + variant_ + "')");
+    if (variant_ != "sinc" && variant_ != "ste" && variant_ != "single" &&
+        variant_ != "compositing" && variant_ != "tmr") {
+      throw std::invalid_argument("variant must be sinc, ste, single, compositing or tmr (got '" +
+                                  variant_ + "')");
     }
     nlohmann::json model = config.value("model", nlohmann::json::object());
     if (variant_ == "ste") model["separate_texts"] = true;
@@ -116,8 +120,11 @@ class SincModel : public plugin::Model {
   void LoadPretrainedTextEncoder(const std::string& from, const plugin::DataContext& context) {
     const bool freeze = config_.value("freeze_text_encoder", true);
     auto encoder = net_->text_encoder();
-    const std::string dir = nn::LoadPretrainedTextEncoder(encoder, from, context.input_dirs, freeze);
-    if (context.rank == 0) std::fprintf(stderr, "temos_sinc: text encoder from %s (%s)\n", dir.c_str(), freeze ? "frozen" : "fine-tuned");
+    const std::string dir =
+        nn::LoadPretrainedTextEncoder(encoder, from, context.input_dirs, freeze);
+    if (context.rank == 0)
+      std::fprintf(stderr, "temos_sinc: text encoder from %s (%s)\n", dir.c_str(),
+                   freeze ? "frozen" : "fine-tuned");
   }
 
   void FitTextEncoder(const SincDataset& dataset, const plugin::DataContext& context) {
@@ -148,16 +155,24 @@ class SincGenerator : public plugin::Generator {
     model_->Module().eval();
     compositing_ = model_->variant() == "compositing" || options.value("compositing", false);
     if (compositing_ && model_->variant() != "single" && model_->variant() != "compositing") {
-      throw std::invalid_argument("compositing runs single-action models, this one is '" + model_->variant() + "'");
+      throw std::invalid_argument("compositing runs single-action models, this one is '" +
+                                  model_->variant() + "'");
     }
   }
-  std::string Name() const override { return "temos_sinc/" + std::string(compositing_ ? "compositing" : model_->variant()); }
+  std::string Name() const override {
+    return "temos_sinc/" + std::string(compositing_ ? "compositing" : model_->variant());
+  }
 
   Result<Motion> Generate(const plugin::GenerateRequest& request) override {
     if (request.texts.empty()) return InvalidArgument("generate: give at least one text");
-    const int64_t frames = request.frames > 0 ? request.frames : static_cast<int64_t>(std::lround(request.seconds * request.fps));
-    if (frames < 2 || frames > 10000) return InvalidArgument("generate: " + std::to_string(frames) + " frames is not a sensible duration");
-    nn::SetTorchThreads(omp_get_max_threads());  // the calling task's budget, for torch and the BLAS
+    const int64_t frames = request.frames > 0
+                               ? request.frames
+                               : static_cast<int64_t>(std::lround(request.seconds * request.fps));
+    if (frames < 2 || frames > 10000)
+      return InvalidArgument("generate: " + std::to_string(frames) +
+                             " frames is not a sensible duration");
+    nn::SetTorchThreads(
+        omp_get_max_threads());  // the calling task's budget, for torch and the BLAS
     try {
       torch::NoGradGuard no_grad;
       torch::manual_seed(request.seed);
@@ -166,7 +181,9 @@ class SincGenerator : public plugin::Generator {
       if (model_->net()->options().separate_texts) {
         texts = {request.texts};
       } else {
-        texts = {{request.texts.size() == 1 ? request.texts[0] : sinc::EvalPairText(request.texts[0], request.texts[1])}};
+        texts = {{request.texts.size() == 1
+                      ? request.texts[0]
+                      : sinc::EvalPairText(request.texts[0], request.texts[1])}};
       }
       return DecodeOne(texts, frames, request.fps);
     } catch (const std::exception& e) {
@@ -174,38 +191,45 @@ class SincGenerator : public plugin::Generator {
     }
   }
 
-  Result<std::vector<std::vector<float>>> EncodeMotions(const std::vector<Motion>& motions) override {
+  Result<std::vector<std::vector<float>>> EncodeMotions(
+      const std::vector<Motion>& motions) override {
     torch::NoGradGuard no_grad;
     std::vector<std::vector<float>> out;
     for (const Motion& m : motions) {
       const int64_t frames = m.num_frames();
       std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
       EncodeTemos135Fast(m.poses.data(), m.trans.data(), frames, features.data());
-      auto x = (torch::from_blob(features.data(), {frames, kFeatureDim}).clone() - model_->mean()) / (model_->stddev() + 1e-5);
-      const auto d = model_->net()->EncodeMotion(x.unsqueeze(1), torch::zeros({1, frames}, torch::kBool), false);
+      auto x = (torch::from_blob(features.data(), {frames, kFeatureDim}).clone() - model_->mean()) /
+               (model_->stddev() + 1e-5);
+      const auto d = model_->net()->EncodeMotion(x.unsqueeze(1),
+                                                 torch::zeros({1, frames}, torch::kBool), false);
       out.emplace_back(d.mu.data_ptr<float>(), d.mu.data_ptr<float>() + d.mu.numel());
     }
     return out;
   }
 
-  Result<std::vector<std::vector<float>>> EncodeTexts(const std::vector<std::string>& texts) override {
+  Result<std::vector<std::vector<float>>> EncodeTexts(
+      const std::vector<std::string>& texts) override {
     torch::NoGradGuard no_grad;
     std::vector<std::vector<std::string>> groups;
     for (const auto& t : texts) groups.push_back({t});
     const auto d = model_->net()->EncodeText(groups, false);
     std::vector<std::vector<float>> out;
-    for (int64_t i = 0; i < d.mu.size(0); ++i) out.emplace_back(d.mu[i].data_ptr<float>(), d.mu[i].data_ptr<float>() + d.mu.size(1));
+    for (int64_t i = 0; i < d.mu.size(0); ++i)
+      out.emplace_back(d.mu[i].data_ptr<float>(), d.mu[i].data_ptr<float>() + d.mu.size(1));
     return out;
   }
 
  private:
-  Result<Motion> DecodeOne(const std::vector<std::vector<std::string>>& texts, int64_t frames, double fps) {
+  Result<Motion> DecodeOne(const std::vector<std::vector<std::string>>& texts, int64_t frames,
+                           double fps) {
     const auto d = model_->net()->EncodeText(texts, false);
     const auto padding = torch::zeros({1, frames}, torch::kBool);
     auto x = model_->net()->Decode(d.z, padding).select(1, 0);  // [T, 135]
     x = (x * (model_->stddev() + 1e-5) + model_->mean()).contiguous();
     FeatureMatrix features(frames, kFeatureDim);
-    std::memcpy(features.data.data(), x.data_ptr<float>(), sizeof(float) * static_cast<size_t>(frames * kFeatureDim));
+    std::memcpy(features.data.data(), x.data_ptr<float>(),
+                sizeof(float) * static_cast<size_t>(frames * kFeatureDim));
     Motion m = DecodeTemos135(features, CanonicalTemosAnchor(), fps);
     for (float v : m.poses) {
       if (!std::isfinite(v)) return Internal("generate: the model produced NaN");
@@ -215,9 +239,12 @@ class SincGenerator : public plugin::Generator {
 
   // GPT-compositing baseline: each action alone, composed by the labeler's parts.
   Result<Motion> Compose(const plugin::GenerateRequest& request, int64_t frames) {
-    auto labeler = labels::MakeBuiltinLabeler(model_->Config().value("compositing_labeler", std::string("lexicon")), nlohmann::json::object());
+    auto labeler = labels::MakeBuiltinLabeler(
+        model_->Config().value("compositing_labeler", std::string("lexicon")),
+        nlohmann::json::object());
     if (!labeler.ok()) return labeler.status();
-    MP_ASSIGN_OR_RETURN(const auto parts, (*labeler)->Label({{request.texts[0], nullptr}, {request.texts[1], nullptr}}));
+    MP_ASSIGN_OR_RETURN(const auto parts, (*labeler)->Label({{request.texts[0], nullptr},
+                                                             {request.texts[1], nullptr}}));
     MP_ASSIGN_OR_RETURN(const Motion a, DecodeOne({{request.texts[0]}}, frames, request.fps));
     MP_ASSIGN_OR_RETURN(const Motion b, DecodeOne({{request.texts[1]}}, frames, request.fps));
     return sinc::Compose(a, parts[0], b, parts[1], sinc::CropMode::kFirst);
@@ -230,24 +257,36 @@ class SincGenerator : public plugin::Generator {
 const mp_object_factory kFactories[] = {
     {"model", "temos_sinc",
      [](const char* config, char* error, size_t size) {
-       return plugin::CreateFromJson("temos_sinc", config, error, size, [](const nlohmann::json& c) -> void* {
-         return static_cast<plugin::Model*>(new SincModel(c));
-       });
+       return plugin::CreateFromJson("temos_sinc", config, error, size,
+                                     [](const nlohmann::json& c) -> void* {
+                                       return static_cast<plugin::Model*>(new SincModel(c));
+                                     });
      },
      [](void* object) { delete static_cast<plugin::Model*>(object); }},
     {"generator", "temos_sinc",
      [](const char* config, char* error, size_t size) {
-       return plugin::CreateFromJson("temos_sinc", config, error, size, [](const nlohmann::json& c) -> void* {
-         return static_cast<plugin::Generator*>(new SincGenerator(c.at("checkpoint").get<std::string>(), c));
-       });
+       return plugin::CreateFromJson(
+           "temos_sinc", config, error, size, [](const nlohmann::json& c) -> void* {
+             return static_cast<plugin::Generator*>(
+                 new SincGenerator(c.at("checkpoint").get<std::string>(), c));
+           });
      },
      [](void* object) { delete static_cast<plugin::Generator*>(object); }},
 };
 
-const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION, sizeof(mp_plugin), "temos_sinc", "1.0.0", 0, nullptr, 2, kFactories};
+const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION,
+                           sizeof(mp_plugin),
+                           "temos_sinc",
+                           "1.0.0",
+                           0,
+                           nullptr,
+                           2,
+                           kFactories};
 
 }  // namespace
 
 }  // namespace motionpipe::temos
 
-extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) { return &motionpipe::temos::kPlugin; }
+extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) {
+  return &motionpipe::temos::kPlugin;
+}

@@ -22,30 +22,40 @@ SincDataOptions SincDataOptions::FromContext(const plugin::DataContext& context)
       }
     }
   }
-  if (o.spans.empty()) throw std::invalid_argument("data.spans: no spans.npz (give data.spans or a `singles` input stage)");
-  o.split = context.split == "val" ? j.value("val_split", std::string("val")) : j.value("split", o.split);
+  if (o.spans.empty())
+    throw std::invalid_argument(
+        "data.spans: no spans.npz (give data.spans or a `singles` input stage)");
+  o.split =
+      context.split == "val" ? j.value("val_split", std::string("val")) : j.value("split", o.split);
   o.singles = j.value("singles", o.singles);
   o.real_pairs = j.value("real_pairs", o.real_pairs);
   o.synthetic_p = j.value("synthetic_p", o.synthetic_p);
   const std::string parts = j.value("parts", std::string("labels"));
-  if (parts != "labels" && parts != "random") throw std::invalid_argument("data.parts must be labels or random");
+  if (parts != "labels" && parts != "random")
+    throw std::invalid_argument("data.parts must be labels or random");
   o.parts = parts == "labels" ? sinc::PartSource::kLabels : sinc::PartSource::kRandom;
   auto crop = sinc::ParseCropMode(j.value("crop", std::string("first")));
   if (!crop.ok()) throw std::invalid_argument("data." + crop.status().message());
   o.crop = *crop;
   o.max_frames = j.value("max_frames", o.max_frames);
   o.augment_texts = j.value("augment_texts", o.augment_texts);
-  if (o.synthetic_p < 0 || o.synthetic_p > 1) throw std::invalid_argument("data.synthetic_p must be in [0, 1]");
+  if (o.synthetic_p < 0 || o.synthetic_p > 1)
+    throw std::invalid_argument("data.synthetic_p must be in [0, 1]");
   return o;
 }
 
-SincDataset::SincDataset(std::shared_ptr<const sinc::SpanTable> table, const SincDataOptions& options)
+SincDataset::SincDataset(std::shared_ptr<const sinc::SpanTable> table,
+                         const SincDataOptions& options)
     : table_(std::move(table)), options_(options) {
   for (int64_t i = 0; i < table_->size(); ++i) {
-    if (!options_.split.empty() && table_->splits[static_cast<size_t>(i)] != options_.split) continue;
-    if (table_->single(i) ? options_.singles : options_.real_pairs) items_.push_back(static_cast<int32_t>(i));
+    if (!options_.split.empty() && table_->splits[static_cast<size_t>(i)] != options_.split)
+      continue;
+    if (table_->single(i) ? options_.singles : options_.real_pairs)
+      items_.push_back(static_cast<int32_t>(i));
   }
-  if (items_.empty()) throw std::invalid_argument("no training examples in split '" + options_.split + "' of " + options_.spans);
+  if (items_.empty())
+    throw std::invalid_argument("no training examples in split '" + options_.split + "' of " +
+                                options_.spans);
   sinc::SynthOptions synth;
   synth.split = options_.split;
   synth.parts = options_.parts;
@@ -64,14 +74,16 @@ Example SincDataset::Make(int64_t index, uint64_t seed) const {
   bool composed = false;
   if (!table_->single(span)) {
     b = table_->text_b[static_cast<size_t>(span)];
-  } else if (options_.synthetic_p > 0 && rng.Bernoulli(options_.synthetic_p) && sampler_->DrawPartner(span, rng, &recipe)) {
+  } else if (options_.synthetic_p > 0 && rng.Bernoulli(options_.synthetic_p) &&
+             sampler_->DrawPartner(span, rng, &recipe)) {
     composed = true;
     b = table_->text_a[static_cast<size_t>(recipe.second)];
   }
   int64_t frames;
   if (composed) {
-    const sinc::CompositionPlan plan = sinc::PlanComposition(table_->frames(recipe.first), recipe.first_parts, table_->frames(recipe.second),
-                                                             recipe.second_parts, options_.crop);
+    const sinc::CompositionPlan plan =
+        sinc::PlanComposition(table_->frames(recipe.first), recipe.first_parts,
+                              table_->frames(recipe.second), recipe.second_parts, options_.crop);
     frames = plan.frames;
     ex.features.resize(static_cast<size_t>(frames * kTemosFeatureDim));
     sinc::MaterialiseFeatures(*table_, recipe, options_.crop, ex.features.data());
@@ -91,8 +103,11 @@ Example SincDataset::Make(int64_t index, uint64_t seed) const {
     const bool swap = options_.augment_texts && rng.Bernoulli(0.5);
     if (swap) std::swap(a, b);
     ex.actions = {a, b};
-    ex.text = options_.augment_texts ? sinc::PairText(a, b, static_cast<sinc::PairPattern>(rng.Int(0, sinc::kNumPairPatterns - 1)))
-                                     : sinc::EvalPairText(a, b);
+    ex.text =
+        options_.augment_texts
+            ? sinc::PairText(a, b,
+                             static_cast<sinc::PairPattern>(rng.Int(0, sinc::kNumPairPatterns - 1)))
+            : sinc::EvalPairText(a, b);
   }
   return ex;
 }
@@ -110,7 +125,8 @@ plugin::Batch SincDataset::Get(const std::vector<int64_t>& indices, uint64_t see
   plugin::Batch batch;
   for (int64_t k = 0; k < n; ++k) {
     const Example& ex = examples[static_cast<size_t>(k)];
-    auto x = torch::from_blob(const_cast<float*>(ex.features.data()), {ex.frames, kTemosFeatureDim}).clone();
+    auto x = torch::from_blob(const_cast<float*>(ex.features.data()), {ex.frames, kTemosFeatureDim})
+                 .clone();
     if (mean_.defined()) x = (x - mean_) / (std_ + 1e-5);
     features.index_put_({torch::indexing::Slice(0, ex.frames), k}, x);
     padding.index_put_({k, torch::indexing::Slice(0, ex.frames)}, false);
@@ -132,7 +148,8 @@ std::pair<torch::Tensor, torch::Tensor> SincDataset::ComputeStats() const {
     const int64_t frames = table_->frames(span);
     buffer.resize(static_cast<size_t>(frames * kTemosFeatureDim));
     EncodeTemos135Fast(table_->poses + table_->offsets[static_cast<size_t>(span)] * kNumJoints * 3,
-                       table_->trans + table_->offsets[static_cast<size_t>(span)] * 3, frames, buffer.data());
+                       table_->trans + table_->offsets[static_cast<size_t>(span)] * 3, frames,
+                       buffer.data());
     for (int64_t f = 0; f < frames; ++f) {
       for (int d = 0; d < kTemosFeatureDim; ++d) {
         const double v = buffer[static_cast<size_t>(f * kTemosFeatureDim + d)];
@@ -145,7 +162,8 @@ std::pair<torch::Tensor, torch::Tensor> SincDataset::ComputeStats() const {
   std::vector<float> mean(kTemosFeatureDim), stddev(kTemosFeatureDim);
   for (int d = 0; d < kTemosFeatureDim; ++d) {
     const double m = sum[static_cast<size_t>(d)] / static_cast<double>(std::max<int64_t>(1, count));
-    const double var = sq[static_cast<size_t>(d)] / static_cast<double>(std::max<int64_t>(1, count)) - m * m;
+    const double var =
+        sq[static_cast<size_t>(d)] / static_cast<double>(std::max<int64_t>(1, count)) - m * m;
     mean[static_cast<size_t>(d)] = static_cast<float>(m);
     stddev[static_cast<size_t>(d)] = static_cast<float>(std::sqrt(std::max(var, 0.0)));
   }

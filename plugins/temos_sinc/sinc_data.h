@@ -1,7 +1,7 @@
-// SINC's training data (paper sec. 3.2-3.3): real singles, real pairs and synthetic pairs composed on
-// the fly, from the spans table of the `singles` stage. Each example's randomness (whether a single is
-// composed, its partner, the text pattern) comes from the batch seed and the example index, so ranks
-// and resumed runs see the same examples.
+// SINC's training data (paper sec. 3.2-3.3): real singles, real pairs and synthetic pairs composed
+// on the fly, from the spans table of the `singles` stage. Each example's randomness (whether a
+// single is composed, its partner, the text pattern) comes from the batch seed and the example
+// index, so ranks and resumed runs see the same examples.
 //
 // params.data: {spans: PATH (default: an input stage's spans.npz), split: train, singles: true,
 // real_pairs: true, synthetic_p: 0.5 (probability that a real single is composed with a partner),
@@ -35,7 +35,7 @@ struct SincDataOptions {
 
 // One example before batching.
 struct Example {
-  std::vector<float> features;       // [frames, 135], not normalised
+  std::vector<float> features;  // [frames, 135], not normalised
   int64_t frames = 0;
   std::vector<std::string> actions;  // the action texts (1 or 2)
   std::string text;                  // the augmented text of the whole example
@@ -48,7 +48,9 @@ class SincDataset : public plugin::Dataset {
   Example Make(int64_t index, uint64_t seed) const;
   // Features [T, N, 135] normalised with mean/std, padding [N, T], texts.
   plugin::Batch Get(const std::vector<int64_t>& indices, uint64_t seed) override;
-  void SetStats(torch::Tensor mean, torch::Tensor std) { mean_ = std::move(mean), std_ = std::move(std); }
+  void SetStats(torch::Tensor mean, torch::Tensor std) {
+    mean_ = std::move(mean), std_ = std::move(std);
+  }
   // Per-feature mean and std over the items' real motions (computed once, before training).
   std::pair<torch::Tensor, torch::Tensor> ComputeStats() const;
   // Every text an example can carry (for the tokenizer).

@@ -12,10 +12,12 @@ namespace {
 
 using torch::indexing::Slice;
 
-nn::TransformerOptions Layers(const TemosOptions& o) { return {o.latent, o.heads, o.ff, o.layers, o.dropout}; }
+nn::TransformerOptions Layers(const TemosOptions& o) {
+  return {o.latent, o.heads, o.ff, o.layers, o.dropout};
+}
 
-// Lexical near-duplicates: cosine of bag-of-words counts above `threshold` (TMR masks negatives whose
-// texts mean the same; without a sentence encoder offline, word overlap stands in).
+// Lexical near-duplicates: cosine of bag-of-words counts above `threshold` (TMR masks negatives
+// whose texts mean the same; without a sentence encoder offline, word overlap stands in).
 torch::Tensor NearDuplicates(const std::vector<std::vector<std::string>>& texts, double threshold) {
   const auto n = static_cast<int64_t>(texts.size());
   std::vector<std::map<std::string, double>> bags(static_cast<size_t>(n));
@@ -71,18 +73,25 @@ TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
   if (!text.contains("dropout")) text["dropout"] = o.dropout;
   o.text = nn::TextEncoderOptions::FromJson(text);
   if (o.latent % o.heads != 0) {
-    throw std::invalid_argument("latent (" + std::to_string(o.latent) + ") must be divisible by heads (" + std::to_string(o.heads) + ")");
+    throw std::invalid_argument("latent (" + std::to_string(o.latent) +
+                                ") must be divisible by heads (" + std::to_string(o.heads) + ")");
   }
   return o;
 }
 
 nlohmann::json TemosOptions::ToJson() const {
-  return {{"latent", latent},       {"layers", layers},
-          {"heads", heads},         {"ff", ff},
-          {"dropout", dropout},     {"kl_weight", kl_weight},
-          {"latent_weight", latent_weight}, {"contrastive", contrastive},
-          {"temperature", temperature}, {"duplicate_threshold", duplicate_threshold},
-          {"separate_texts", separate_texts}, {"text_encoder", text.ToJson()}};
+  return {{"latent", latent},
+          {"layers", layers},
+          {"heads", heads},
+          {"ff", ff},
+          {"dropout", dropout},
+          {"kl_weight", kl_weight},
+          {"latent_weight", latent_weight},
+          {"contrastive", contrastive},
+          {"temperature", temperature},
+          {"duplicate_threshold", duplicate_threshold},
+          {"separate_texts", separate_texts},
+          {"text_encoder", text.ToJson()}};
 }
 
 VaeEncoderImpl::VaeEncoderImpl(int64_t input_dim, const TemosOptions& o) : latent_(o.latent) {
@@ -92,7 +101,8 @@ VaeEncoderImpl::VaeEncoderImpl(int64_t input_dim, const TemosOptions& o) : laten
   encoder_ = register_module("encoder", nn::Encoder(Layers(o)));
 }
 
-std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
+std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Tensor& x,
+                                                                const torch::Tensor& padding) {
   const int64_t n = x.size(1), length = x.size(0);
   auto h = project_->forward(x);
   auto tokens = torch::stack({mu_token_, logvar_token_}).unsqueeze(1).expand({2, n, latent_});
@@ -122,7 +132,8 @@ TemosImpl::TemosImpl(const TemosOptions& o) : options_(o) {
   decoder_ = register_module("decoder", Decoder(o));
 }
 
-Distribution TemosImpl::EncodeText(const std::vector<std::vector<std::string>>& texts, bool sample) {
+Distribution TemosImpl::EncodeText(const std::vector<std::vector<std::string>>& texts,
+                                   bool sample) {
   nn::TextFeatures features;
   if (options_.separate_texts) {
     features = text_encoder_->ForwardJoined(texts);
@@ -139,7 +150,8 @@ Distribution TemosImpl::EncodeText(const std::vector<std::vector<std::string>>& 
   return {mu, logvar, sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu};
 }
 
-Distribution TemosImpl::EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding, bool sample) {
+Distribution TemosImpl::EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding,
+                                     bool sample) {
   auto [mu, logvar] = motion_vae_->forward(features, padding);
   return {mu, logvar, sample ? mu + torch::exp(0.5 * logvar) * torch::randn_like(mu) : mu};
 }
@@ -148,19 +160,22 @@ torch::Tensor ExampleNoise(const torch::Tensor& seeds, int64_t rows, int64_t lat
   const auto s = seeds.to(torch::kInt64).contiguous();
   std::vector<torch::Tensor> noise;
   for (int64_t i = 0; i < s.size(0); ++i) {
-    auto generator = at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(s.data_ptr<int64_t>()[i]));
+    auto generator =
+        at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(s.data_ptr<int64_t>()[i]));
     noise.push_back(torch::randn({rows, latent}, generator));
   }
   return torch::stack(noise, 1);  // [rows, N, latent]
 }
 
-std::map<std::string, torch::Tensor> TemosImpl::Losses(const std::vector<std::vector<std::string>>& texts, const torch::Tensor& features,
-                                                       const torch::Tensor& padding, const torch::Tensor& example_seeds) {
+std::map<std::string, torch::Tensor> TemosImpl::Losses(
+    const std::vector<std::vector<std::string>>& texts, const torch::Tensor& features,
+    const torch::Tensor& padding, const torch::Tensor& example_seeds) {
   Distribution t = EncodeText(texts, false);
   Distribution m = EncodeMotion(features, padding, false);
   // Reparameterisation: z = mu + sigma * eps, eps per example from its seed when the trainer gives
   // seeds (the same eps whichever rank the example lands on), else from torch's generator.
-  const auto eps = example_seeds.defined() ? ExampleNoise(example_seeds, 2, t.mu.size(1)) : torch::randn({2, t.mu.size(0), t.mu.size(1)});
+  const auto eps = example_seeds.defined() ? ExampleNoise(example_seeds, 2, t.mu.size(1))
+                                           : torch::randn({2, t.mu.size(0), t.mu.size(1)});
   t.z = t.mu + torch::exp(0.5 * t.logvar) * eps[0];
   m.z = m.mu + torch::exp(0.5 * m.logvar) * eps[1];
   std::map<std::string, torch::Tensor> out;
@@ -176,42 +191,54 @@ std::map<std::string, torch::Tensor> TemosImpl::Losses(const std::vector<std::ve
   out["kl_motion"] = KlDivergence(m.mu, m.logvar, zeros, zeros);
   out["latent"] = torch::smooth_l1_loss(t.z, m.z);
   auto loss = out["recon_text"] + out["recon_motion"] +
-              options_.kl_weight * (out["kl_text_motion"] + out["kl_motion_text"] + out["kl_text"] + out["kl_motion"]) +
+              options_.kl_weight * (out["kl_text_motion"] + out["kl_motion_text"] + out["kl_text"] +
+                                    out["kl_motion"]) +
               options_.latent_weight * out["latent"];
   if (options_.contrastive > 0) {
-    out["contrastive"] = InfoNce(t.mu, m.mu, options_.temperature, NearDuplicates(texts, options_.duplicate_threshold));
+    out["contrastive"] = InfoNce(t.mu, m.mu, options_.temperature,
+                                 NearDuplicates(texts, options_.duplicate_threshold));
     loss = loss + options_.contrastive * out["contrastive"];
   }
   out["loss"] = loss;
   return out;
 }
 
-torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding) {
-  const auto keep = padding.logical_not().transpose(0, 1).unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
+torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target,
+                             const torch::Tensor& padding) {
+  const auto keep =
+      padding.logical_not().transpose(0, 1).unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
   const auto loss = torch::smooth_l1_loss(prediction, target, torch::Reduction::None) * keep;
   // Each motion's mean over its own frames and features, then the mean over motions: a batch's loss
   // is the mean of its examples' losses, so ranks that split a batch reproduce it exactly.
   const std::vector<int64_t> frames_features = {0, 2};
-  const auto per_example = loss.sum(frames_features) / (keep.sum(frames_features) * prediction.size(2)).clamp_min(1.0);
+  const auto per_example =
+      loss.sum(frames_features) / (keep.sum(frames_features) * prediction.size(2)).clamp_min(1.0);
   return per_example.mean();
 }
 
-torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p) {
+torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q,
+                           const torch::Tensor& mu_p, const torch::Tensor& logvar_p) {
   // 0.5 * sum(logvar_p - logvar_q + (exp(logvar_q) + (mu_q - mu_p)^2) / exp(logvar_p) - 1)
-  const auto kl = 0.5 * (logvar_p - logvar_q + (torch::exp(logvar_q) + (mu_q - mu_p).pow(2)) / torch::exp(logvar_p) - 1.0);
+  const auto kl =
+      0.5 * (logvar_p - logvar_q +
+             (torch::exp(logvar_q) + (mu_q - mu_p).pow(2)) / torch::exp(logvar_p) - 1.0);
   // The mean over every element, as TEMOS, TMR and SINC's `kl_divergence(q, p).mean()`: their KL
   // weight 1e-5 is per latent dimension (a sum over the dimensions would weigh it `latent` times).
   return kl.mean();
 }
 
-torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature, const torch::Tensor& duplicate) {
-  const auto an = torch::nn::functional::normalize(a, torch::nn::functional::NormalizeFuncOptions().dim(1));
-  const auto bn = torch::nn::functional::normalize(b, torch::nn::functional::NormalizeFuncOptions().dim(1));
+torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature,
+                      const torch::Tensor& duplicate) {
+  const auto an =
+      torch::nn::functional::normalize(a, torch::nn::functional::NormalizeFuncOptions().dim(1));
+  const auto bn =
+      torch::nn::functional::normalize(b, torch::nn::functional::NormalizeFuncOptions().dim(1));
   auto logits = torch::mm(an, bn.t()) / temperature;
   // Near-duplicates are not negatives (the diagonal is never masked).
   logits = logits.masked_fill(duplicate, -1e9);
   const auto target = torch::arange(a.size(0), torch::kInt64);
-  return 0.5 * (torch::nn::functional::cross_entropy(logits, target) + torch::nn::functional::cross_entropy(logits.t(), target));
+  return 0.5 * (torch::nn::functional::cross_entropy(logits, target) +
+                torch::nn::functional::cross_entropy(logits.t(), target));
 }
 
 }  // namespace motionpipe::temos

@@ -1,11 +1,12 @@
-// TEMOS (REFERENCE 4.5) as SINC extends it: a text VAE encoder and a motion VAE encoder (transformer
-// encoders with two learned tokens whose outputs are mu and logvar), and a transformer decoder over
-// positional queries of the wanted duration with the latent as memory.
+// TEMOS (REFERENCE 4.5) as SINC extends it: a text VAE encoder and a motion VAE encoder
+// (transformer encoders with two learned tokens whose outputs are mu and logvar), and a transformer
+// decoder over positional queries of the wanted duration with the latent as memory.
 //
-// Losses with the reference weights: smooth-L1 reconstruction from the text branch and from the motion
-// branch, KL(text || motion), KL(motion || text), KL(text || N(0, I)), KL(motion || N(0, I)) (1e-5 each),
-// smooth-L1 between the two latents (1e-5). With `contrastive` > 0 it is TMR (REFERENCE 5): InfoNCE
-// on the cosine of the two means, temperature 0.1, symmetric, near-duplicate texts masked out.
+// Losses with the reference weights: smooth-L1 reconstruction from the text branch and from the
+// motion branch, KL(text || motion), KL(motion || text), KL(text || N(0, I)), KL(motion || N(0, I))
+// (1e-5 each), smooth-L1 between the two latents (1e-5). With `contrastive` > 0 it is TMR
+// (REFERENCE 5): InfoNCE on the cosine of the two means, temperature 0.1, symmetric, near-duplicate
+// texts masked out.
 #pragma once
 
 #include <torch/torch.h>
@@ -21,12 +22,12 @@ inline constexpr int64_t kFeatureDim = 135;
 struct TemosOptions {
   int64_t latent = 256;
   int64_t layers = 6;
-  int64_t heads = 4;         // REFERENCE lists 6, which does not divide 256; TEMOS's code uses 4
+  int64_t heads = 4;  // REFERENCE lists 6, which does not divide 256; TEMOS's code uses 4
   int64_t ff = 1024;
   double dropout = 0.1;
   double kl_weight = 1e-5;
   double latent_weight = 1e-5;
-  double contrastive = 0;    // TMR: 0.1
+  double contrastive = 0;  // TMR: 0.1
   double temperature = 0.1;
   double duplicate_threshold = 0.6;
   bool separate_texts = false;  // SINC-STE: each action text encoded apart, joined by a separator
@@ -40,7 +41,8 @@ class VaeEncoderImpl : public torch::nn::Module {
  public:
   VaeEncoderImpl(int64_t input_dim, const TemosOptions& o);
   // x [L, N, input_dim], padding [N, L] (true = pad) -> mu, logvar [N, latent]
-  std::pair<torch::Tensor, torch::Tensor> forward(const torch::Tensor& x, const torch::Tensor& padding);
+  std::pair<torch::Tensor, torch::Tensor> forward(const torch::Tensor& x,
+                                                  const torch::Tensor& padding);
 
  private:
   int64_t latent_;
@@ -72,12 +74,17 @@ class TemosImpl : public torch::nn::Module {
   explicit TemosImpl(const TemosOptions& o);
   // Texts of each example (one, or the actions for SINC-STE).
   Distribution EncodeText(const std::vector<std::vector<std::string>>& texts, bool sample);
-  Distribution EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding, bool sample);
-  torch::Tensor Decode(const torch::Tensor& z, const torch::Tensor& padding) { return decoder_->forward(z, padding); }
+  Distribution EncodeMotion(const torch::Tensor& features, const torch::Tensor& padding,
+                            bool sample);
+  torch::Tensor Decode(const torch::Tensor& z, const torch::Tensor& padding) {
+    return decoder_->forward(z, padding);
+  }
   // features [T, N, 135] (normalised), padding [N, T]: every loss term and "loss".
   // example_seeds [N] (optional): the seed of each example's reparameterisation noise.
-  std::map<std::string, torch::Tensor> Losses(const std::vector<std::vector<std::string>>& texts, const torch::Tensor& features,
-                                              const torch::Tensor& padding, const torch::Tensor& example_seeds = {});
+  std::map<std::string, torch::Tensor> Losses(const std::vector<std::vector<std::string>>& texts,
+                                              const torch::Tensor& features,
+                                              const torch::Tensor& padding,
+                                              const torch::Tensor& example_seeds = {});
   nn::TextEncoder text_encoder() const { return text_encoder_; }
   const TemosOptions& options() const { return options_; }
 
@@ -91,12 +98,16 @@ TORCH_MODULE(Temos);
 
 // Per-example noise [rows, N, latent] from each example's seed.
 torch::Tensor ExampleNoise(const torch::Tensor& seeds, int64_t rows, int64_t latent);
-// Smooth-L1 averaged over each example's unpadded frames, then over the examples. prediction/target [T, N, D], padding [N, T].
-torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target, const torch::Tensor& padding);
+// Smooth-L1 averaged over each example's unpadded frames, then over the examples. prediction/target
+// [T, N, D], padding [N, T].
+torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target,
+                             const torch::Tensor& padding);
 // KL(q || p) of diagonal Gaussians, averaged over the batch and the latent dimensions.
-torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q, const torch::Tensor& mu_p, const torch::Tensor& logvar_p);
+torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q,
+                           const torch::Tensor& mu_p, const torch::Tensor& logvar_p);
 // Symmetric InfoNCE on cosine similarities / temperature; pairs whose texts are near-duplicates
 // (duplicate[i][j] true, i != j) are removed from the negatives.
-torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature, const torch::Tensor& duplicate);
+torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature,
+                      const torch::Tensor& duplicate);
 
 }  // namespace motionpipe::temos

@@ -6,7 +6,8 @@
 #include "motionpipe/formats/bvh.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  auto bvh = motionpipe::ParseBvh(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.bvh");
+  auto bvh =
+      motionpipe::ParseBvh(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.bvh");
   if (bvh.ok() && bvh->frames * static_cast<int64_t>(bvh->joints.size()) < 20000) {
     motionpipe::BvhImportOptions options;
     options.fps = 0;

@@ -6,7 +6,8 @@
 #include "motionpipe/formats/npy.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  auto array = motionpipe::ParseNpy(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.npy");
+  auto array =
+      motionpipe::ParseNpy(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.npy");
   if (array.ok()) {
     (void)array->ToFloat64("fuzz");
     (void)array->ToStrings("fuzz");

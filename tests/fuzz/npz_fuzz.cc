@@ -9,7 +9,8 @@
 #include "motionpipe/formats/npz.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  auto npz = motionpipe::ParseNpz(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.npz");
+  auto npz =
+      motionpipe::ParseNpz(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.npz");
   if (npz.ok()) {
     (void)motionpipe::ClipsFromNpz(*npz, "fuzz.npz");
     (void)motionpipe::TripletsFromNpz(*npz, "fuzz.npz");

@@ -1,11 +1,9 @@
 // Sends malformed traffic for the engine's robustness tests.
-//   motionpipe_garbage --connect ENDPOINT [--count N]   floods a coordinator's ROUTER (worker or control)
-//   motionpipe_garbage --bind ENDPOINT [--count N] [--seconds S]
-//                                                      plays a coordinator that sends garbage to the
-//                                                      workers that connect to it
+//   motionpipe_garbage --connect ENDPOINT [--count N]   floods a coordinator's ROUTER (worker or
+//   control) motionpipe_garbage --bind ENDPOINT [--count N] [--seconds S]
+//                                                      plays a coordinator that sends garbage to
+//                                                      the workers that connect to it
 // Prints how many messages it sent.
-#include <zmq.hpp>
-
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -14,6 +12,7 @@
 #include <string>
 #include <thread>
 #include <vector>
+#include <zmq.hpp>
 
 #include "motionpipe.pb.h"
 #include "motionpipe/net/protocol.h"
@@ -32,33 +31,46 @@ std::string Random(std::mt19937& rng, size_t n) {
 // One malformed (or unexpected) message as frames, never including a routing identity.
 std::vector<std::string> Garbage(std::mt19937& rng, int kind) {
   switch (kind % 10) {
-    case 0: return {Random(rng, 1 + rng() % 64)};                                        // one random frame
-    case 1: return {"XX\x01\x02", Random(rng, 10)};                                       // bad magic
-    case 2: return {std::string{'M', 'P', 99, 2}, ""};                                    // unknown version
-    case 3: return {std::string{'M', 'P', 1, static_cast<char>(200)}, ""};                // unknown type
-    case 4: return {EncodeHeader(MessageType::kTaskResult), Random(rng, 40)};            // undecodable body
-    case 5: return {EncodeHeader(MessageType::kReady), Random(rng, 8), Random(rng, 8)};  // too many frames
-    case 6: return {EncodeHeader(MessageType::kAssign), std::string((16u << 20) + 1, 'x')};  // oversized
-    case 7: {                                                                             // result for an unknown attempt
+    case 0:
+      return {Random(rng, 1 + rng() % 64)};  // one random frame
+    case 1:
+      return {"XX\x01\x02", Random(rng, 10)};  // bad magic
+    case 2:
+      return {std::string{'M', 'P', 99, 2}, ""};  // unknown version
+    case 3:
+      return {std::string{'M', 'P', 1, static_cast<char>(200)}, ""};  // unknown type
+    case 4:
+      return {EncodeHeader(MessageType::kTaskResult), Random(rng, 40)};  // undecodable body
+    case 5:
+      return {EncodeHeader(MessageType::kReady), Random(rng, 8),
+              Random(rng, 8)};  // too many frames
+    case 6:
+      return {EncodeHeader(MessageType::kAssign), std::string((16u << 20) + 1, 'x')};  // oversized
+    case 7: {  // result for an unknown attempt
       motionpipe::wire::TaskResult r;
       r.set_attempt_id(static_cast<int64_t>(rng()));
       r.set_outcome(motionpipe::wire::TaskResult::OK);
       return {EncodeHeader(MessageType::kTaskResult), r.SerializeAsString()};
     }
-    case 8: return {EncodeHeader(MessageType::kControlReply), ""};                       // wrong direction
+    case 8:
+      return {EncodeHeader(MessageType::kControlReply), ""};  // wrong direction
     default: {
       std::vector<std::string> many;
-      for (int k = 0; k < 40; ++k) many.push_back(Random(rng, 3));                       // a frame flood
+      for (int k = 0; k < 40; ++k) many.push_back(Random(rng, 3));  // a frame flood
       return many;
     }
   }
 }
 
-void SendFrames(zmq::socket_t& socket, const std::string* identity, const std::vector<std::string>& frames) {
+void SendFrames(zmq::socket_t& socket, const std::string* identity,
+                const std::vector<std::string>& frames) {
   try {
-    if (identity) socket.send(zmq::buffer(*identity), zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+    if (identity)
+      socket.send(zmq::buffer(*identity), zmq::send_flags::sndmore | zmq::send_flags::dontwait);
     for (size_t k = 0; k < frames.size(); ++k) {
-      socket.send(zmq::buffer(frames[k]), (k + 1 < frames.size() ? zmq::send_flags::sndmore : zmq::send_flags::none) | zmq::send_flags::dontwait);
+      socket.send(zmq::buffer(frames[k]),
+                  (k + 1 < frames.size() ? zmq::send_flags::sndmore : zmq::send_flags::none) |
+                      zmq::send_flags::dontwait);
     }
   } catch (const zmq::error_t&) {
   }
@@ -71,10 +83,14 @@ int main(int argc, char** argv) {
   int count = 200;
   double seconds = 5;
   for (int k = 1; k < argc; ++k) {
-    if (!std::strcmp(argv[k], "--connect") && k + 1 < argc) connect = argv[++k];
-    else if (!std::strcmp(argv[k], "--bind") && k + 1 < argc) bind = argv[++k];
-    else if (!std::strcmp(argv[k], "--count") && k + 1 < argc) count = std::atoi(argv[++k]);
-    else if (!std::strcmp(argv[k], "--seconds") && k + 1 < argc) seconds = std::atof(argv[++k]);
+    if (!std::strcmp(argv[k], "--connect") && k + 1 < argc)
+      connect = argv[++k];
+    else if (!std::strcmp(argv[k], "--bind") && k + 1 < argc)
+      bind = argv[++k];
+    else if (!std::strcmp(argv[k], "--count") && k + 1 < argc)
+      count = std::atoi(argv[++k]);
+    else if (!std::strcmp(argv[k], "--seconds") && k + 1 < argc)
+      seconds = std::atof(argv[++k]);
   }
   std::mt19937 rng(12345);
   zmq::context_t context(1);
@@ -89,7 +105,8 @@ int main(int argc, char** argv) {
     socket.set(zmq::sockopt::linger, 2000);
     socket.bind(bind);
     std::set<std::string> peers;
-    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<int>(seconds * 1000));
+    const auto end = std::chrono::steady_clock::now() +
+                     std::chrono::milliseconds(static_cast<int>(seconds * 1000));
     while (std::chrono::steady_clock::now() < end && sent < count) {
       zmq::pollitem_t item{socket.handle(), 0, ZMQ_POLLIN, 0};
       zmq::poll(&item, 1, std::chrono::milliseconds(50));
@@ -100,7 +117,8 @@ int main(int argc, char** argv) {
         }
       }
       for (const std::string& peer : peers) {
-        for (int k = 0; k < 10 && sent < count; ++k, ++sent) SendFrames(socket, &peer, Garbage(rng, sent));
+        for (int k = 0; k < 10 && sent < count; ++k, ++sent)
+          SendFrames(socket, &peer, Garbage(rng, sent));
       }
     }
   }

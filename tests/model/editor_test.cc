@@ -1,15 +1,15 @@
 // The MDT editor's pieces: the noise schedule, guidance, adaLN-Zero, the similarity loss's masks,
 // overfitting, editing length and finiteness, sampler determinism.
+#include "../../plugins/mdt_editor/editor.h"
+
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
 #include <cmath>
-
 #include <filesystem>
 
 #include "../../plugins/mdt_editor/diffusion.h"
 #include "../../plugins/mdt_editor/edit_data.h"
-#include "../../plugins/mdt_editor/editor.h"
 #include "motionpipe/formats/motionfix.h"
 
 namespace motionpipe::mdt {
@@ -30,7 +30,8 @@ TEST(Diffusion, CosineScheduleHasTheReferenceValues) {
   for (size_t t = 1; t < 300; ++t) EXPECT_LT(s.alpha_bar()[t], s.alpha_bar()[t - 1]);
   EXPECT_LT(s.alpha_bar()[299], 1e-6);
   // The fixed-small posterior variance beta (1 - abar_{t-1}) / (1 - abar_t)
-  EXPECT_NEAR(s.PosteriorVariance(10), s.betas()[10] * (1 - s.alpha_bar()[9]) / (1 - s.alpha_bar()[10]), 1e-12);
+  EXPECT_NEAR(s.PosteriorVariance(10),
+              s.betas()[10] * (1 - s.alpha_bar()[9]) / (1 - s.alpha_bar()[10]), 1e-12);
 }
 
 TEST(Diffusion, QSampleAndPosteriorAreConsistent) {
@@ -38,12 +39,18 @@ TEST(Diffusion, QSampleAndPosteriorAreConsistent) {
   const auto x0 = torch::randn({5, 2, 3});
   const auto eps = torch::randn({5, 2, 3});
   const auto xt = s.QSample(x0, torch::tensor({0, 200}), eps);
-  EXPECT_NEAR((xt.select(1, 1) - (std::sqrt(s.alpha_bar()[200]) * x0.select(1, 1) + std::sqrt(1 - s.alpha_bar()[200]) * eps.select(1, 1)))
-                  .abs().max().item<double>(), 0.0, 1e-5);
-  // With the true x0 and eps, a DDIM step lands on the same trajectory: x_{t'} = sqrt(abar') x0 + sqrt(1-abar') eps.
+  EXPECT_NEAR((xt.select(1, 1) - (std::sqrt(s.alpha_bar()[200]) * x0.select(1, 1) +
+                                  std::sqrt(1 - s.alpha_bar()[200]) * eps.select(1, 1)))
+                  .abs()
+                  .max()
+                  .item<double>(),
+              0.0, 1e-5);
+  // With the true x0 and eps, a DDIM step lands on the same trajectory: x_{t'} = sqrt(abar') x0 +
+  // sqrt(1-abar') eps.
   const auto xt1 = s.QSample(x0, torch::tensor({200, 200}), eps);
   const auto next = s.DdimStep(x0, xt1, 200, 100);
-  const auto expected = std::sqrt(s.alpha_bar()[100]) * x0 + std::sqrt(1 - s.alpha_bar()[100]) * eps;
+  const auto expected =
+      std::sqrt(s.alpha_bar()[100]) * x0 + std::sqrt(1 - s.alpha_bar()[100]) * eps;
   EXPECT_LT((next - expected).abs().max().item<double>(), 1e-4);
   EXPECT_EQ(DdimTimesteps(300, 50).front(), 299);
   EXPECT_EQ(DdimTimesteps(300, 50).back(), 0);
@@ -68,8 +75,15 @@ TEST(Editor, AdaLnZeroBlocksStartAsTheIdentity) {
 
 EditorOptions Tiny(const std::string& variant, const std::string& aux = "classes") {
   nlohmann::json j = {{"variant", variant},
-                      {"model", {{"dim", 32}, {"cond_layers", 1}, {"layers", 2}, {"heads", 4}, {"ff", 64}, {"sim_hidden", 32}, {"dropout", 0.0},
-                                 {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"dim", 32}}}}},
+                      {"model",
+                       {{"dim", 32},
+                        {"cond_layers", 1},
+                        {"layers", 2},
+                        {"heads", 4},
+                        {"ff", 64},
+                        {"sim_hidden", 32},
+                        {"dropout", 0.0},
+                        {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"dim", 32}}}}},
                       {"diffusion", {{"steps", 50}}}};
   j["aux"] = {{"mode", variant == "mdt" ? aux : "none"}};
   return EditorOptions::FromJson(j);
@@ -82,22 +96,26 @@ TEST(Editor, SimilarityLossCountsOnlyRealFramesWithACurveAndASource) {
   auto logits = torch::zeros({2, 3, 3});
   logits.select(2, 0).fill_(2.0);
   auto classes = torch::tensor({{0, 1, -1}, {2, 2, 2}}, torch::kInt64);
-  auto padding = torch::tensor({{0, 1, 0}, {0, 0, 0}}, torch::kInt64).to(torch::kBool);  // frame 1 of example 0 is padding
+  auto padding = torch::tensor({{0, 1, 0}, {0, 0, 0}}, torch::kInt64)
+                     .to(torch::kBool);  // frame 1 of example 0 is padding
   const auto similarity = torch::zeros({2, 3});
   const double p0 = std::exp(2.0) / (std::exp(2.0) + 2);
   // Example 1's source dropped: only frame 0 of example 0 counts (class 0).
-  auto out = SimilarityLoss(logits, classes, similarity, padding, torch::tensor({0, 1}).to(torch::kBool), o);
+  auto out = SimilarityLoss(logits, classes, similarity, padding,
+                            torch::tensor({0, 1}).to(torch::kBool), o);
   EXPECT_NEAR(out["aux"].item<double>(), -std::log(p0), 1e-6);
   EXPECT_NEAR(out["aux_accuracy"].item<double>(), 1.0, 1e-6);
   // Nothing dropped: frames (0,0) class 0 and example 1's three class-2 frames.
-  out = SimilarityLoss(logits, classes, similarity, padding, torch::tensor({0, 0}).to(torch::kBool), o);
+  out = SimilarityLoss(logits, classes, similarity, padding, torch::tensor({0, 0}).to(torch::kBool),
+                       o);
   const double p2 = 1 / (std::exp(2.0) + 2);
   EXPECT_NEAR(out["aux"].item<double>(), (-std::log(p0) - 3 * std::log(p2)) / 4, 1e-6);
   EXPECT_NEAR(out["aux_accuracy"].item<double>(), 0.25, 1e-6);
   // The reference class weights [1, 0, 1] ignore the middle class.
   o.class_weights = {1, 0, 1};
   classes = torch::tensor({{1, 1, 1}, {0, 1, 1}}, torch::kInt64);
-  out = SimilarityLoss(logits, classes, similarity, torch::zeros({2, 3}, torch::kBool), torch::tensor({0, 0}).to(torch::kBool), o);
+  out = SimilarityLoss(logits, classes, similarity, torch::zeros({2, 3}, torch::kBool),
+                       torch::tensor({0, 0}).to(torch::kBool), o);
   EXPECT_NEAR(out["aux"].item<double>(), -std::log(p0), 1e-6);
 }
 
@@ -130,8 +148,13 @@ TEST(Editor, EveryVariantOverfitsAFewTriplets) {
       const auto t = torch::full({3}, 10, torch::kInt64);
       torch::manual_seed(step % 4);
       const auto xt = schedule.QSample(data.target, t, torch::randn_like(data.target));
-      Condition c{data.texts, variant == "mdm" ? torch::Tensor() : data.source, data.source_padding, {}, {}};
-      const auto loss = GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0, data.target, data.target_padding);
+      Condition c{data.texts,
+                  variant == "mdm" ? torch::Tensor() : data.source,
+                  data.source_padding,
+                  {},
+                  {}};
+      const auto loss = GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0,
+                                         data.target, data.target_padding);
       optimizer.zero_grad();
       loss.backward();
       optimizer.step();
@@ -150,7 +173,8 @@ TEST(Editor, AnExamplesPredictionDoesNotDependOnItsBatch) {
   for (const std::string variant : {"mdt", "tmed", "mdm"}) {
     torch::manual_seed(4);
     EditorNet net(Tiny(variant));
-    net->text_encoder()->Fit({"raise the right arm", "walk faster and then turn around to the left twice"});
+    net->text_encoder()->Fit(
+        {"raise the right arm", "walk faster and then turn around to the left twice"});
     net->eval();
     torch::NoGradGuard no_grad;
     // Example 0: 9-frame source and target, a short text. Example 1: 20 frames, a long text.
@@ -160,13 +184,18 @@ TEST(Editor, AnExamplesPredictionDoesNotDependOnItsBatch) {
     source_padding[0].narrow(0, 9, 11).fill_(true);
     const auto target_padding = source_padding.clone();
     const auto t = torch::tensor({45, 20}, torch::kInt64);  // of the 50 steps
-    const std::vector<std::string> texts = {"raise the right arm", "walk faster and then turn around to the left twice"};
+    const std::vector<std::string> texts = {"raise the right arm",
+                                            "walk faster and then turn around to the left twice"};
     const bool with_source = variant != "mdm";
     Condition both{texts, with_source ? source : torch::Tensor(), source_padding, {}, {}};
     const auto batched = net->forward(xt, t, target_padding, both).x0.select(1, 0).narrow(0, 0, 9);
-    Condition alone{{texts[0]}, with_source ? source.narrow(0, 0, 9).narrow(1, 0, 1) : torch::Tensor(),
-                    torch::zeros({1, 9}, torch::kBool), {}, {}};
-    const auto single = net->forward(xt.narrow(0, 0, 9).narrow(1, 0, 1), t.narrow(0, 0, 1), torch::zeros({1, 9}, torch::kBool), alone)
+    Condition alone{{texts[0]},
+                    with_source ? source.narrow(0, 0, 9).narrow(1, 0, 1) : torch::Tensor(),
+                    torch::zeros({1, 9}, torch::kBool),
+                    {},
+                    {}};
+    const auto single = net->forward(xt.narrow(0, 0, 9).narrow(1, 0, 1), t.narrow(0, 0, 1),
+                                     torch::zeros({1, 9}, torch::kBool), alone)
                             .x0.select(1, 0);
     EXPECT_LT((batched - single).abs().max().item<double>(), 1e-4) << variant;
   }
@@ -177,7 +206,14 @@ TEST(Editor, AnExamplesPredictionDoesNotDependOnItsBatch) {
 // must be no larger than the timestep's (DiT starts its class embeddings at N(0, 0.02)).
 TEST(Editor, TheTextDoesNotDrownTheTimestepInAdaLn) {
   torch::manual_seed(5);
-  nlohmann::json j = {{"variant", "mdt"}, {"model", {{"dim", 128}, {"cond_layers", 1}, {"layers", 1}, {"heads", 4}, {"ff", 64}, {"sim_hidden", 32}}}};
+  nlohmann::json j = {{"variant", "mdt"},
+                      {"model",
+                       {{"dim", 128},
+                        {"cond_layers", 1},
+                        {"layers", 1},
+                        {"heads", 4},
+                        {"ff", 64},
+                        {"sim_hidden", 32}}}};
   EditorNet net(EditorOptions::FromJson(j));
   torch::NoGradGuard no_grad;
   const auto t = torch::randint(300, {64}, torch::kInt64);
@@ -194,7 +230,9 @@ TEST(Diffusion, TheSnrShiftMovesLogSnrByTwoLogK) {
   const CosineSchedule plain(300), shifted(300, 4.0);
   const auto logit = [](double a) { return std::log(a / (1 - a)); };
   for (size_t t : {0, 50, 150, 250, 299}) {
-    EXPECT_NEAR(logit(shifted.alpha_bar()[t]), logit(plain.alpha_bar()[t]) - 2 * std::log(4.0), 1e-6) << t;
+    EXPECT_NEAR(logit(shifted.alpha_bar()[t]), logit(plain.alpha_bar()[t]) - 2 * std::log(4.0),
+                1e-6)
+        << t;
     // The betas reproduce the shifted alpha_bar as their running product.
     double product = 1;
     for (size_t k = 0; k <= t; ++k) product *= 1 - shifted.betas()[k];
@@ -207,14 +245,18 @@ TEST(Diffusion, TheSnrShiftMovesLogSnrByTwoLogK) {
 TEST(Diffusion, PreconditioningIsKarrasForThisSchedule) {
   const CosineSchedule schedule(300);
   const double sd = 0.5;
-  const auto [skip, out] = schedule.Preconditioning(torch::tensor({0, 150, 299}, torch::kInt64), sd);
+  const auto [skip, out] =
+      schedule.Preconditioning(torch::tensor({0, 150, 299}, torch::kInt64), sd);
   for (int k = 0; k < 2; ++k) {
     const int64_t t = k == 0 ? 0 : 150;
     const double abar = schedule.alpha_bar()[static_cast<size_t>(t)];
     const double sigma2 = (1 - abar) / abar;
     // c_skip x~ with x~ = x_t / sqrt(abar); c_out = sigma sd / sqrt(sigma^2 + sd^2).
-    EXPECT_NEAR(skip[0][k][0].item<double>(), sd * sd / (sigma2 + sd * sd) / std::sqrt(abar), 1e-5) << t;
-    EXPECT_NEAR(out[0][k][0].item<double>(), std::sqrt(sigma2) * sd / std::sqrt(sigma2 + sd * sd), 1e-5) << t;
+    EXPECT_NEAR(skip[0][k][0].item<double>(), sd * sd / (sigma2 + sd * sd) / std::sqrt(abar), 1e-5)
+        << t;
+    EXPECT_NEAR(out[0][k][0].item<double>(), std::sqrt(sigma2) * sd / std::sqrt(sigma2 + sd * sd),
+                1e-5)
+        << t;
   }
   // At the last step x_t is nearly pure noise: no skip, c_out -> sd; finite.
   EXPECT_LT(skip[0][2][0].item<double>(), 1e-3);
@@ -241,8 +283,14 @@ TEST(Editor, TheEdmPreconditioningPassesANearlyCleanTargetThrough) {
       const auto target = 0.5 * data.target;  // the normalised features' spread
       const auto t = torch::zeros({3}, torch::kInt64);
       const auto xt = schedule.QSample(target, t, torch::randn_like(target));
-      Condition c{data.texts, variant == "mdm" ? torch::Tensor() : data.source, data.source_padding, {}, {}};
-      const double mse = GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0, target, data.target_padding).item<double>();
+      Condition c{data.texts,
+                  variant == "mdm" ? torch::Tensor() : data.source,
+                  data.source_padding,
+                  {},
+                  {}};
+      const double mse = GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0, target,
+                                          data.target_padding)
+                             .item<double>();
       if (preconditioning == "edm") {
         EXPECT_LT(mse, 1e-3) << variant;
       } else {
@@ -259,16 +307,21 @@ TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
   net->text_encoder()->Fit(data.texts);
   net->eval();
   const CosineSchedule schedule(50);
-  Condition c{{data.texts[0], data.texts[0], data.texts[0]}, data.source.narrow(1, 0, 1).repeat({1, 3, 1}),
-              data.source_padding.narrow(0, 0, 1).repeat({3, 1}), torch::tensor({1, 1, 0}).to(torch::kBool),
+  Condition c{{data.texts[0], data.texts[0], data.texts[0]},
+              data.source.narrow(1, 0, 1).repeat({1, 3, 1}),
+              data.source_padding.narrow(0, 0, 1).repeat({3, 1}),
+              torch::tensor({1, 1, 0}).to(torch::kBool),
               torch::tensor({1, 0, 0}).to(torch::kBool)};
   const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
-    const auto x0 = net->forward(xt.repeat({1, 3, 1}), torch::full({3}, t, torch::kInt64), torch::zeros({3, 17}, torch::kBool), c).x0.chunk(3, 1);
+    const auto x0 = net->forward(xt.repeat({1, 3, 1}), torch::full({3}, t, torch::kInt64),
+                                 torch::zeros({3, 17}, torch::kBool), c)
+                        .x0.chunk(3, 1);
     return GuideThreeWay(x0[0], x0[1], x0[2], 2.0, 2.0);
   };
   const auto run = [&](uint64_t seed, bool ddim) {
     auto generator = at::make_generator<at::CPUGeneratorImpl>(seed);
-    return ddim ? SampleDdim(schedule, {17, 1, kEditFeatureDim}, 10, denoise, generator) : SampleDdpm(schedule, {17, 1, kEditFeatureDim}, denoise, generator);
+    return ddim ? SampleDdim(schedule, {17, 1, kEditFeatureDim}, 10, denoise, generator)
+                : SampleDdpm(schedule, {17, 1, kEditFeatureDim}, denoise, generator);
   };
   for (bool ddim : {false, true}) {
     const auto a = run(5, ddim), b = run(5, ddim), other = run(6, ddim);
@@ -294,8 +347,9 @@ TEST(Editor, ConstantFeatureColumnsKeepUnitScale) {
     for (Motion* m : {&t.source, &t.target}) {
       *m = Motion::Rest(30, 30, 0.9);
       for (int64_t f = 0; f < 30; ++f) {
-        m->poses[static_cast<size_t>(f * 66 + 16 * 3 + 2)] = 0.02f * static_cast<float>(f + i);  // the left shoulder turns
-        m->trans[static_cast<size_t>(f * 3)] = 0.03f * static_cast<float>(f);                    // and the body walks
+        m->poses[static_cast<size_t>(f * 66 + 16 * 3 + 2)] =
+            0.02f * static_cast<float>(f + i);  // the left shoulder turns
+        m->trans[static_cast<size_t>(f * 3)] = 0.03f * static_cast<float>(f);  // and the body walks
       }
     }
     triplets.push_back(std::move(t));
@@ -352,7 +406,9 @@ TEST(Editor, VelocityLossSeesJitterNotOffsets) {
   EXPECT_NEAR(VelocityMse(target + 0.3, target, padding).item<double>(), 0.0, 1e-10);
   EXPECT_GT(GroupedMaskedMse(target + 0.3, target, padding).item<double>(), 0.08);
   // Alternating +-a per frame: every difference is off by 2a, squared 4a^2.
-  const auto sign = torch::tensor({1., -1., 1., -1., 1., -1., 1., -1., 1., -1.}).to(torch::kFloat32).view({10, 1, 1});
+  const auto sign = torch::tensor({1., -1., 1., -1., 1., -1., 1., -1., 1., -1.})
+                        .to(torch::kFloat32)
+                        .view({10, 1, 1});
   EXPECT_NEAR(VelocityMse(target + 0.1 * sign, target, padding).item<double>(), 0.04, 1e-5);
   // Differences that touch a padded frame do not count: garbage there changes nothing.
   auto garbage = target.clone();
@@ -367,7 +423,9 @@ TEST(Editor, RegressionModePredictsTheNormalisedCurve) {
   const auto prediction = torch::zeros({1, 3});
   const auto similarity = torch::tensor({{0.5f, 1.0f, -1.0f}});
   const auto classes = torch::tensor({{0, 2, -1}}, torch::kInt64);
-  const auto out = SimilarityLoss(prediction, classes, similarity, torch::zeros({1, 3}, torch::kBool), torch::tensor({0}).to(torch::kBool), o);
+  const auto out =
+      SimilarityLoss(prediction, classes, similarity, torch::zeros({1, 3}, torch::kBool),
+                     torch::tensor({0}).to(torch::kBool), o);
   EXPECT_NEAR(out.at("aux").item<double>(), (0.0 + 0.25) / 2, 1e-7);
   // K = 5 and K = 9 build their heads and default to equal class weights.
   for (int k : {5, 9}) {

@@ -1,5 +1,5 @@
-// LibTorch model code: the transformer layers against torch's own, the fast dropout, TEMOS's losses,
-// overfitting, checkpoints, per-example noise.
+// LibTorch model code: the transformer layers against torch's own, the fast dropout, TEMOS's
+// losses, overfitting, checkpoints, per-example noise.
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
@@ -27,12 +27,17 @@ TEST(Transformer, EncoderLayerComputesWhatTorchsDoes) {
   torch::manual_seed(3);
   torch::NoGradGuard no_grad;
   const int64_t dim = 32, heads = 4, ff = 64, length = 7, n = 3;
-  torch::nn::TransformerEncoderLayer theirs(torch::nn::TransformerEncoderLayerOptions(dim, heads).dim_feedforward(ff).dropout(0.1).activation(torch::kGELU));
+  torch::nn::TransformerEncoderLayer theirs(torch::nn::TransformerEncoderLayerOptions(dim, heads)
+                                                .dim_feedforward(ff)
+                                                .dropout(0.1)
+                                                .activation(torch::kGELU));
   nn::EncoderLayer ours(nn::TransformerOptions{dim, heads, ff, 1, 0.1});
   CopyAttention(theirs->self_attn, *ours->named_children()["self_attn"]);
   auto p = ours->named_parameters();
-  p["linear1.weight"].copy_(theirs->linear1->weight), p["linear1.bias"].copy_(theirs->linear1->bias);
-  p["linear2.weight"].copy_(theirs->linear2->weight), p["linear2.bias"].copy_(theirs->linear2->bias);
+  p["linear1.weight"].copy_(theirs->linear1->weight),
+      p["linear1.bias"].copy_(theirs->linear1->bias);
+  p["linear2.weight"].copy_(theirs->linear2->weight),
+      p["linear2.bias"].copy_(theirs->linear2->bias);
   p["norm1.weight"].copy_(theirs->norm1->weight), p["norm1.bias"].copy_(theirs->norm1->bias);
   p["norm2.weight"].copy_(theirs->norm2->weight), p["norm2.bias"].copy_(theirs->norm2->bias);
   theirs->eval();
@@ -50,7 +55,10 @@ TEST(Transformer, OneTokenCrossAttentionComputesWhatTorchsDecoderDoes) {
   torch::manual_seed(4);
   torch::NoGradGuard no_grad;
   const int64_t dim = 32, heads = 4, ff = 64, length = 9, n = 2;
-  torch::nn::TransformerDecoderLayer theirs(torch::nn::TransformerDecoderLayerOptions(dim, heads).dim_feedforward(ff).dropout(0.1).activation(torch::kGELU));
+  torch::nn::TransformerDecoderLayer theirs(torch::nn::TransformerDecoderLayerOptions(dim, heads)
+                                                .dim_feedforward(ff)
+                                                .dropout(0.1)
+                                                .activation(torch::kGELU));
   nn::OneTokenDecoderLayer ours(nn::TransformerOptions{dim, heads, ff, 1, 0.1});
   CopyAttention(theirs->self_attn, *ours->named_children()["self_attn"]);
   auto p = ours->named_parameters();
@@ -59,8 +67,10 @@ TEST(Transformer, OneTokenCrossAttentionComputesWhatTorchsDecoderDoes) {
   p["cross_value.bias"].copy_(theirs->multihead_attn->in_proj_bias.narrow(0, 2 * dim, dim));
   p["cross_out_proj.weight"].copy_(theirs->multihead_attn->out_proj->weight);
   p["cross_out_proj.bias"].copy_(theirs->multihead_attn->out_proj->bias);
-  p["linear1.weight"].copy_(theirs->linear1->weight), p["linear1.bias"].copy_(theirs->linear1->bias);
-  p["linear2.weight"].copy_(theirs->linear2->weight), p["linear2.bias"].copy_(theirs->linear2->bias);
+  p["linear1.weight"].copy_(theirs->linear1->weight),
+      p["linear1.bias"].copy_(theirs->linear1->bias);
+  p["linear2.weight"].copy_(theirs->linear2->weight),
+      p["linear2.bias"].copy_(theirs->linear2->bias);
   for (const char* norm : {"norm1", "norm2", "norm3"}) {
     auto theirs_norm = theirs->named_parameters();
     p[std::string(norm) + ".weight"].copy_(theirs_norm[std::string(norm) + ".weight"]);
@@ -113,15 +123,19 @@ TEST(Transformer, DropoutMaskHasTheRightRateAndScale) {
 }
 
 temos::Temos TinyTemos(double dropout) {
-  const nlohmann::json config = {{"latent", 32}, {"layers", 1}, {"heads", 2}, {"ff", 64}, {"dropout", dropout},
-                                 {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
+  const nlohmann::json config = {
+      {"latent", 32},       {"layers", 1},
+      {"heads", 2},         {"ff", 64},
+      {"dropout", dropout}, {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
   temos::Temos net(temos::TemosOptions::FromJson(config));
-  net->text_encoder()->Fit({"walk forward", "wave the right hand", "jump in place", "sit down slowly", "turn left"});
+  net->text_encoder()->Fit(
+      {"walk forward", "wave the right hand", "jump in place", "sit down slowly", "turn left"});
   return net;
 }
 
 struct TinyBatch {
-  std::vector<std::vector<std::string>> texts = {{"walk forward"}, {"wave the right hand"}, {"jump in place"}, {"sit down slowly"}};
+  std::vector<std::vector<std::string>> texts = {
+      {"walk forward"}, {"wave the right hand"}, {"jump in place"}, {"sit down slowly"}};
   torch::Tensor features, padding;
   TinyBatch() {
     torch::manual_seed(9);
@@ -140,11 +154,12 @@ TEST(Temos, MaskedLossIgnoresPaddingAndWeighsExamplesEqually) {
   const auto target = torch::zeros({4, 2, 3});
   auto prediction = torch::zeros({4, 2, 3});
   auto padding = torch::zeros({2, 4}, torch::kBool);
-  padding[1].narrow(0, 1, 3).fill_(true);        // example 1 has one frame
+  padding[1].narrow(0, 1, 3).fill_(true);                // example 1 has one frame
   prediction.select(1, 1).narrow(0, 1, 3).fill_(100.0);  // garbage on its padded frames: ignored
-  prediction[1][0].fill_(0.5);                   // example 0: one of 4 frames off by 0.5 -> smooth-L1 0.125
+  prediction[1][0].fill_(0.5);  // example 0: one of 4 frames off by 0.5 -> smooth-L1 0.125
   // example 0's mean: 0.125 / 4; example 1's: 0 -> batch mean 0.015625
-  EXPECT_NEAR(temos::MaskedSmoothL1(prediction, target, padding).item<double>(), 0.125 / 4 / 2, 1e-7);
+  EXPECT_NEAR(temos::MaskedSmoothL1(prediction, target, padding).item<double>(), 0.125 / 4 / 2,
+              1e-7);
 }
 
 TEST(Temos, KlOfIdenticalGaussiansIsZeroAndMatchesTheClosedForm) {
@@ -154,7 +169,8 @@ TEST(Temos, KlOfIdenticalGaussiansIsZeroAndMatchesTheClosedForm) {
   const auto zeros = torch::zeros({1, 2});
   // KL(N(mu, s^2) || N(0, 1)) = 0.5 * sum(s^2 + mu^2 - 1 - log s^2)
   // ... averaged over the dimensions, as the reference's kl_divergence(q, p).mean().
-  const double expected = 0.5 * ((std::exp(0.2) + 0.25 - 1 - 0.2) + (std::exp(-0.3) + 1.0 - 1 + 0.3)) / 2;
+  const double expected =
+      0.5 * ((std::exp(0.2) + 0.25 - 1 - 0.2) + (std::exp(-0.3) + 1.0 - 1 + 0.3)) / 2;
   EXPECT_NEAR(temos::KlDivergence(mu, logvar, zeros, zeros).item<double>(), expected, 1e-6);
 }
 
@@ -168,10 +184,12 @@ TEST(Temos, KlIsTheMeanOverEveryElementLikeTheReference) {
   const auto var_ratio = torch::exp(logvar_q - logvar_p);
   const auto t1 = (mu_q - mu_p).pow(2) / torch::exp(logvar_p);
   const auto elementwise = 0.5 * (var_ratio + t1 - 1 - (logvar_q - logvar_p));
-  EXPECT_NEAR(temos::KlDivergence(mu_q, logvar_q, mu_p, logvar_p).item<double>(), elementwise.mean().item<double>(), 1e-5);
+  EXPECT_NEAR(temos::KlDivergence(mu_q, logvar_q, mu_p, logvar_p).item<double>(),
+              elementwise.mean().item<double>(), 1e-5);
   // Doubling the latent size with copies of the same dimensions leaves the KL unchanged.
-  EXPECT_NEAR(temos::KlDivergence(torch::cat({mu_q, mu_q}, 1), torch::cat({logvar_q, logvar_q}, 1), torch::cat({mu_p, mu_p}, 1),
-                                  torch::cat({logvar_p, logvar_p}, 1)).item<double>(),
+  EXPECT_NEAR(temos::KlDivergence(torch::cat({mu_q, mu_q}, 1), torch::cat({logvar_q, logvar_q}, 1),
+                                  torch::cat({mu_p, mu_p}, 1), torch::cat({logvar_p, logvar_p}, 1))
+                  .item<double>(),
               elementwise.mean().item<double>(), 1e-5);
 }
 
@@ -216,7 +234,8 @@ TEST(Temos, SavedAndLoadedModelGivesIdenticalOutputs) {
   const auto b = loaded->EncodeText(batch.texts, false);
   EXPECT_TRUE(torch::equal(a.mu, b.mu));
   EXPECT_TRUE(torch::equal(net->Decode(a.mu, batch.padding), loaded->Decode(b.mu, batch.padding)));
-  EXPECT_TRUE(torch::equal(net->EncodeMotion(batch.features, batch.padding, false).mu, loaded->EncodeMotion(batch.features, batch.padding, false).mu));
+  EXPECT_TRUE(torch::equal(net->EncodeMotion(batch.features, batch.padding, false).mu,
+                           loaded->EncodeMotion(batch.features, batch.padding, false).mu));
 }
 
 TEST(Temos, ExampleNoiseDependsOnlyOnTheExamplesSeed) {
@@ -241,11 +260,13 @@ TEST(Temos, SplitBatchGradientsAverageToTheUnionBatchGradient) {
     std::vector<std::vector<std::string>> texts;
     for (int64_t r : rows) texts.push_back(batch.texts[static_cast<size_t>(r)]);
     net->zero_grad();
-    net->Losses(texts, batch.features.index_select(1, index), batch.padding.index_select(0, index), seeds.index_select(0, index))
+    net->Losses(texts, batch.features.index_select(1, index), batch.padding.index_select(0, index),
+                seeds.index_select(0, index))
         .at("loss")
         .backward();
     std::vector<torch::Tensor> g;
-    for (const auto& p : net->parameters()) g.push_back(p.grad().defined() ? p.grad().clone() : torch::zeros_like(p));
+    for (const auto& p : net->parameters())
+      g.push_back(p.grad().defined() ? p.grad().clone() : torch::zeros_like(p));
     return g;
   };
   const auto whole = gradients({0, 1, 2, 3});
@@ -273,13 +294,15 @@ TEST(TextEncoder, PrecomputedTableGivesItsEmbeddingsAndNamesUnknownTexts) {
   npz.Add("texts", NpyArray::Strings({2}, {"walk forward", "wave the right hand"}));
   npz.Add("embeddings", NpyArray::Float32({2, 3}, {1, 0, 0, 0, 1, 0}));
   ASSERT_TRUE(WriteNpz(path, npz).ok());
-  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson({{"kind", "precomputed"}, {"table", path}, {"dim", 8}, {"heads", 2}, {"layers", 1}}));
+  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson(
+      {{"kind", "precomputed"}, {"table", path}, {"dim", 8}, {"heads", 2}, {"layers", 1}}));
   encoder->Fit({});
   encoder->eval();
   torch::NoGradGuard no_grad;
   const auto a = encoder->forward({"walk forward", "wave the right hand", "walk forward"});
   ASSERT_EQ(a.tokens.sizes(), (std::vector<int64_t>{1, 3, 8}));
-  EXPECT_TRUE(torch::equal(a.tokens.select(1, 0), a.tokens.select(1, 2)));  // the same text, the same features
+  EXPECT_TRUE(torch::equal(a.tokens.select(1, 0),
+                           a.tokens.select(1, 2)));  // the same text, the same features
   EXPECT_FALSE(torch::equal(a.tokens.select(1, 0), a.tokens.select(1, 1)));
   try {
     encoder->forward({"jump"});
@@ -288,7 +311,8 @@ TEST(TextEncoder, PrecomputedTableGivesItsEmbeddingsAndNamesUnknownTexts) {
     EXPECT_NE(std::string(e.what()).find("no embedding for 'jump'"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
   }
-  nn::TextEncoder missing(nn::TextEncoderOptions::FromJson({{"kind", "precomputed"}, {"dim", 8}, {"heads", 2}}));
+  nn::TextEncoder missing(
+      nn::TextEncoderOptions::FromJson({{"kind", "precomputed"}, {"dim", 8}, {"heads", 2}}));
   EXPECT_THROW(missing->Fit({}), std::invalid_argument);
 }
 
@@ -297,13 +321,18 @@ TEST(TextEncoder, PrecomputedTableGivesItsEmbeddingsAndNamesUnknownTexts) {
 TEST(TextEncoder, FirstLayerAttentionIsSoftAndItsQueriesAndKeysLearn) {
   torch::manual_seed(7);
   const int64_t dim = 128;
-  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson({{"dim", dim}, {"heads", 4}, {"layers", 1}, {"dropout", 0.0}, {"vocab", 200}}));
-  const std::vector<std::string> texts = {"walk forward slowly", "wave the right hand", "jump in place twice",
-                                          "turn around to the left", "kick with the right leg", "sit down on the floor"};
+  nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson(
+      {{"dim", dim}, {"heads", 4}, {"layers", 1}, {"dropout", 0.0}, {"vocab", 200}}));
+  const std::vector<std::string> texts = {"walk forward slowly",     "wave the right hand",
+                                          "jump in place twice",     "turn around to the left",
+                                          "kick with the right leg", "sit down on the floor"};
   encoder->Fit(texts);
-  // The embedded tokens (what forward() scales by sqrt(d)) have a spread of about 1, like the positions.
+  // The embedded tokens (what forward() scales by sqrt(d)) have a spread of about 1, like the
+  // positions.
   const auto ids = encoder->TokenIds(texts);
-  const auto embedded = encoder->named_parameters()["embed.weight"].index_select(0, ids.view({-1})) * std::sqrt(static_cast<double>(dim));
+  const auto embedded =
+      encoder->named_parameters()["embed.weight"].index_select(0, ids.view({-1})) *
+      std::sqrt(static_cast<double>(dim));
   EXPECT_LT(embedded.std().item<double>(), 1.5);
   EXPECT_GT(embedded.std().item<double>(), 0.5);
   // The query and key rows of the first attention's input projection receive a gradient of the same
@@ -314,11 +343,13 @@ TEST(TextEncoder, FirstLayerAttentionIsSoftAndItsQueriesAndKeysLearn) {
   ASSERT_TRUE(grad.defined());
   const double query_key = grad.narrow(0, 0, 2 * dim).norm().item<double>() / std::sqrt(2.0);
   const double value = grad.narrow(0, 2 * dim, dim).norm().item<double>();
-  EXPECT_GT(query_key, 0.05 * value) << "query/key gradient " << query_key << " value gradient " << value;
+  EXPECT_GT(query_key, 0.05 * value)
+      << "query/key gradient " << query_key << " value gradient " << value;
 }
 
 // A TMR-style checkpoint's text encoder, copied into another model's (the MDT's, SINC's): the same
-// features for the same texts, its tokenizer, frozen or not, and a clear error when the settings differ.
+// features for the same texts, its tokenizer, frozen or not, and a clear error when the settings
+// differ.
 TEST(TextEncoder, PretrainedTextEncoderIsCopiedFromACheckpoint) {
   torch::manual_seed(3);
   auto net = TinyTemos(0.1);
@@ -329,7 +360,9 @@ TEST(TextEncoder, PretrainedTextEncoderIsCopiedFromACheckpoint) {
   out.save_to(dir + "/model.pt");
   net->text_encoder()->SaveExtras(dir);
   const nlohmann::json options = net->text_encoder()->options().ToJson();
-  std::ofstream(dir + "/model.json") << nlohmann::json{{"config", {{"variant", "tmr"}, {"model", {{"text_encoder", options}}}}}}.dump();
+  std::ofstream(dir + "/model.json")
+      << nlohmann::json{{"config", {{"variant", "tmr"}, {"model", {{"text_encoder", options}}}}}}
+             .dump();
 
   torch::manual_seed(99);  // other initial weights, no tokenizer yet
   nn::TextEncoder encoder(nn::TextEncoderOptions::FromJson(options));
@@ -340,12 +373,16 @@ TEST(TextEncoder, PretrainedTextEncoderIsCopiedFromACheckpoint) {
   encoder->eval();
   torch::NoGradGuard no_grad;
   const std::vector<std::string> texts = {"walk forward", "wave the right hand"};
-  EXPECT_TRUE(torch::equal(encoder->forward(texts).tokens, net->text_encoder()->forward(texts).tokens));
-  for (const auto& item : encoder->named_parameters()) EXPECT_EQ(item.value().requires_grad(), item.key() == "separator") << item.key();
+  EXPECT_TRUE(
+      torch::equal(encoder->forward(texts).tokens, net->text_encoder()->forward(texts).tokens));
+  for (const auto& item : encoder->named_parameters())
+    EXPECT_EQ(item.value().requires_grad(), item.key() == "separator") << item.key();
 
   nn::TextEncoder tuned(nn::TextEncoderOptions::FromJson(options));
-  nn::LoadPretrainedTextEncoder(tuned, "input", {::testing::TempDir() + "/nothing", dir}, false);  // found among the inputs
-  for (const auto& item : tuned->named_parameters()) EXPECT_TRUE(item.value().requires_grad()) << item.key();
+  nn::LoadPretrainedTextEncoder(tuned, "input", {::testing::TempDir() + "/nothing", dir},
+                                false);  // found among the inputs
+  for (const auto& item : tuned->named_parameters())
+    EXPECT_TRUE(item.value().requires_grad()) << item.key();
 
   nlohmann::json wider = options;
   wider["dim"] = 64;
@@ -355,20 +392,25 @@ TEST(TextEncoder, PretrainedTextEncoderIsCopiedFromACheckpoint) {
     ADD_FAILURE() << "a text encoder of other settings was loaded";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find(dir), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("same text_encoder settings"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("same text_encoder settings"), std::string::npos)
+        << e.what();
   }
-  EXPECT_THROW(nn::LoadPretrainedTextEncoder(encoder, "input", {::testing::TempDir() + "/nothing"}, true), std::invalid_argument);
+  EXPECT_THROW(
+      nn::LoadPretrainedTextEncoder(encoder, "input", {::testing::TempDir() + "/nothing"}, true),
+      std::invalid_argument);
 }
 
 TEST(TextEncoder, TokenizerIsDeterministicAndRoundTrips) {
   nn::Tokenizer a, b;
-  const std::vector<std::string> texts = {"walk forward slowly", "wave the right hand", "walking forwards", "jump in place"};
+  const std::vector<std::string> texts = {"walk forward slowly", "wave the right hand",
+                                          "walking forwards", "jump in place"};
   a.Train(texts, 80);
   b.Train(texts, 80);
   EXPECT_EQ(a.serialized(), b.serialized());
   nn::Tokenizer c;
   c.Load(a.serialized());
-  EXPECT_EQ(c.Encode("walk the right hand forward", 32), a.Encode("walk the right hand forward", 32));
+  EXPECT_EQ(c.Encode("walk the right hand forward", 32),
+            a.Encode("walk the right hand forward", 32));
   EXPECT_LE(a.Encode("walk the right hand forward", 3).size(), 3u);
   for (int64_t id : a.Encode("zzz unseen", 32)) EXPECT_GT(id, 0);  // never the padding id
 }

@@ -54,7 +54,8 @@ TEST(Babel, SweepFindsSinglesAndSimultaneousPairs) {
 
 TEST(Babel, AdjacentLabelsWithTheSameActionFormOneSpan) {
   auto seqs = ParseBabel(R"({"1": {"dur": 4, "frame_ann": {"labels": [
-      {"proc_label": "walk", "start_t": 0, "end_t": 2}, {"proc_label": "walk", "start_t": 2, "end_t": 4}]}}})", "b.json");
+      {"proc_label": "walk", "start_t": 0, "end_t": 2}, {"proc_label": "walk", "start_t": 2, "end_t": 4}]}}})",
+                         "b.json");
   ASSERT_TRUE(seqs.ok());
   const auto spans = SweepActionSpans((*seqs)[0], {});
   ASSERT_EQ(spans.size(), 1u);
@@ -62,7 +63,8 @@ TEST(Babel, AdjacentLabelsWithTheSameActionFormOneSpan) {
 }
 
 TEST(Babel, ExcludedLabelSpellings) {
-  for (const char* label : {"t-pose", "T pose", "tpose", "a-pose", "A Pose", "transition", "Transition"}) {
+  for (const char* label :
+       {"t-pose", "T pose", "tpose", "a-pose", "A Pose", "transition", "Transition"}) {
     EXPECT_TRUE(IsExcludedBabelLabel(label)) << label;
   }
   EXPECT_FALSE(IsExcludedBabelLabel("pose"));
@@ -73,14 +75,18 @@ TEST(Babel, MalformedInputNamesFileAndSequence) {
   auto broken = ParseBabel("{\"1\": {", "ann.json");
   ASSERT_FALSE(broken.ok());
   EXPECT_NE(broken.status().message().find("ann.json: malformed JSON"), std::string::npos);
-  auto no_times = ParseBabel(R"({"7": {"dur": 2, "frame_ann": {"labels": [{"proc_label": "walk"}]}}})", "ann.json");
+  auto no_times = ParseBabel(
+      R"({"7": {"dur": 2, "frame_ann": {"labels": [{"proc_label": "walk"}]}}})", "ann.json");
   ASSERT_FALSE(no_times.ok());
   EXPECT_NE(no_times.status().message().find("sequence '7'"), std::string::npos);
   EXPECT_NE(no_times.status().message().find("start_t"), std::string::npos);
-  auto backwards = ParseBabel(R"({"7": {"dur": 2, "frame_ann": {"labels": [{"proc_label": "w", "start_t": 2, "end_t": 1}]}}})", "a.json");
+  auto backwards = ParseBabel(
+      R"({"7": {"dur": 2, "frame_ann": {"labels": [{"proc_label": "w", "start_t": 2, "end_t": 1}]}}})",
+      "a.json");
   EXPECT_FALSE(backwards.ok());
   EXPECT_FALSE(ParseBabel("[1, 2]", "a.json").ok());
-  EXPECT_FALSE(ParseBabel(R"({"7": {"frame_ann": null, "seq_ann": null, "dur": 1}})", "a.json").ok());
+  EXPECT_FALSE(
+      ParseBabel(R"({"7": {"frame_ann": null, "seq_ann": null, "dur": 1}})", "a.json").ok());
 }
 
 }  // namespace

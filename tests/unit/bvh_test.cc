@@ -27,7 +27,8 @@ TEST(Bvh, ParsesTheCmuClips) {
     EXPECT_EQ(bvh->channels_per_frame, 6 + 30 * 3);
     EXPECT_EQ(bvh->frames, c.frames);
     EXPECT_NEAR(1.0 / bvh->frame_time, 120.0, 0.01);
-    EXPECT_EQ(bvh->joints[static_cast<size_t>(bvh->JointIndex("LeftShoulder"))].rotation_order, "ZXY");
+    EXPECT_EQ(bvh->joints[static_cast<size_t>(bvh->JointIndex("LeftShoulder"))].rotation_order,
+              "ZXY");
     EXPECT_EQ(bvh->joints[static_cast<size_t>(bvh->JointIndex("LeftKnee"))].rotation_order, "ZYX");
   }
 }
@@ -36,7 +37,9 @@ TEST(Bvh, CmuBoneLengthsArePlausibleInMetres) {
   auto bvh = ReadBvh(CmuPath("131_01.bvh"));
   ASSERT_TRUE(bvh.ok());
   const double scale = BuiltinJointMaps().front().unit_scale;
-  const auto length = [&](const char* joint) { return scale * Norm(bvh->joints[static_cast<size_t>(bvh->JointIndex(joint))].offset); };
+  const auto length = [&](const char* joint) {
+    return scale * Norm(bvh->joints[static_cast<size_t>(bvh->JointIndex(joint))].offset);
+  };
   for (const char* bone : {"LeftKnee", "RightKnee", "LeftAnkle", "RightAnkle"}) {
     EXPECT_GT(length(bone), 0.30) << bone;
     EXPECT_LT(length(bone), 0.55) << bone;
@@ -57,7 +60,9 @@ TEST(Bvh, CmuImportIsUprightOnTheFloorAndFinite) {
     EXPECT_EQ(motion.fps, 30);
     EXPECT_TRUE(ValidateMotion(motion, "m").ok());
     const std::vector<float> joints = ComputeJoints(Skeleton::Smpl22(), motion);
-    const auto z = [&](int64_t f, int j) { return joints[static_cast<size_t>((f * kNumJoints + j) * 3 + 2)]; };
+    const auto z = [&](int64_t f, int j) {
+      return joints[static_cast<size_t>((f * kNumJoints + j) * 3 + 2)];
+    };
     std::vector<float> lowest;
     int upright = 0;
     for (int64_t f = 0; f < motion.num_frames(); ++f) {
@@ -66,8 +71,8 @@ TEST(Bvh, CmuImportIsUprightOnTheFloorAndFinite) {
     }
     std::sort(lowest.begin(), lowest.end());
     EXPECT_NEAR(lowest[lowest.size() / 20], 0.0, 1e-5) << kCmu[k].file;  // floor placement
-    EXPECT_LT(lowest[lowest.size() / 2], 0.08) << kCmu[k].file;           // feet near the floor
-    EXPECT_GT(lowest.front(), -0.10) << kCmu[k].file;                     // no deep penetration
+    EXPECT_LT(lowest[lowest.size() / 2], 0.08) << kCmu[k].file;          // feet near the floor
+    EXPECT_GT(lowest.front(), -0.10) << kCmu[k].file;                    // no deep penetration
     EXPECT_EQ(upright, motion.num_frames()) << kCmu[k].file;
     EXPECT_GT(z(0, 0), 0.7);  // pelvis at standing height
     EXPECT_LT(z(0, 0), 1.1);
@@ -93,16 +98,19 @@ TEST(Bvh, RetargetedBonesPointAlongTheSourceBones) {
     BvhForwardKinematics(*bvh, frame, &global, &pos);
     for (int j = 1; j < kNumJoints; ++j) {
       const int p = s.parents()[static_cast<size_t>(j)];
-      if (j == 1 || j == 2 || j == 3 || j == 13 || j == 14) continue;  // pelvis/spine3 branch offsets are fixed
-      const Vec3 src = up * (pos[static_cast<size_t>(bvh->JointIndex(map.source[static_cast<size_t>(j)]))] -
-                             pos[static_cast<size_t>(bvh->JointIndex(map.source[static_cast<size_t>(p)]))]);
+      if (j == 1 || j == 2 || j == 3 || j == 13 || j == 14)
+        continue;  // pelvis/spine3 branch offsets are fixed
+      const Vec3 src =
+          up * (pos[static_cast<size_t>(bvh->JointIndex(map.source[static_cast<size_t>(j)]))] -
+                pos[static_cast<size_t>(bvh->JointIndex(map.source[static_cast<size_t>(p)]))]);
       const float* a = &joints[static_cast<size_t>((frame * kNumJoints + j) * 3)];
       const float* b = &joints[static_cast<size_t>((frame * kNumJoints + p) * 3)];
       const Vec3 dst{a[0] - b[0], a[1] - b[1], a[2] - b[2]};
       worst_cos = std::min(worst_cos, Dot(src, dst) / (Norm(src) * Norm(dst)));
     }
     // The pelvis faces where the source hips face: left hip direction agrees.
-    const Vec3 src_left = up * (pos[static_cast<size_t>(bvh->JointIndex("LeftHip"))] - pos[static_cast<size_t>(bvh->JointIndex("RightHip"))]);
+    const Vec3 src_left = up * (pos[static_cast<size_t>(bvh->JointIndex("LeftHip"))] -
+                                pos[static_cast<size_t>(bvh->JointIndex("RightHip"))]);
     const Vec3 pelvis_left = clip->motion.LocalRotation(frame, 0) * Vec3{1, 0, 0};
     EXPECT_GT(Dot(src_left, pelvis_left) / Norm(src_left), 0.95) << frame;
   }
@@ -137,30 +145,39 @@ TEST(Bvh, MalformedFilesGiveLineNumberedErrors) {
     EXPECT_NE(bvh.status().message().find("bad.bvh:"), std::string::npos);
     EXPECT_NE(bvh.status().message().find(fragment), std::string::npos) << bvh.status().message();
   };
-  const std::string header = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n";
+  const std::string header =
+      "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation "
+      "Yrotation Xrotation\n";
   expect_error("nothing", "expected 'HIERARCHY'");
   expect_error(header + "MOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0 0 0\n", "missing '}'");
   expect_error(header + "}\n}\nMOTION\n", "unbalanced");
-  expect_error("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation\n}\n", "declares 3 channels");
+  expect_error("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation\n}\n",
+               "declares 3 channels");
   expect_error(header + "}\nMOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0 0 0 0\n0 0 0\n", "truncated");
-  expect_error(header + "}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0 zero 0\n", "non-numeric motion value 'zero'");
-  expect_error(header + "}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0 0 0 7\n", "more motion values");
-  expect_error(header + "}\nMOTION\nFrames: 1\nFrame Time: 0\n0 0 0 0 0 0\n", "frame time must be positive");
+  expect_error(header + "}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0 zero 0\n",
+               "non-numeric motion value 'zero'");
+  expect_error(header + "}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0 0 0 7\n",
+               "more motion values");
+  expect_error(header + "}\nMOTION\nFrames: 1\nFrame Time: 0\n0 0 0 0 0 0\n",
+               "frame time must be positive");
   expect_error(header + "}\nMOTION\nFrames: 99999999\nFrame Time: 0.1\n0 0 0\n", "too short");
   expect_error(good->substr(0, good->size() / 2), "truncated motion");
 }
 
 TEST(Bvh, UnmappableSkeletonListsMissingSmplJoints) {
   const std::string text =
-      "HIERARCHY\nROOT Root\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
-      "JOINT Leg\n{\nOFFSET 1 -1 0\nCHANNELS 3 Zrotation Yrotation Xrotation\nEnd Site\n{\nOFFSET 0 -5 0\n}\n}\n}\n"
+      "HIERARCHY\nROOT Root\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation "
+      "Yrotation Xrotation\n"
+      "JOINT Leg\n{\nOFFSET 1 -1 0\nCHANNELS 3 Zrotation Yrotation Xrotation\nEnd Site\n{\nOFFSET "
+      "0 -5 0\n}\n}\n}\n"
       "MOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0 0 0 0 0 0\n";
   auto bvh = ParseBvh(text, "robot.bvh");
   ASSERT_TRUE(bvh.ok());
   auto clip = ImportBvh(*bvh, "robot.bvh", {});
   ASSERT_FALSE(clip.ok());
   const std::string& message = clip.status().message();
-  EXPECT_NE(message.find("robot.bvh: cannot map this skeleton onto SMPL-22"), std::string::npos) << message;
+  EXPECT_NE(message.find("robot.bvh: cannot map this skeleton onto SMPL-22"), std::string::npos)
+      << message;
   EXPECT_NE(message.find("pelvis"), std::string::npos);
   EXPECT_NE(message.find("left_wrist"), std::string::npos);
   EXPECT_NE(message.find("--map"), std::string::npos);
@@ -203,10 +220,12 @@ TEST(Bvh, CustomJointMapFileImportsARenamedRig) {
 TEST(Bvh, JointMapFileErrors) {
   auto unknown = ParseJointMap("pelvis: Hips\nelbow_thing: X\n", "m.map");
   ASSERT_FALSE(unknown.ok());
-  EXPECT_NE(unknown.status().message().find("m.map:2: 'elbow_thing' is not an SMPL-22 joint name"), std::string::npos);
+  EXPECT_NE(unknown.status().message().find("m.map:2: 'elbow_thing' is not an SMPL-22 joint name"),
+            std::string::npos);
   auto partial = ParseJointMap("pelvis: Hips\n", "m.map");
   ASSERT_FALSE(partial.ok());
-  EXPECT_NE(partial.status().message().find("does not list SMPL joints: left_hip"), std::string::npos);
+  EXPECT_NE(partial.status().message().find("does not list SMPL joints: left_hip"),
+            std::string::npos);
   auto bad_scale = ParseJointMap("unit_scale: -3\n", "m.map");
   EXPECT_FALSE(bad_scale.ok());
 }

@@ -1,7 +1,8 @@
+#include "motionpipe/formats/clip.h"
+
 #include <gtest/gtest.h>
 
 #include "motionpipe/formats/amass.h"
-#include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/humanml3d.h"
 #include "motionpipe/formats/motionfix.h"
 #include "test_util.h"
@@ -15,8 +16,10 @@ Clip MakeClip(const std::string& id, int64_t frames, uint32_t seed) {
   clip.source = "test";
   clip.motion = testing::SmoothMotion(frames, seed);
   clip.texts = {"a person walks in a circle", "walk in a circle"};
-  clip.segments = {{0, static_cast<int32_t>(frames / 2), "walk", PartBit(BodyPart::kGlobal) | PartBit(BodyPart::kLeftLeg), ""},
-                   {static_cast<int32_t>(frames / 4), static_cast<int32_t>(frames), "wave right hand", PartBit(BodyPart::kRightArm), ""}};
+  clip.segments = {{0, static_cast<int32_t>(frames / 2), "walk",
+                    PartBit(BodyPart::kGlobal) | PartBit(BodyPart::kLeftLeg), ""},
+                   {static_cast<int32_t>(frames / 4), static_cast<int32_t>(frames),
+                    "wave right hand", PartBit(BodyPart::kRightArm), ""}};
   return clip;
 }
 
@@ -43,7 +46,8 @@ TEST(Clips, InvalidClipsAreRefusedWithTheirName) {
   clip.segments[0].end_frame = 99;
   const Status s = WriteClips(::testing::TempDir() + "/bad.npz", {clip});
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.message().find("clip 'bad': segment 'walk' [0, 99)"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("clip 'bad': segment 'walk' [0, 99)"), std::string::npos)
+      << s.message();
   Clip nan = MakeClip("nan", 20, 1);
   nan.motion.poses[5] = std::numeric_limits<float>::infinity();
   EXPECT_FALSE(WriteClips(::testing::TempDir() + "/nan.npz", {nan}).ok());
@@ -71,7 +75,8 @@ TEST(Amass, ReadsSmplhAndSmplxLayoutsAndResamples) {
   Npz smplx;
   std::vector<double> poses(120 * 165, 0.0);
   for (int64_t f = 0; f < 120; ++f) {
-    for (int c = 0; c < 66; ++c) poses[static_cast<size_t>(f * 165 + c)] = motion.poses[static_cast<size_t>(f * 66 + c)];
+    for (int c = 0; c < 66; ++c)
+      poses[static_cast<size_t>(f * 165 + c)] = motion.poses[static_cast<size_t>(f * 66 + c)];
   }
   smplx.Add("poses", NpyArray::Float64({120, 165}, poses));
   smplx.Add("trans", NpyArray::Float32({120, 3}, motion.trans));
@@ -116,7 +121,8 @@ TEST(Triplets, RoundTripWithJointsAndEditRange) {
     triplets[k].id = "t" + std::to_string(k);
     triplets[k].text = k ? "raise the right arm higher" : "walk faster";
     triplets[k].split = k ? "test" : "train";
-    triplets[k].source = testing::SmoothMotion(30 + static_cast<int64_t>(k) * 5, static_cast<uint32_t>(k));
+    triplets[k].source =
+        testing::SmoothMotion(30 + static_cast<int64_t>(k) * 5, static_cast<uint32_t>(k));
     triplets[k].target = testing::SmoothMotion(28, static_cast<uint32_t>(k) + 10);
     triplets[k].source_joints = ComputeJoints(Skeleton::Smpl22(), triplets[k].source);
     triplets[k].target_joints = ComputeJoints(Skeleton::Smpl22(), triplets[k].target);

@@ -1,14 +1,15 @@
 // The procedural corpus (issue 3): vocabulary, synthesis quality, joint performance of simultaneous
 // actions, editing triplets, determinism and readability through the real loaders.
+#include "motionpipe/corpus/corpus.h"
+
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <set>
 
 #include "motionpipe/base/file.h"
-#include "motionpipe/corpus/corpus.h"
 #include "motionpipe/corpus/edits.h"
 #include "motionpipe/corpus/inspect.h"
 #include "motionpipe/corpus/synthesizer.h"
@@ -30,7 +31,8 @@ ClipScript SingleAction(ActionId id, uint64_t seed, ActionId base_id = ActionId:
   ActionInstance a = SampleInstance(id, rng);
   const double length = a.duration();
   if (IsBaseKind(Def(id).kind)) {
-    ActionInstance before = SampleInstance(ActionId::kStand, rng), after = SampleInstance(ActionId::kStand, rng);
+    ActionInstance before = SampleInstance(ActionId::kStand, rng),
+                   after = SampleInstance(ActionId::kStand, rng);
     before.start = 0;
     before.end = 1;
     a.start = 1;
@@ -80,8 +82,10 @@ TEST(Vocabulary, FortyPlusActionsOverAllSixParts) {
     for (Side side : {Side::kLeft, Side::kRight}) {
       covered |= PartsOf(def.id, side);
       TextParams params{side, 1.5, 1, 3, false};
-      for (const std::string& t : def.labels) EXPECT_EQ(FillTemplate(t, params).find('{'), std::string::npos) << t;
-      for (const std::string& t : def.captions) EXPECT_EQ(FillTemplate(t, params).find('{'), std::string::npos) << t;
+      for (const std::string& t : def.labels)
+        EXPECT_EQ(FillTemplate(t, params).find('{'), std::string::npos) << t;
+      for (const std::string& t : def.captions)
+        EXPECT_EQ(FillTemplate(t, params).find('{'), std::string::npos) << t;
     }
     EXPECT_NE(PartsOf(def.id, Side::kRight), 0) << def.name;
     EXPECT_EQ(ActionByName(def.name), def.id);
@@ -89,13 +93,15 @@ TEST(Vocabulary, FortyPlusActionsOverAllSixParts) {
   EXPECT_EQ(covered, 0x3F);
   EXPECT_EQ(PartsOf(ActionId::kWave, Side::kRight), PartBit(BodyPart::kRightArm));
   EXPECT_EQ(PartsOf(ActionId::kKick, Side::kLeft), PartBit(BodyPart::kLeftLeg));
-  EXPECT_EQ(FillTemplate("wave {hand} {speed}", {Side::kLeft, 1.5, 1, 0, true}), "wave left hand quickly");
+  EXPECT_EQ(FillTemplate("wave {hand} {speed}", {Side::kLeft, 1.5, 1, 0, true}),
+            "wave left hand quickly");
 }
 
 TEST(Synthesizer, EveryActionAloneIsPhysicallyPlausible) {
   for (const ActionDef& def : Vocabulary()) {
     for (uint64_t seed : {1u, 2u, 3u}) {
-      ExpectPlausible(Synthesize(SingleAction(def.id, MixSeed(seed, static_cast<uint64_t>(def.id)))), def.name);
+      ExpectPlausible(
+          Synthesize(SingleAction(def.id, MixSeed(seed, static_cast<uint64_t>(def.id)))), def.name);
     }
   }
 }
@@ -103,7 +109,8 @@ TEST(Synthesizer, EveryActionAloneIsPhysicallyPlausible) {
 TEST(Synthesizer, GesturesWhileWalkingArePhysicallyPlausible) {
   for (const ActionDef& def : Vocabulary()) {
     if (def.kind != ActionKind::kArm && def.kind != ActionKind::kHead) continue;
-    ExpectPlausible(Synthesize(SingleAction(def.id, MixSeed(9, static_cast<uint64_t>(def.id)), ActionId::kWalk)),
+    ExpectPlausible(Synthesize(SingleAction(def.id, MixSeed(9, static_cast<uint64_t>(def.id)),
+                                            ActionId::kWalk)),
                     std::string(def.name) + " while walking");
   }
 }
@@ -115,7 +122,8 @@ TEST(Synthesizer, RandomScriptsRarelyFailThePlausibilityGate) {
     Rng rng(MixSeed(77, static_cast<uint64_t>(i)));
     const Synthesis s = Synthesize(SampleScript(rng, {}, "x"));
     const PlausibilityReport r = EvaluateMotionPlausibility(Smpl(), s.motion);
-    failures += r.foot_skate_ratio > 0.08 || r.penetration_max > 0.01 || r.joint_limit_violations > 0 || s.max_reach_error > 0.01;
+    failures += r.foot_skate_ratio > 0.08 || r.penetration_max > 0.01 ||
+                r.joint_limit_violations > 0 || s.max_reach_error > 0.01;
   }
   EXPECT_LE(failures, n * 3 / 100) << failures << " of " << n;
 }
@@ -147,16 +155,20 @@ TEST(Synthesizer, WavingWhileWalkingIsPerformedJointly) {
   // The pace slows while the hand waves...
   EXPECT_LT(PelvisSpeed(joint, 90, 150), 0.95 * PelvisSpeed(plain, 90, 150));
   const std::vector<float> jp = ComputeJoints(Smpl(), plain), jj = ComputeJoints(Smpl(), joint);
-  const auto z = [](const std::vector<float>& j, int64_t f, int joint_index) { return j[static_cast<size_t>((f * 22 + joint_index) * 3 + 2)]; };
+  const auto z = [](const std::vector<float>& j, int64_t f, int joint_index) {
+    return j[static_cast<size_t>((f * 22 + joint_index) * 3 + 2)];
+  };
   // ...the waving hand is up by the head instead of swinging...
   for (int64_t f = 100; f < 150; f += 5) EXPECT_GT(z(jj, f, 21), z(jj, f, 17) + 0.1) << f;
-  // ...and the other arm swings less than in the plain walk (relative to the pelvis, along the walk).
+  // ...and the other arm swings less than in the plain walk (relative to the pelvis, along the
+  // walk).
   const auto swing = [&](const std::vector<float>& j, const Motion& m) {
     double lo = 1e9, hi = -1e9;
     for (int64_t f = 100; f < 150; ++f) {
       const Vec3 forward = m.LocalRotation(f, 0) * Vec3{0, 0, 1};
-      const Vec3 rel{j[static_cast<size_t>((f * 22 + 20) * 3)] - j[static_cast<size_t>(f * 66)],
-                     j[static_cast<size_t>((f * 22 + 20) * 3 + 1)] - j[static_cast<size_t>(f * 66 + 1)], 0};
+      const Vec3 rel{
+          j[static_cast<size_t>((f * 22 + 20) * 3)] - j[static_cast<size_t>(f * 66)],
+          j[static_cast<size_t>((f * 22 + 20) * 3 + 1)] - j[static_cast<size_t>(f * 66 + 1)], 0};
       const double along = Dot(rel, forward);
       lo = std::min(lo, along);
       hi = std::max(hi, along);
@@ -177,7 +189,8 @@ double PartSpeed(const Motion& m, BodyPart part) {
     for (int64_t f = 1; f < m.num_frames(); ++f) {
       double d2 = 0;
       for (int c = 0; c < 3; ++c) {
-        const double d = j[static_cast<size_t>((f * 22 + joint) * 3 + c)] - j[static_cast<size_t>(((f - 1) * 22 + joint) * 3 + c)];
+        const double d = j[static_cast<size_t>((f * 22 + joint) * 3 + c)] -
+                         j[static_cast<size_t>(((f - 1) * 22 + joint) * 3 + c)];
         d2 += d * d;
       }
       sum += std::sqrt(d2) * m.fps;
@@ -212,18 +225,22 @@ TEST(Synthesizer, DifferentActionsShareCoarseStatistics) {
                                                       {ActionId::kNod, ActionId::kShakeHead},
                                                       {ActionId::kSquat, ActionId::kCrouch}};
   for (const auto& [a, b] : confusable) {
-    for (BodyPart part : {BodyPart::kGlobal, BodyPart::kTorso, BodyPart::kRightArm, BodyPart::kRightLeg}) {
+    for (BodyPart part :
+         {BodyPart::kGlobal, BodyPart::kTorso, BodyPart::kRightArm, BodyPart::kRightLeg}) {
       double sa = 0, sb = 0;
       for (uint64_t seed = 1; seed <= 4; ++seed) {
         ClipScript ca = SingleAction(a, seed), cb = SingleAction(b, seed);
-        for (ActionInstance* i : {&ca.base.back(), ca.overlays.empty() ? nullptr : &ca.overlays[0]}) if (i) i->side = Side::kRight;
-        for (ActionInstance* i : {&cb.base.back(), cb.overlays.empty() ? nullptr : &cb.overlays[0]}) if (i) i->side = Side::kRight;
+        for (ActionInstance* i : {&ca.base.back(), ca.overlays.empty() ? nullptr : &ca.overlays[0]})
+          if (i) i->side = Side::kRight;
+        for (ActionInstance* i : {&cb.base.back(), cb.overlays.empty() ? nullptr : &cb.overlays[0]})
+          if (i) i->side = Side::kRight;
         if (IsBaseKind(Def(a).kind)) ca.base[1].side = Side::kRight;
         if (IsBaseKind(Def(b).kind)) cb.base[1].side = Side::kRight;
         sa += PartSpeed(Synthesize(ca).motion, part);
         sb += PartSpeed(Synthesize(cb).motion, part);
       }
-      EXPECT_LT(std::abs(sa - sb), 0.6 * std::max(sa, sb) + 0.02) << Def(a).name << " vs " << Def(b).name << " part " << static_cast<int>(part);
+      EXPECT_LT(std::abs(sa - sb), 0.6 * std::max(sa, sb) + 0.02)
+          << Def(a).name << " vs " << Def(b).name << " part " << static_cast<int>(part);
     }
   }
 }
@@ -262,7 +279,8 @@ TEST(Edits, EveryKindOccursWithTextAndRange) {
     EXPECT_LT(edit.edit_start, edit.edit_end);
     EXPECT_LE(edit.edit_end, source.duration + 1e-9);
     EXPECT_GT(edit.target.duration, 0.5);
-    for (size_t k = 1; k < edit.target.base.size(); ++k) EXPECT_NEAR(edit.target.base[k].start, edit.target.base[k - 1].end, 1e-9);
+    for (size_t k = 1; k < edit.target.base.size(); ++k)
+      EXPECT_NEAR(edit.target.base[k].start, edit.target.base[k - 1].end, 1e-9);
   }
   EXPECT_EQ(kinds.size(), static_cast<size_t>(EditKind::kCount));
 }
@@ -357,7 +375,8 @@ TEST_F(CorpusTest, TheRealLoadersReadEveryFormat) {
     for (const BabelSequence& seq : *babel) {
       ++sequences;
       EXPECT_TRUE(std::filesystem::exists(*dir_ + "/" + seq.feat_p)) << seq.feat_p;
-      for (const ActionSpan& span : SweepActionSpans(seq, {})) (span.labels.size() == 1 ? singles : pairs) += 1;
+      for (const ActionSpan& span : SweepActionSpans(seq, {}))
+        (span.labels.size() == 1 ? singles : pairs) += 1;
     }
   }
   EXPECT_EQ(sequences, 90);
@@ -389,8 +408,9 @@ TEST_F(CorpusTest, EditsChangeTheEditedFramesAndOnlyRoughlyTheRest) {
       for (int64_t f = 0; f < frames; ++f) {
         double d = 0;
         for (int k = 0; k < 66; ++k) {
-          d = std::max(d, static_cast<double>(std::abs(t.source_joints[static_cast<size_t>(f * 66 + k)] -
-                                                       t.target_joints[static_cast<size_t>(f * 66 + k)])));
+          d = std::max(
+              d, static_cast<double>(std::abs(t.source_joints[static_cast<size_t>(f * 66 + k)] -
+                                              t.target_joints[static_cast<size_t>(f * 66 + k)])));
         }
         const bool edited = f >= t.edit_start && f < t.edit_end;
         (edited ? inside : outside) += d;
@@ -413,7 +433,8 @@ TEST_F(CorpusTest, LabelsCarryGroundTruthParts) {
     const auto parts = entry["parts"].get<std::vector<double>>();
     ASSERT_EQ(parts.size(), 6u);
     if (text.find("right hand") != std::string::npos && text.find("both") == std::string::npos &&
-        entry.contains("actions") && entry["actions"].size() == 1 && Def(ActionByName(entry["actions"][0])).kind == ActionKind::kArm) {
+        entry.contains("actions") && entry["actions"].size() == 1 &&
+        Def(ActionByName(entry["actions"][0])).kind == ActionKind::kArm) {
       EXPECT_EQ(parts[3], 1.0) << text;  // right arm
       EXPECT_EQ(parts[2], 0.0) << text;  // not the left arm
       ++checked;

@@ -1,11 +1,12 @@
 // The deployment files stay well-formed: every YAML parses (Kubernetes, Prometheus), the Grafana
-// dashboard is JSON whose queries name metrics the engine exports, the shell scripts pass `bash -n`.
+// dashboard is JSON whose queries name metrics the engine exports, the shell scripts pass `bash
+// -n`.
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include <cstdlib>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <regex>
 
 #include "motionpipe/base/file.h"
@@ -16,7 +17,8 @@ const std::string kDeploy = std::string(MOTIONPIPE_SOURCE_DIR) + "/deploy";
 
 TEST(Deploy, KubernetesAndPrometheusYamlParse) {
   int documents = 0;
-  for (const char* file : {"k8s/pvc.yaml", "k8s/coordinator.yaml", "k8s/workers.yaml", "k8s/submit-job.yaml", "prometheus/prometheus.yml"}) {
+  for (const char* file : {"k8s/pvc.yaml", "k8s/coordinator.yaml", "k8s/workers.yaml",
+                           "k8s/submit-job.yaml", "prometheus/prometheus.yml"}) {
     for (const YAML::Node& doc : YAML::LoadAllFromFile(kDeploy + "/" + file)) {
       ASSERT_TRUE(doc.IsMap()) << file;
       if (std::string(file).rfind("k8s/", 0) == 0) {
@@ -33,9 +35,11 @@ TEST(Deploy, KubernetesAndPrometheusYamlParse) {
 }
 
 TEST(Deploy, GrafanaDashboardQueriesExportedMetrics) {
-  const auto dashboard = nlohmann::json::parse(*motionpipe::ReadFile(kDeploy + "/grafana/motionpipe-dashboard.json"));
-  const std::string sources = *motionpipe::ReadFile(std::string(MOTIONPIPE_SOURCE_DIR) + "/coordinator/server.cc") +
-                              *motionpipe::ReadFile(std::string(MOTIONPIPE_SOURCE_DIR) + "/worker/worker.cc");
+  const auto dashboard =
+      nlohmann::json::parse(*motionpipe::ReadFile(kDeploy + "/grafana/motionpipe-dashboard.json"));
+  const std::string sources =
+      *motionpipe::ReadFile(std::string(MOTIONPIPE_SOURCE_DIR) + "/coordinator/server.cc") +
+      *motionpipe::ReadFile(std::string(MOTIONPIPE_SOURCE_DIR) + "/worker/worker.cc");
   const std::regex metric("motionpipe_[a-z_]+");
   int queries = 0;
   for (const auto& panel : dashboard["panels"]) {
@@ -44,11 +48,13 @@ TEST(Deploy, GrafanaDashboardQueriesExportedMetrics) {
       for (std::sregex_iterator it(expr.begin(), expr.end(), metric), end; it != end; ++it) {
         std::string name = it->str();
         for (const char* suffix : {"_bucket", "_count", "_sum"}) {
-          if (name.size() > std::strlen(suffix) && name.compare(name.size() - std::strlen(suffix), std::strlen(suffix), suffix) == 0) {
+          if (name.size() > std::strlen(suffix) &&
+              name.compare(name.size() - std::strlen(suffix), std::strlen(suffix), suffix) == 0) {
             name.resize(name.size() - std::strlen(suffix));
           }
         }
-        EXPECT_NE(sources.find("\"" + name + "\""), std::string::npos) << name << " in panel " << panel["title"];
+        EXPECT_NE(sources.find("\"" + name + "\""), std::string::npos)
+            << name << " in panel " << panel["title"];
         ++queries;
       }
     }
@@ -57,7 +63,8 @@ TEST(Deploy, GrafanaDashboardQueriesExportedMetrics) {
 }
 
 TEST(Deploy, ShellScriptsParse) {
-  for (const char* script : {"/deploy/slurm/motionpipe.sbatch", "/scripts/setup", "/scripts/test", "/scripts/demo", "/scripts/fuzz"}) {
+  for (const char* script : {"/deploy/slurm/motionpipe.sbatch", "/scripts/setup", "/scripts/test",
+                             "/scripts/demo", "/scripts/fuzz"}) {
     const std::string command = "bash -n " + std::string(MOTIONPIPE_SOURCE_DIR) + script;
     EXPECT_EQ(std::system(command.c_str()), 0) << script;
   }

@@ -52,7 +52,8 @@ std::string PipelineIn(const std::string& root, const std::string& text = kPipel
   return yaml;
 }
 
-// ---- pipeline ------------------------------------------------------------------------------------
+// ---- pipeline
+// ------------------------------------------------------------------------------------
 
 TEST(Pipeline, ParsesPlansAndOrdersStages) {
   auto spec = ParsePipeline(PipelineIn("out"), {}, "p.yaml", Kinds());
@@ -67,12 +68,16 @@ TEST(Pipeline, ParsesPlansAndOrdersStages) {
   EXPECT_EQ(spec->seed, 5u);
   EXPECT_EQ(spec->fingerprint.size(), 64u);
   // Declared out of order: the DAG decides.
-  auto reordered = ParsePipeline("name: r\nstages:\n  b: {kind: noop, inputs: [a]}\n  a: {kind: noop}\n", {}, "r.yaml", Kinds());
+  auto reordered =
+      ParsePipeline("name: r\nstages:\n  b: {kind: noop, inputs: [a]}\n  a: {kind: noop}\n", {},
+                    "r.yaml", Kinds());
   ASSERT_TRUE(reordered.ok());
   EXPECT_EQ(reordered->stages[0].name, "a");
   // The corpus planner shards by clip count and adds a reduce task.
-  auto corpus = ParsePipeline("name: c\nstages:\n  corpus: {kind: corpus, params: {clips: 1200, triplets: 100, shard_size: 500}}\n", {},
-                              "c.yaml", Kinds());
+  auto corpus = ParsePipeline(
+      "name: c\nstages:\n  corpus: {kind: corpus, params: {clips: 1200, triplets: 100, shard_size: "
+      "500}}\n",
+      {}, "c.yaml", Kinds());
   ASSERT_TRUE(corpus.ok());
   EXPECT_EQ(corpus->stages[0].shards, 3);
   EXPECT_TRUE(corpus->stages[0].reduce);
@@ -82,7 +87,8 @@ TEST(Pipeline, ParsesPlansAndOrdersStages) {
 // plans as it stands, so a README command never meets a YAML error.
 TEST(Pipeline, EveryShippedConfigParsesAndPlans) {
   KindRegistry kinds = KindRegistry::WithBuiltins();
-  kinds.AddGeneric("labeler.train");  // the labelers plugin's stage kind (a plugin-declared kind plans generically)
+  kinds.AddGeneric("labeler.train");  // the labelers plugin's stage kind (a plugin-declared kind
+                                      // plans generically)
   int count = 0;
   for (const auto& entry : fs::directory_iterator(motionpipe::testing::SourceDir() + "/configs")) {
     if (entry.path().extension() != ".yaml") continue;
@@ -99,16 +105,19 @@ TEST(Pipeline, EveryShippedConfigParsesAndPlans) {
 }
 
 TEST(Pipeline, OverridesAndInterpolation) {
-  auto spec = ParsePipeline(PipelineIn("out"), {"stages.write.params.tasks=9", "stages.check.timeout=5m", "seed=11", "vars.extra=[1, 2]"},
-                            "p.yaml", Kinds());
+  auto spec = ParsePipeline(
+      PipelineIn("out"),
+      {"stages.write.params.tasks=9", "stages.check.timeout=5m", "seed=11", "vars.extra=[1, 2]"},
+      "p.yaml", Kinds());
   ASSERT_TRUE(spec.ok()) << spec.status().ToString();
   EXPECT_EQ(spec->stages[0].shards, 9);
   EXPECT_EQ(spec->stages[1].timeout_seconds, 300.0);
   EXPECT_EQ(spec->seed, 11u);
   auto other = ParsePipeline(PipelineIn("out"), {"stages.write.params.tasks=3"}, "p.yaml", Kinds());
   EXPECT_NE(spec->fingerprint, other->fingerprint);
-  auto partial = ParsePipeline("name: x\noutput_root: runs/${vars.scale}\nvars: {scale: small}\nstages: {a: {kind: noop}}\n", {},
-                               "x.yaml", Kinds());
+  auto partial = ParsePipeline(
+      "name: x\noutput_root: runs/${vars.scale}\nvars: {scale: small}\nstages: {a: {kind: noop}}\n",
+      {}, "x.yaml", Kinds());
   ASSERT_TRUE(partial.ok());
   EXPECT_EQ(partial->output_root, "runs/small");
   EXPECT_FALSE(ParsePipeline(PipelineIn("out"), {"novalue"}, "p.yaml", Kinds()).ok());
@@ -132,22 +141,29 @@ stages:
   ASSERT_EQ(by_name.size(), 8u);
   ASSERT_TRUE(by_name.count("mdt-s3") && by_name.count("edit-s2"));
   EXPECT_FALSE(by_name["mdt"]->params.contains("seed"));  // replicate 1 is the stage as written
-  EXPECT_EQ(by_name["mdt-s2"]->params["seed"], 8);         // pipeline seed + 1
+  EXPECT_EQ(by_name["mdt-s2"]->params["seed"], 8);        // pipeline seed + 1
   EXPECT_EQ(by_name["mdt-s3"]->replicate, 3);
   EXPECT_EQ(by_name["edit-s2"]->inputs, (std::vector<std::string>{"mdt-s2", "data"}));
-  EXPECT_EQ(by_name["edit-s2"]->params["model"], "mdt-s2");  // a param naming a seeded input follows it
+  EXPECT_EQ(by_name["edit-s2"]->params["model"],
+            "mdt-s2");  // a param naming a seeded input follows it
   EXPECT_EQ(by_name["edit-s2"]->params["other"], "data");
-  EXPECT_EQ(by_name["edit-s3"]->params["seed"], 42);         // its own seed + 2
+  EXPECT_EQ(by_name["edit-s3"]->params["seed"], 42);  // its own seed + 2
   EXPECT_EQ(by_name["edit"]->params["seed"], 40);
   EXPECT_EQ(by_name["report"]->inputs, (std::vector<std::string>{"edit", "edit-s2", "edit-s3"}));
   EXPECT_EQ(spec->stages.back().name, "report");
   // Chains must agree on the count; the count must be sane.
-  auto mismatch = ParsePipeline("name: m\nstages:\n  a: {kind: noop, seeds: 2}\n  b: {kind: noop, inputs: [a], seeds: 3}\n", {}, "m.yaml", Kinds());
+  auto mismatch = ParsePipeline(
+      "name: m\nstages:\n  a: {kind: noop, seeds: 2}\n  b: {kind: noop, inputs: [a], seeds: 3}\n",
+      {}, "m.yaml", Kinds());
   ASSERT_FALSE(mismatch.ok());
-  EXPECT_NE(mismatch.status().message().find("stages.b.seeds: 3 replicates, but its input 'a' has 2"), std::string::npos);
-  auto zero = ParsePipeline("name: z\nstages:\n  a: {kind: noop, seeds: 0}\n", {}, "z.yaml", Kinds());
+  EXPECT_NE(
+      mismatch.status().message().find("stages.b.seeds: 3 replicates, but its input 'a' has 2"),
+      std::string::npos);
+  auto zero =
+      ParsePipeline("name: z\nstages:\n  a: {kind: noop, seeds: 0}\n", {}, "z.yaml", Kinds());
   ASSERT_FALSE(zero.ok());
-  EXPECT_NE(zero.status().message().find("stages.a.seeds: must be an integer from 1 to 100"), std::string::npos);
+  EXPECT_NE(zero.status().message().find("stages.a.seeds: must be an integer from 1 to 100"),
+            std::string::npos);
 }
 
 TEST(Pipeline, ScalePicksVarsThatOverridesStillBeat) {
@@ -170,7 +186,9 @@ stages:
   EXPECT_EQ(big->stages[1].shards, 4);  // the command line beats the scale
   auto unknown = ParsePipeline(yaml, {"scale=huge"}, "s.yaml", Kinds());
   ASSERT_FALSE(unknown.ok());
-  EXPECT_NE(unknown.status().message().find("scale: must name one of scales (small, big), got \"huge\""), std::string::npos)
+  EXPECT_NE(
+      unknown.status().message().find("scale: must name one of scales (small, big), got \"huge\""),
+      std::string::npos)
       << unknown.status().message();
 }
 
@@ -190,19 +208,23 @@ stages:
   auto spec = ParsePipeline(bad, {}, "bad.yaml", Kinds());
   ASSERT_FALSE(spec.ok());
   const std::string& m = spec.status().message();
-  for (const char* expected : {"bad.yaml: colour: unknown key", "stages.a.retries: unknown key",
-                               "stages.b.kind: unknown kind 'nosuchkind'", "stages.c.inputs[1]: unknown stage 'missing'",
-                               "stages.d.timeout: must be a duration", "stages.d.params.tasks: must be an integer >= 1",
-                               "stages.g.params.tasks: unknown reference ${vars.nope}"}) {
+  for (const char* expected :
+       {"bad.yaml: colour: unknown key", "stages.a.retries: unknown key",
+        "stages.b.kind: unknown kind 'nosuchkind'", "stages.c.inputs[1]: unknown stage 'missing'",
+        "stages.d.timeout: must be a duration", "stages.d.params.tasks: must be an integer >= 1",
+        "stages.g.params.tasks: unknown reference ${vars.nope}"}) {
     EXPECT_NE(m.find(expected), std::string::npos) << expected << "\n" << m;
   }
-  auto cycle = ParsePipeline("name: c\nstages:\n  e: {kind: noop, inputs: [f]}\n  f: {kind: noop, inputs: [e]}\n", {}, "c.yaml", Kinds());
+  auto cycle = ParsePipeline(
+      "name: c\nstages:\n  e: {kind: noop, inputs: [f]}\n  f: {kind: noop, inputs: [e]}\n", {},
+      "c.yaml", Kinds());
   ASSERT_FALSE(cycle.ok());
   EXPECT_NE(cycle.status().message().find("cycle among e, f"), std::string::npos);
   auto yaml = ParsePipeline("name: [unclosed\n", {}, "y.yaml", Kinds());
   ASSERT_FALSE(yaml.ok());
   EXPECT_NE(yaml.status().message().find("y.yaml:"), std::string::npos);
-  auto cron = ParsePipeline("name: c\nschedule: '61 * * * *'\nstages: {a: {kind: noop}}\n", {}, "c.yaml", Kinds());
+  auto cron = ParsePipeline("name: c\nschedule: '61 * * * *'\nstages: {a: {kind: noop}}\n", {},
+                            "c.yaml", Kinds());
   ASSERT_FALSE(cron.ok());
   EXPECT_NE(cron.status().message().find("schedule: cron"), std::string::npos);
 }
@@ -210,7 +232,9 @@ stages:
 // Issue 17: a 600-byte alias bomb took 2.4 GB and killed a coordinator through `submit`, and so did
 // a valid pipeline with `shards: 1000000000`. Both are errors naming the file.
 TEST(Pipeline, AliasBombsAndBillionsOfTasksAreRejected) {
-  std::string bomb = "name: bomb\nstages: {a: {kind: noop}}\nx0: &x0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n";
+  std::string bomb =
+      "name: bomb\nstages: {a: {kind: noop}}\nx0: &x0 [lol, lol, lol, lol, lol, lol, lol, lol, "
+      "lol, lol]\n";
   for (int k = 1; k <= 9; ++k) {
     const std::string prev = "*x" + std::to_string(k - 1);
     bomb += "x" + std::to_string(k) + ": &x" + std::to_string(k) + " [" + prev;
@@ -219,17 +243,25 @@ TEST(Pipeline, AliasBombsAndBillionsOfTasksAreRejected) {
   }
   auto spec = ParsePipeline(bomb, {}, "bomb.yaml", Kinds());
   ASSERT_FALSE(spec.ok());
-  EXPECT_NE(spec.status().message().find("bomb.yaml: the document expands to more than"), std::string::npos) << spec.status().message();
-  auto override_bomb = ParsePipeline("name: o\nstages: {a: {kind: noop}}\n", {"vars.x=" + bomb.substr(bomb.find("x0:"))}, "o.yaml", Kinds());
+  EXPECT_NE(spec.status().message().find("bomb.yaml: the document expands to more than"),
+            std::string::npos)
+      << spec.status().message();
+  auto override_bomb =
+      ParsePipeline("name: o\nstages: {a: {kind: noop}}\n",
+                    {"vars.x=" + bomb.substr(bomb.find("x0:"))}, "o.yaml", Kinds());
   EXPECT_FALSE(override_bomb.ok());
 
-  auto shards = ParsePipeline("name: s\nstages: {a: {kind: noop, shards: 1000000000}}\n", {}, "s.yaml", Kinds());
+  auto shards = ParsePipeline("name: s\nstages: {a: {kind: noop, shards: 1000000000}}\n", {},
+                              "s.yaml", Kinds());
   ASSERT_FALSE(shards.ok());
-  EXPECT_NE(shards.status().message().find("s.yaml: the pipeline plans 1000000000 tasks (stage a: 1000000000); a job holds at most 1000000"),
+  EXPECT_NE(shards.status().message().find("s.yaml: the pipeline plans 1000000000 tasks (stage a: "
+                                           "1000000000); a job holds at most 1000000"),
             std::string::npos)
       << shards.status().message();
   // Many legitimate tasks still plan.
-  EXPECT_TRUE(ParsePipeline("name: s\nstages: {a: {kind: noop, shards: 200000}}\n", {}, "s.yaml", Kinds()).ok());
+  EXPECT_TRUE(
+      ParsePipeline("name: s\nstages: {a: {kind: noop, shards: 200000}}\n", {}, "s.yaml", Kinds())
+          .ok());
 }
 
 TEST(Pipeline, Durations) {
@@ -243,7 +275,8 @@ TEST(Pipeline, Durations) {
   EXPECT_FALSE(ParseDuration("two minutes", &s));
 }
 
-// ---- cron ----------------------------------------------------------------------------------------
+// ---- cron
+// ----------------------------------------------------------------------------------------
 
 int64_t Unix(int year, int month, int day, int hour, int minute) {
   std::tm tm{};
@@ -260,22 +293,28 @@ TEST(Cron, NextFireTimes) {
   EXPECT_EQ(NextFireTime(*ParseCron("*/5 * * * *"), t0), Unix(2026, 11, 21, 10, 10));
   EXPECT_EQ(NextFireTime(*ParseCron("0 3 * * *"), t0), Unix(2026, 11, 22, 3, 0));
   EXPECT_EQ(NextFireTime(*ParseCron("@daily"), t0), Unix(2026, 11, 22, 0, 0));
-  EXPECT_EQ(NextFireTime(*ParseCron("30 9 * * 1-5"), t0), Unix(2026, 11, 23, 9, 30));  // next Monday
+  EXPECT_EQ(NextFireTime(*ParseCron("30 9 * * 1-5"), t0),
+            Unix(2026, 11, 23, 9, 30));  // next Monday
   EXPECT_EQ(NextFireTime(*ParseCron("0 0 1 1 *"), t0), Unix(2027, 1, 1, 0, 0));
   // Day-of-month and day-of-week both restricted: either matches (Vixie cron).
-  EXPECT_EQ(NextFireTime(*ParseCron("0 12 25 * 0"), t0), Unix(2026, 11, 22, 12, 0));  // Sunday comes first
-  EXPECT_EQ(NextFireTime(*ParseCron("0 0 * * 7"), t0), Unix(2026, 11, 22, 0, 0));     // 7 is Sunday too
-  EXPECT_EQ(NextFireTime(*ParseCron("0 0 31 2 *"), t0), -1);                          // never
-  EXPECT_EQ(NextFireTime(*ParseCron("7 10 21 11 *"), t0), Unix(2027, 11, 21, 10, 7)); // strictly after
+  EXPECT_EQ(NextFireTime(*ParseCron("0 12 25 * 0"), t0),
+            Unix(2026, 11, 22, 12, 0));  // Sunday comes first
+  EXPECT_EQ(NextFireTime(*ParseCron("0 0 * * 7"), t0),
+            Unix(2026, 11, 22, 0, 0));                        // 7 is Sunday too
+  EXPECT_EQ(NextFireTime(*ParseCron("0 0 31 2 *"), t0), -1);  // never
+  EXPECT_EQ(NextFireTime(*ParseCron("7 10 21 11 *"), t0),
+            Unix(2027, 11, 21, 10, 7));  // strictly after
 }
 
 TEST(Cron, RejectsMalformedSpecs) {
-  for (const char* bad : {"* * * *", "60 * * * *", "* 24 * * *", "* * 0 * *", "* * * 13 *", "*/0 * * * *", "a * * * *", "5-1 * * * *"}) {
+  for (const char* bad : {"* * * *", "60 * * * *", "* 24 * * *", "* * 0 * *", "* * * 13 *",
+                          "*/0 * * * *", "a * * * *", "5-1 * * * *"}) {
     EXPECT_FALSE(ParseCron(bad).ok()) << bad;
   }
 }
 
-// ---- journal -------------------------------------------------------------------------------------
+// ---- journal
+// -------------------------------------------------------------------------------------
 
 TEST(Journal, JobsTasksOutputsAndSchedulesSurviveReopening) {
   const std::string path = ::testing::TempDir() + "/journal_test.sqlite";
@@ -301,7 +340,8 @@ TEST(Journal, JobsTasksOutputsAndSchedulesSurviveReopening) {
     (*journal)->AddOutputs(*id, "s", 1, {{"out.txt", "deadbeef", 10}});
     EXPECT_EQ((*journal)->buffered(), 2u);
     ASSERT_TRUE((*journal)->Flush().ok());
-    (*journal)->UpdateTask(*id, "s", 2, TaskState::kCommitted, 0, 0, "");  // never flushed: lost with the process
+    (*journal)->UpdateTask(*id, "s", 2, TaskState::kCommitted, 0, 0,
+                           "");  // never flushed: lost with the process
     ASSERT_TRUE((*journal)->AddSchedule({0, "nightly", "{}", "0 3 * * *", 12345}).ok());
   }
   auto journal = Journal::Open(path);
@@ -327,12 +367,14 @@ TEST(Journal, JobsTasksOutputsAndSchedulesSurviveReopening) {
   EXPECT_FALSE(Journal::Open("/proc/no/such/dir/journal.sqlite").ok());
 }
 
-// ---- scheduler -----------------------------------------------------------------------------------
+// ---- scheduler
+// -----------------------------------------------------------------------------------
 
 class SchedulerTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = ::testing::TempDir() + "/sched_" + ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    root_ = ::testing::TempDir() + "/sched_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name();
     fs::remove_all(root_);
     fs::create_directories(root_);
     journal_path_ = root_ + "/journal.sqlite";
@@ -342,9 +384,11 @@ class SchedulerTest : public ::testing::Test {
     scheduler_.reset();
     journal_.reset();
     journal_ = std::move(Journal::Open(journal_path_).value());
-    scheduler_ = std::make_unique<Scheduler>(journal_.get(), &clock_, Kinds(), SchedulerOptions{1.0, 3});
+    scheduler_ =
+        std::make_unique<Scheduler>(journal_.get(), &clock_, Kinds(), SchedulerOptions{1.0, 3});
   }
-  wire::Ready ReadyFor(const std::string& name, int credit, std::vector<std::string> kinds = {"test.write", "sample.checksum", "noop"}) {
+  wire::Ready ReadyFor(const std::string& name, int credit,
+                       std::vector<std::string> kinds = {"test.write", "sample.checksum", "noop"}) {
     wire::Ready ready;
     ready.set_worker_id(name);
     ready.set_credit(credit);
@@ -371,7 +415,8 @@ class SchedulerTest : public ::testing::Test {
     out->set_bytes(6);
     return r;
   }
-  wire::TaskResult Outcome(const wire::Assign& assign, wire::TaskResult::Outcome outcome, const std::string& message) {
+  wire::TaskResult Outcome(const wire::Assign& assign, wire::TaskResult::Outcome outcome,
+                           const std::string& message) {
     wire::TaskResult r;
     r.set_attempt_id(assign.attempt_id());
     r.set_outcome(outcome);
@@ -399,7 +444,7 @@ TEST_F(SchedulerTest, DispatchByCreditAndKindCommitAndFinish) {
   scheduler_->OnReady("noop-only", ReadyFor("noop-only", 5, {"noop"}));
   scheduler_->Dispatch();
   auto first = Assigned("w1");
-  ASSERT_EQ(first.size(), 3u);                   // credit 3
+  ASSERT_EQ(first.size(), 3u);                 // credit 3
   EXPECT_TRUE(Assigned("noop-only").empty());  // cannot run test.write
   EXPECT_EQ(first[0].task().stage(), "write");
   for (const auto& a : first) scheduler_->OnResult("w1", Ok(a));
@@ -420,7 +465,8 @@ TEST_F(SchedulerTest, DispatchByCreditAndKindCommitAndFinish) {
 }
 
 TEST_F(SchedulerTest, GangsStartTogetherOnDistinctWorkersAndRestartTogether) {
-  const std::string yaml = "name: g\noutput_root: " + root_ + "\nstages:\n  t: {kind: noop, world_size: 2, retry_backoff: 1s}\n";
+  const std::string yaml = "name: g\noutput_root: " + root_ +
+                           "\nstages:\n  t: {kind: noop, world_size: 2, retry_backoff: 1s}\n";
   auto job = scheduler_->Submit(yaml, {}, "g.yaml");
   ASSERT_TRUE(job.ok()) << job.status().ToString();
   auto take = [&] {
@@ -440,14 +486,18 @@ TEST_F(SchedulerTest, GangsStartTogetherOnDistinctWorkersAndRestartTogether) {
   auto [assigns, cancels] = take();
   ASSERT_EQ(assigns["w1"].size(), 1u);
   ASSERT_EQ(assigns["w2"].size(), 1u);
-  const wire::Assign r0 = assigns["w1"][0].task().index() == 0 ? assigns["w1"][0] : assigns["w2"][0];
-  const wire::Assign r1 = assigns["w1"][0].task().index() == 1 ? assigns["w1"][0] : assigns["w2"][0];
+  const wire::Assign r0 =
+      assigns["w1"][0].task().index() == 0 ? assigns["w1"][0] : assigns["w2"][0];
+  const wire::Assign r1 =
+      assigns["w1"][0].task().index() == 1 ? assigns["w1"][0] : assigns["w2"][0];
   EXPECT_EQ(r0.task().world_size(), 2);
   EXPECT_EQ(r0.task().rendezvous(), r1.task().rendezvous());
   EXPECT_FALSE(r0.task().rendezvous().empty());
-  EXPECT_EQ(fs::path(r0.task().state_dir()).lexically_normal(), fs::path(root_ + "/g-1/t/state").lexically_normal());
+  EXPECT_EQ(fs::path(r0.task().state_dir()).lexically_normal(),
+            fs::path(root_ + "/g-1/t/state").lexically_normal());
   // Rank 1 fails: rank 0 is cancelled, and both start again together after the backoff.
-  scheduler_->OnResult(assigns["w1"][0].task().index() == 1 ? "w1" : "w2", Outcome(r1, wire::TaskResult::ERROR, "boom"));
+  scheduler_->OnResult(assigns["w1"][0].task().index() == 1 ? "w1" : "w2",
+                       Outcome(r1, wire::TaskResult::ERROR, "boom"));
   auto [none, stopped] = take();
   EXPECT_TRUE(none.empty());
   EXPECT_EQ(stopped.size(), 1u);
@@ -498,7 +548,9 @@ TEST_F(SchedulerTest, LostWorkerRequeuesWithoutUsingTheRetryBudget) {
 }
 
 TEST_F(SchedulerTest, PoisonTaskIsQuarantinedAndReported) {
-  auto job = scheduler_->Submit("name: p\noutput_root: " + root_ + "\nstages: {w: {kind: test.write, poison_threshold: 3}}\n", {}, "p.yaml");
+  auto job = scheduler_->Submit(
+      "name: p\noutput_root: " + root_ + "\nstages: {w: {kind: test.write, poison_threshold: 3}}\n",
+      {}, "p.yaml");
   for (int k = 0; k < 3; ++k) {
     const std::string w = "w" + std::to_string(k);
     scheduler_->OnReady(w, ReadyFor(w, 1));
@@ -515,7 +567,8 @@ TEST_F(SchedulerTest, PoisonTaskIsQuarantinedAndReported) {
 }
 
 TEST_F(SchedulerTest, ErrorsBackOffThenFailAfterMaxAttempts) {
-  auto job = scheduler_->Submit(PipelineIn(root_), {"stages.write.params.tasks=1"}, "p.yaml");  // max_attempts 2, backoff 2s
+  auto job = scheduler_->Submit(PipelineIn(root_), {"stages.write.params.tasks=1"},
+                                "p.yaml");  // max_attempts 2, backoff 2s
   scheduler_->OnReady("w1", ReadyFor("w1", 5));
   scheduler_->Dispatch();
   auto a = Assigned("w1");
@@ -534,7 +587,8 @@ TEST_F(SchedulerTest, ErrorsBackOffThenFailAfterMaxAttempts) {
   EXPECT_EQ(b[0].task().attempt(), 1);
   scheduler_->OnResult("w1", Outcome(b[0], wire::TaskResult::ERROR, "disk full again"));
   EXPECT_EQ(scheduler_->JobState(*job), "failed");
-  EXPECT_NE(StageOf(*job, "write").failures(0).find("failed after 2 attempt(s): disk full again"), std::string::npos);
+  EXPECT_NE(StageOf(*job, "write").failures(0).find("failed after 2 attempt(s): disk full again"),
+            std::string::npos);
 }
 
 TEST_F(SchedulerTest, BadInputFailsAtOnce) {
@@ -542,14 +596,17 @@ TEST_F(SchedulerTest, BadInputFailsAtOnce) {
   scheduler_->OnReady("w1", ReadyFor("w1", 1));
   scheduler_->Dispatch();
   auto a = Assigned("w1");
-  scheduler_->OnResult("w1", Outcome(a[0], wire::TaskResult::BAD_INPUT, "clip 3 has NaN rotations"));
+  scheduler_->OnResult("w1",
+                       Outcome(a[0], wire::TaskResult::BAD_INPUT, "clip 3 has NaN rotations"));
   EXPECT_EQ(scheduler_->JobState(*job), "failed");
-  EXPECT_NE(StageOf(*job, "write").failures(0).find("rejected its input: clip 3 has NaN rotations"), std::string::npos);
+  EXPECT_NE(StageOf(*job, "write").failures(0).find("rejected its input: clip 3 has NaN rotations"),
+            std::string::npos);
   EXPECT_EQ(scheduler_->counters().errors, 1);
 }
 
 TEST_F(SchedulerTest, SlowWorkerLeaseExpiresTheTaskMovesOnFirstCommitWins) {
-  auto job = scheduler_->Submit(PipelineIn(root_), {"stages.write.params.tasks=1", "stages.write.timeout=10s"}, "p.yaml");
+  auto job = scheduler_->Submit(
+      PipelineIn(root_), {"stages.write.params.tasks=1", "stages.write.timeout=10s"}, "p.yaml");
   scheduler_->OnReady("slow", ReadyFor("slow", 1));
   scheduler_->Dispatch();
   auto slow = Assigned("slow");
@@ -574,7 +631,8 @@ TEST_F(SchedulerTest, SlowWorkerLeaseExpiresTheTaskMovesOnFirstCommitWins) {
   scheduler_->OnResult("slow", Ok(slow[0]));
   EXPECT_EQ(scheduler_->counters().duplicates, 1);
   EXPECT_FALSE(fs::exists(slow[0].task().output_dir()));
-  EXPECT_TRUE(fs::exists(fs::path(slow[0].task().output_dir()).parent_path().parent_path() / "task-00000/out.txt"));
+  EXPECT_TRUE(fs::exists(fs::path(slow[0].task().output_dir()).parent_path().parent_path() /
+                         "task-00000/out.txt"));
   EXPECT_EQ(scheduler_->counters().lease_expired, 1);
 }
 
@@ -584,7 +642,8 @@ TEST_F(SchedulerTest, HandedBackTasksReturnWithoutPenalty) {
   scheduler_->Dispatch();
   auto a = Assigned("w1");
   scheduler_->OnDrain("w1");
-  for (const auto& x : a) scheduler_->OnResult("w1", Outcome(x, wire::TaskResult::HANDED_BACK, "preempted"));
+  for (const auto& x : a)
+    scheduler_->OnResult("w1", Outcome(x, wire::TaskResult::HANDED_BACK, "preempted"));
   scheduler_->Dispatch();
   EXPECT_TRUE(Assigned("w1").empty());  // a draining worker gets nothing new
   scheduler_->OnReady("w2", ReadyFor("w2", 4));
@@ -640,7 +699,9 @@ TEST_F(SchedulerTest, CancelStopsAttemptsAndDiscardsTheirResults) {
 }
 
 TEST_F(SchedulerTest, ScheduledPipelinesFireOnTheClock) {
-  auto id = scheduler_->Submit("name: nightly\noutput_root: " + root_ + "\nschedule: '0 3 * * *'\nstages: {a: {kind: noop}}\n", {}, "n.yaml");
+  auto id = scheduler_->Submit("name: nightly\noutput_root: " + root_ +
+                                   "\nschedule: '0 3 * * *'\nstages: {a: {kind: noop}}\n",
+                               {}, "n.yaml");
   ASSERT_TRUE(id.ok());
   EXPECT_EQ(*id, 0);  // registered, not run
   EXPECT_TRUE(scheduler_->JobStatuses(0).empty());
@@ -658,7 +719,8 @@ TEST_F(SchedulerTest, ScheduledPipelinesFireOnTheClock) {
   EXPECT_EQ(scheduler_->JobStatuses(0).size(), 1u);  // once per fire time
 }
 
-// ---- protocol ------------------------------------------------------------------------------------
+// ---- protocol
+// ------------------------------------------------------------------------------------
 
 std::vector<zmq::message_t> Frames(std::vector<std::string> parts) {
   std::vector<zmq::message_t> frames;
@@ -681,7 +743,8 @@ TEST(Protocol, HeaderGuardsEveryFrame) {
   EXPECT_EQ(net::DecodeFrames(version, true, &e), net::DropReason::kVersion);
   auto type = Frames({"id", std::string{'M', 'P', 1, 77}, body});
   EXPECT_EQ(net::DecodeFrames(type, true, &e), net::DropReason::kType);
-  auto big = Frames({net::EncodeHeader(net::MessageType::kReady), std::string(net::kMaxFrameBytes + 1, 'x')});
+  auto big = Frames(
+      {net::EncodeHeader(net::MessageType::kReady), std::string(net::kMaxFrameBytes + 1, 'x')});
   EXPECT_EQ(net::DecodeFrames(big, false, &e), net::DropReason::kOversized);
   wire::Ready ready;
   EXPECT_FALSE(net::ParseBody(std::string("\xff\xff\xff\xff\xff", 5), &ready));
@@ -698,7 +761,9 @@ TEST(Security, AllowListKeysMayContainHash) {
   const std::string with_hash = "rq:rM>}U?@Lns47E1%kR.o@n%FcmmsL/@{H8]yf#";
   const std::string plain = "Yne@$w-vo<fVvi]a<NY6T1ed:M$fCG*[IaLV{hID";
   const std::string path = ::testing::TempDir() + "/allow_hash.txt";
-  ASSERT_TRUE(WriteFileAtomic(path, "# workers\n" + with_hash + "\n  public-key: " + plain + "   # laptop\n\n").ok());
+  ASSERT_TRUE(WriteFileAtomic(
+                  path, "# workers\n" + with_hash + "\n  public-key: " + plain + "   # laptop\n\n")
+                  .ok());
   auto keys = net::LoadAllowList(path);
   ASSERT_TRUE(keys.ok()) << keys.status().ToString();
   EXPECT_EQ(*keys, (std::set<std::string>{with_hash, plain}));
@@ -721,21 +786,26 @@ TEST(PluginHost, LoadsTheSamplePluginAndRefusesBadOnes) {
   ASSERT_TRUE(host.LoadFile(MOTIONPIPE_BUILD_DIR "/plugins/sample.so").ok());
   ASSERT_EQ(host.plugins().size(), 1u);
   EXPECT_EQ(host.plugins()[0].name, "sample");
-  EXPECT_EQ(host.plugins()[0].stage_kinds, (std::vector<std::string>{"sample.checksum", "sample.echo"}));
+  EXPECT_EQ(host.plugins()[0].stage_kinds,
+            (std::vector<std::string>{"sample.checksum", "sample.echo"}));
   const auto expect_refused = [&](const std::string& file, const std::string& why) {
     const Status s = host.LoadFile(file);
     ASSERT_FALSE(s.ok()) << file;
     EXPECT_NE(s.message().find(why), std::string::npos) << s.message();
   };
   const unsigned abi = MOTIONPIPE_PLUGIN_ABI_VERSION;
-  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/bad_abi.so", "plugin ABI version " + std::to_string(abi + 41) +
-                                                                      ", this host speaks version " + std::to_string(abi));
-  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/throws.so", "entry point threw: cannot find my model weights");
-  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/no_entry.so", "no 'motionpipe_plugin_v1' symbol");
+  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/bad_abi.so",
+                 "plugin ABI version " + std::to_string(abi + 41) + ", this host speaks version " +
+                     std::to_string(abi));
+  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/throws.so",
+                 "entry point threw: cannot find my model weights");
+  expect_refused(MOTIONPIPE_BUILD_DIR "/test_plugins/no_entry.so",
+                 "no 'motionpipe_plugin_v1' symbol");
   const std::string not_a_library = ::testing::TempDir() + "/fake.so";
   std::ofstream(not_a_library) << "not ELF";
   expect_refused(not_a_library, "cannot load");
-  EXPECT_TRUE(host.LoadFile(MOTIONPIPE_BUILD_DIR "/plugins/../plugins/sample.so").ok());  // same file again: no-op
+  EXPECT_TRUE(host.LoadFile(MOTIONPIPE_BUILD_DIR "/plugins/../plugins/sample.so")
+                  .ok());  // same file again: no-op
   EXPECT_EQ(host.problems().size(), 4u);
   EXPECT_EQ(host.plugins().size(), 1u);  // the host kept going
 
@@ -780,7 +850,8 @@ TEST(Executors, OutputsAreScannedWithChecksums) {
   const auto outputs = ScanOutputs(dir);
   ASSERT_EQ(outputs.size(), 2u);
   EXPECT_EQ(outputs[0].path(), "b.txt");
-  EXPECT_EQ(outputs[0].sha256(), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(outputs[0].sha256(),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
   EXPECT_EQ(outputs[1].path(), "sub/a.txt");
   EXPECT_TRUE(ScanOutputs(dir + "/missing").empty());
 }

@@ -7,12 +7,16 @@ namespace {
 
 TEST(Gerund, EnglishSpellingRules) {
   const std::pair<const char*, const char*> cases[] = {
-      {"wave", "waving"},   {"sit", "sitting"},    {"lie", "lying"},       {"kneel", "kneeling"}, {"run", "running"},
-      {"hop", "hopping"},   {"jog", "jogging"},    {"squat", "squatting"}, {"nod", "nodding"},    {"clap", "clapping"},
-      {"step", "stepping"}, {"stomp", "stomping"}, {"visit", "visiting"},  {"open", "opening"},   {"begin", "beginning"},
-      {"bow", "bowing"},    {"fix", "fixing"},     {"play", "playing"},    {"see", "seeing"},     {"tiptoe", "tiptoeing"},
-      {"dance", "dancing"}, {"look", "looking"},   {"point", "pointing"},  {"wait", "waiting"},   {"quit", "quitting"},
-      {"kick", "kicking"},  {"shuffle", "shuffling"}, {"walking", "walking"}, {"Wave", "Waving"}, {"die", "dying"}};
+      {"wave", "waving"},     {"sit", "sitting"},      {"lie", "lying"},
+      {"kneel", "kneeling"},  {"run", "running"},      {"hop", "hopping"},
+      {"jog", "jogging"},     {"squat", "squatting"},  {"nod", "nodding"},
+      {"clap", "clapping"},   {"step", "stepping"},    {"stomp", "stomping"},
+      {"visit", "visiting"},  {"open", "opening"},     {"begin", "beginning"},
+      {"bow", "bowing"},      {"fix", "fixing"},       {"play", "playing"},
+      {"see", "seeing"},      {"tiptoe", "tiptoeing"}, {"dance", "dancing"},
+      {"look", "looking"},    {"point", "pointing"},   {"wait", "waiting"},
+      {"quit", "quitting"},   {"kick", "kicking"},     {"shuffle", "shuffling"},
+      {"walking", "walking"}, {"Wave", "Waving"},      {"die", "dying"}};
   for (const auto& [verb, gerund] : cases) EXPECT_EQ(Gerund(verb), gerund) << verb;
 }
 

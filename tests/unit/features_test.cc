@@ -24,7 +24,8 @@ Motion TurnAndShift(const Motion& motion, double angle, double dx, double dy) {
 
 double MaxFeatureDiff(const FeatureMatrix& a, const FeatureMatrix& b) {
   double worst = 0;
-  for (size_t k = 0; k < a.data.size(); ++k) worst = std::max(worst, static_cast<double>(std::abs(a.data[k] - b.data[k])));
+  for (size_t k = 0; k < a.data.size(); ++k)
+    worst = std::max(worst, static_cast<double>(std::abs(a.data[k] - b.data[k])));
   return worst;
 }
 
@@ -42,7 +43,8 @@ TEST(MotionFix207, EncodeDecodeRoundTripTo1e5) {
     const FeatureMatrix f = EncodeMotionFix207(s, motion);
     ASSERT_EQ(f.rows, 300);
     ASSERT_EQ(f.cols, 207);
-    const MotionDifference d = CompareMotions(s, motion, DecodeMotionFix207(f, AnchorOf(motion), 30));
+    const MotionDifference d =
+        CompareMotions(s, motion, DecodeMotionFix207(f, AnchorOf(motion), 30));
     EXPECT_LT(d.max_rotation, 1e-5) << seed;
     EXPECT_LT(d.max_translation, 1e-5) << seed;
     EXPECT_LT(d.max_joint, 1e-5) << seed;
@@ -71,12 +73,14 @@ TEST(MotionFix207, InvariantToHeadingAndGroundPosition) {
 }
 
 TEST(MotionFix207, StandingPoseMatchesReferenceStatistics) {
-  // The shipped MotionFix means describe upright bodies: orientation ~ Rx(90), heading delta ~ identity.
+  // The shipped MotionFix means describe upright bodies: orientation ~ Rx(90), heading delta ~
+  // identity.
   auto stats = LoadStats(testing::DataDir() + "/stats/motionfix_feature_stats.json");
   ASSERT_TRUE(stats.ok()) << stats.status().ToString();
   const Motion rest = Motion::Rest(3, 30, 0.9);
   const FeatureMatrix f = EncodeMotionFix207(Skeleton::Smpl22(), rest);
-  for (int c = 3; c < 15; ++c) EXPECT_NEAR(f.at(1, c), stats->mean[static_cast<size_t>(c)], 0.06) << c;
+  for (int c = 3; c < 15; ++c)
+    EXPECT_NEAR(f.at(1, c), stats->mean[static_cast<size_t>(c)], 0.06) << c;
 }
 
 TEST(Temos135, EncodeDecodeRoundTripTo1e5) {
@@ -106,7 +110,8 @@ TEST(Temos135, CanonicalisationIsInvariantToInitialHeading) {
 
 TEST(Temos135, CanonicalHeadingMatchesTheReferenceMean) {
   // The shipped SINC mean has the first pelvis facing -x: 6D orientation ~ [0, 0, -1, -1, 0, 0].
-  auto stats = LoadStats(testing::DataDir() + "/stats/sinc_tmr_feature_stats.json", "sinc_rfeats_babel-amass");
+  auto stats = LoadStats(testing::DataDir() + "/stats/sinc_tmr_feature_stats.json",
+                         "sinc_rfeats_babel-amass");
   ASSERT_TRUE(stats.ok()) << stats.status().ToString();
   ASSERT_EQ(stats->mean.size(), 135u);
   const FeatureMatrix f = EncodeTemos135(testing::SmoothMotion(2, 3));
@@ -129,7 +134,8 @@ TEST(Normalization, ComputeSaveLoadApply) {
   EXPECT_EQ(stats->count, 120);
   // Column 20 by hand.
   double mean = 0;
-  for (const FeatureMatrix* m : {&a, &b}) for (int64_t r = 0; r < m->rows; ++r) mean += m->at(r, 20);
+  for (const FeatureMatrix* m : {&a, &b})
+    for (int64_t r = 0; r < m->rows; ++r) mean += m->at(r, 20);
   mean /= 120;
   EXPECT_NEAR(stats->mean[20], mean, 1e-6);
   const std::string path = ::testing::TempDir() + "/stats.json";
@@ -140,7 +146,8 @@ TEST(Normalization, ComputeSaveLoadApply) {
   EXPECT_EQ(loaded->mean, stats->mean);
   FeatureMatrix copy = a;
   ASSERT_TRUE(Normalize(&copy, *loaded).ok());
-  EXPECT_NEAR(copy.at(0, 20), (a.at(0, 20) - stats->mean[20]) / (2 * (stats->std[20] + 1e-5)), 1e-4);
+  EXPECT_NEAR(copy.at(0, 20), (a.at(0, 20) - stats->mean[20]) / (2 * (stats->std[20] + 1e-5)),
+              1e-4);
   ASSERT_TRUE(Denormalize(&copy, *loaded).ok());
   EXPECT_LT(MaxFeatureDiff(copy, a), 1e-5);
   FeatureMatrix wrong(3, 5);

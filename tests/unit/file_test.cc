@@ -13,7 +13,8 @@ TEST(Sha256, KnownVectors) {
   EXPECT_EQ(Sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
   EXPECT_EQ(Sha256Hex("abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq"),
             "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
-  EXPECT_EQ(Sha256Hex(std::string(1000000, 'a')), "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+  EXPECT_EQ(Sha256Hex(std::string(1000000, 'a')),
+            "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
 }
 
 TEST(File, AtomicWriteReplacesAndLeavesNoTemporaries) {
@@ -24,7 +25,8 @@ TEST(File, AtomicWriteReplacesAndLeavesNoTemporaries) {
   ASSERT_TRUE(WriteFileAtomic(path, "second").ok());
   EXPECT_EQ(*ReadFile(path), "second");
   int entries = 0;
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) entries += entry.is_regular_file();
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    entries += entry.is_regular_file();
   EXPECT_EQ(entries, 1);
   EXPECT_EQ(ReadFile(dir + "/missing").status().code(), StatusCode::kNotFound);
   EXPECT_FALSE(WriteFileAtomic(dir + "/no/such/dir/file", "x").ok());
@@ -37,12 +39,15 @@ TEST(FileLock, OneHolderAtATimeNamedByPid) {
   {
     auto first = FileLock::Acquire(path);
     ASSERT_TRUE(first.ok()) << first.status().message();
-    // flock belongs to the open file: a second open of the same file conflicts, even in this process.
+    // flock belongs to the open file: a second open of the same file conflicts, even in this
+    // process.
     const auto second = FileLock::Acquire(path);
     ASSERT_FALSE(second.ok());
     EXPECT_EQ(second.status().code(), StatusCode::kFailedPrecondition);
     EXPECT_NE(second.status().message().find(path), std::string::npos) << second.status().message();
-    EXPECT_NE(second.status().message().find("(pid " + std::to_string(::getpid()) + ")"), std::string::npos) << second.status().message();
+    EXPECT_NE(second.status().message().find("(pid " + std::to_string(::getpid()) + ")"),
+              std::string::npos)
+        << second.status().message();
     FileLock moved = std::move(*first);  // the lock moves with the object
     EXPECT_FALSE(FileLock::Acquire(path).ok());
   }

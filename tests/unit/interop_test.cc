@@ -32,7 +32,8 @@ TEST(NumpyInterop, NumpyLoadsOurClipFile) {
   b.joints = ComputeJoints(Skeleton::Smpl22(), b.motion);
   a.joints = ComputeJoints(Skeleton::Smpl22(), a.motion);
   for (bool compress : {true, false}) {
-    const std::string path = ::testing::TempDir() + (compress ? "/interop_deflated.npz" : "/interop_stored.npz");
+    const std::string path =
+        ::testing::TempDir() + (compress ? "/interop_deflated.npz" : "/interop_stored.npz");
     ASSERT_TRUE(WriteClips(path, {a, b}, compress).ok());
     EXPECT_EQ(RunPython(Script() + " check-clips " + path), 0);
   }
@@ -70,8 +71,10 @@ TEST(NumpyInterop, WeReadWhatNumpyWrites) {
     EXPECT_EQ((*(*npz->Get("b", name))->ToInt64(name)), (std::vector<int64_t>{1, 0, 1}));
     EXPECT_EQ((*(*npz->Get("u", name))->ToStrings(name))[1], "wave — right hand");
     EXPECT_EQ((*(*npz->Get("scalar", name))->ToFloat64(name))[0], 29.97);
-    EXPECT_EQ((*(*npz->Get("fortran", name))->ToInt64(name)), (std::vector<int64_t>{0, 1, 2, 3, 4, 5}));
-    EXPECT_EQ((*(*npz->Get("bigendian", name))->ToFloat64(name)), (std::vector<double>{0, 1, 2, 3}));
+    EXPECT_EQ((*(*npz->Get("fortran", name))->ToInt64(name)),
+              (std::vector<int64_t>{0, 1, 2, 3, 4, 5}));
+    EXPECT_EQ((*(*npz->Get("bigendian", name))->ToFloat64(name)),
+              (std::vector<double>{0, 1, 2, 3}));
     EXPECT_EQ((*npz->Get("empty", name))->shape, (std::vector<int64_t>{0, 3}));
   }
   auto npy = ReadNpy(dir + "/plain.npy");
@@ -83,8 +86,8 @@ TEST(MotionFixConverter, ConvertsAJoblibPickleToOurLayout) {
   const std::string dir = ::testing::TempDir() + "/motionfix";
   ASSERT_EQ(RunPython(Script() + " motionfix-pickle " + dir), 0);
   const std::string out = dir + "/motionfix.npz";
-  ASSERT_EQ(RunPython(testing::SourceDir() + "/tools/motionfix_convert.py " + dir + "/motionfix.pth.tar --splits " + dir +
-                      "/splits.json --out " + out),
+  ASSERT_EQ(RunPython(testing::SourceDir() + "/tools/motionfix_convert.py " + dir +
+                      "/motionfix.pth.tar --splits " + dir + "/splits.json --out " + out),
             0);
   auto triplets = ReadTriplets(out);
   ASSERT_TRUE(triplets.ok()) << triplets.status().ToString();
@@ -105,8 +108,8 @@ TEST(MotionFixConverter, ConvertsAJoblibPickleToOurLayout) {
   std::FILE* f = std::fopen((dir + "/broken.pth.tar").c_str(), "w");
   std::fputs("not a pickle", f);
   std::fclose(f);
-  EXPECT_NE(RunPython(testing::SourceDir() + "/tools/motionfix_convert.py " + dir + "/broken.pth.tar --out " + dir +
-                      "/x.npz 2> " + dir + "/err.txt"),
+  EXPECT_NE(RunPython(testing::SourceDir() + "/tools/motionfix_convert.py " + dir +
+                      "/broken.pth.tar --out " + dir + "/x.npz 2> " + dir + "/err.txt"),
             0);
 }
 

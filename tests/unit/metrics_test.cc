@@ -1,4 +1,6 @@
 // The evaluation metrics on hand-computed cases.
+#include "motionpipe/eval/metrics.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -6,7 +8,6 @@
 #include <random>
 
 #include "metric_history.h"
-#include "motionpipe/eval/metrics.h"
 
 namespace motionpipe::eval {
 namespace {
@@ -14,9 +15,9 @@ namespace {
 TEST(Retrieval, RanksCountHigherCandidatesAndAverageTies) {
   // Query 0: own 0.9, best -> rank 1. Query 1: own 0.5, one higher (0.8) -> 2. Query 2: own 0.3,
   // ties with one (0.3) and one higher (0.7) -> 1 + 1 + 0.5 = 2.5. Query 3: own lowest -> 4.
-  const std::vector<double> s = {0.9, 0.1, 0.2, 0.3,   //
-                                 0.8, 0.5, 0.1, 0.2,   //
-                                 0.7, 0.3, 0.3, 0.1,   //
+  const std::vector<double> s = {0.9, 0.1, 0.2, 0.3,  //
+                                 0.8, 0.5, 0.1, 0.2,  //
+                                 0.7, 0.3, 0.3, 0.1,  //
                                  0.5, 0.6, 0.7, 0.0};
   const auto ranks = TrueMatchRanks(s, 4);
   EXPECT_EQ(ranks, (std::vector<double>{1, 2, 2.5, 4}));
@@ -46,7 +47,8 @@ TEST(Retrieval, IdenticalEmbeddingsAreFoundFirstAndBatchesDropTheRemainder) {
   const RetrievalScores batched = Retrieval(x, x, 32, 7);
   EXPECT_EQ(batched.queries, 64);  // 2 batches of 32, 6 dropped
   EXPECT_DOUBLE_EQ(batched.r1, 100.0);
-  // Unrelated embeddings: mean rank near (32 + 1) / 2 in batches of 32, the same under the same seed.
+  // Unrelated embeddings: mean rank near (32 + 1) / 2 in batches of 32, the same under the same
+  // seed.
   const Embeddings y = Random(640, 8, 2);
   const RetrievalScores chance = Retrieval(Random(640, 8, 3), y, 32, 5);
   EXPECT_NEAR(chance.avg_rank, 16.5, 1.5);
@@ -98,14 +100,17 @@ TEST(PositionErrors, LocalErrorsRemoveEachFramesHeading) {
   const PositionErrors aligned = AveragePositionalError(turned, truth, 3, HeadingJoints{1, 2});
   EXPECT_NEAR(aligned.mean_local, 0, 1e-6);
   EXPECT_NEAR(aligned.root, 2, 1e-6);  // the global terms are unchanged
-  EXPECT_NEAR(aligned.mean_global, (2 + std::hypot(2 - 0.1, 0.1) + std::hypot(2 + 0.1, 0.1)) / 3, 1e-6);
+  EXPECT_NEAR(aligned.mean_global, (2 + std::hypot(2 - 0.1, 0.1) + std::hypot(2 + 0.1, 0.1)) / 3,
+              1e-6);
 }
 
 TEST(PositionErrors, CanonicalMotionsCompareWhereverTheyStarted) {
   // The same two-frame walk of root + hips, once at the origin facing +x (hips along +x) and once
   // 5 m away, turned 90 degrees: canonical, they are identical.
-  std::vector<float> here = {0, 0, 1, 0.1f, 0, 1, -0.1f, 0, 1, 0, 0.5f, 1, 0.1f, 0.5f, 1, -0.1f, 0.5f, 1};
-  std::vector<float> there = {5, 5, 1, 5, 5.1f, 1, 5, 4.9f, 1, 4.5f, 5, 1, 4.5f, 5.1f, 1, 4.5f, 4.9f, 1};
+  std::vector<float> here = {0, 0,    1, 0.1f, 0,    1, -0.1f, 0,    1,
+                             0, 0.5f, 1, 0.1f, 0.5f, 1, -0.1f, 0.5f, 1};
+  std::vector<float> there = {5,    5, 1, 5,    5.1f, 1, 5,    4.9f, 1,
+                              4.5f, 5, 1, 4.5f, 5.1f, 1, 4.5f, 4.9f, 1};
   EXPECT_GT(AveragePositionalError(there, here, 3).root, 5);
   Canonicalize(&here, 3, HeadingJoints{1, 2});
   Canonicalize(&there, 3, HeadingJoints{1, 2});
@@ -120,7 +125,8 @@ TEST(Fid, IsZeroForIdenticalSetsAndTheClosedFormOtherwise) {
   Embeddings shifted = x;
   for (auto& v : shifted.values) v += 0.5;
   EXPECT_NEAR(FrechetDistance(x, shifted), 1.5, 1e-6);
-  // A scaled copy (covariance times 4): Tr(C + 4C - 2 * 2C) = Tr(C), and the mean term |mu|^2 (1 - 2)^2.
+  // A scaled copy (covariance times 4): Tr(C + 4C - 2 * 2C) = Tr(C), and the mean term |mu|^2 (1 -
+  // 2)^2.
   Embeddings scaled = x;
   for (auto& v : scaled.values) v *= 2;
   double trace = 0, mean_sq = 0;
@@ -142,7 +148,9 @@ TEST(Fid, SymmetricEigenReconstructsTheMatrix) {
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
       double s = 0;
-      for (int k = 0; k < 3; ++k) s += vectors[static_cast<size_t>(i * 3 + k)] * values[static_cast<size_t>(k)] * vectors[static_cast<size_t>(j * 3 + k)];
+      for (int k = 0; k < 3; ++k)
+        s += vectors[static_cast<size_t>(i * 3 + k)] * values[static_cast<size_t>(k)] *
+             vectors[static_cast<size_t>(j * 3 + k)];
       EXPECT_NEAR(s, m[static_cast<size_t>(i * 3 + j)], 1e-10);
     }
   }
@@ -166,19 +174,25 @@ namespace {
 TEST(MetricHistory, ARegressionIsAFallOfMoreThanTheMarginBelowTheBest) {
   const std::string path = ::testing::TempDir() + "/history.sqlite";
   std::filesystem::remove(path);
-  const auto record = [](const std::string& method, const std::string& metric, double value, bool higher, const std::string& ckpt) {
+  const auto record = [](const std::string& method, const std::string& metric, double value,
+                         bool higher, const std::string& ckpt) {
     MetricRecord r;
-    r.method = method, r.metric = metric, r.value = value, r.higher_is_better = higher, r.checkpoint = ckpt;
+    r.method = method, r.metric = metric, r.value = value, r.higher_is_better = higher,
+    r.checkpoint = ckpt;
     return r;
   };
-  auto first = AppendAndCompare(path, {record("mdt", "R@1", 50, true, "a"), record("mdt", "AvgR", 3.0, false, "a")}, 2.0);
+  auto first = AppendAndCompare(
+      path, {record("mdt", "R@1", 50, true, "a"), record("mdt", "AvgR", 3.0, false, "a")}, 2.0);
   ASSERT_TRUE(first.ok()) << first.status().message();
   EXPECT_TRUE(first->empty());  // nothing to compare with
   ASSERT_TRUE(AppendAndCompare(path, {record("mdt", "R@1", 60, true, "b")}, 2.0).ok());
   // 59 is within the margin of the best (60); 57 is not; AvgR 5.5 is worse than 3.0 by more than 2.
   EXPECT_TRUE(AppendAndCompare(path, {record("mdt", "R@1", 59, true, "c")}, 2.0)->empty());
-  auto worse = AppendAndCompare(path, {record("mdt", "R@1", 57, true, "d"), record("mdt", "AvgR", 5.5, false, "d"),
-                                       record("tmed", "R@1", 10, true, "d")}, 2.0);
+  auto worse =
+      AppendAndCompare(path,
+                       {record("mdt", "R@1", 57, true, "d"), record("mdt", "AvgR", 5.5, false, "d"),
+                        record("tmed", "R@1", 10, true, "d")},
+                       2.0);
   ASSERT_TRUE(worse.ok());
   ASSERT_EQ(worse->size(), 2u);  // tmed has no history yet
   EXPECT_EQ((*worse)[0].metric, "R@1");
@@ -186,8 +200,10 @@ TEST(MetricHistory, ARegressionIsAFallOfMoreThanTheMarginBelowTheBest) {
   EXPECT_EQ((*worse)[0].best_checkpoint, "b");
   EXPECT_EQ((*worse)[1].metric, "AvgR");
   EXPECT_DOUBLE_EQ((*worse)[1].best, 3.0);
-  EXPECT_NE((*worse)[0].Describe().find("regressed: 57 against its best 60"), std::string::npos) << (*worse)[0].Describe();
-  EXPECT_FALSE(AppendAndCompare("/no/such/dir/history.sqlite", {record("m", "x", 1, true, "")}, 0).ok());
+  EXPECT_NE((*worse)[0].Describe().find("regressed: 57 against its best 60"), std::string::npos)
+      << (*worse)[0].Describe();
+  EXPECT_FALSE(
+      AppendAndCompare("/no/such/dir/history.sqlite", {record("m", "x", 1, true, "")}, 0).ok());
   EXPECT_EQ(HashText("abc"), HashText("abc"));
   EXPECT_NE(HashText("abc"), HashText("abd"));
 }

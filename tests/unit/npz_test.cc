@@ -1,22 +1,27 @@
+#include "motionpipe/formats/npz.h"
+
 #include <gtest/gtest.h>
 
 #include "motionpipe/formats/npy.h"
-#include "motionpipe/formats/npz.h"
 #include "motionpipe/formats/zip.h"
 
 namespace motionpipe {
 namespace {
 
 TEST(Npy, RoundTripsEveryDType) {
-  const std::vector<NpyArray> arrays = {
-      NpyArray::Float32({2, 3}, {1, 2, 3, 4, 5, -6.5f}), NpyArray::Float64({3}, {1e300, -2, 0.5}),
-      NpyArray::Int32({2}, {-7, 1 << 30}),               NpyArray::Int64({1}, {-(int64_t{1} << 50)}),
-      NpyArray::Bool({4}, {1, 0, 0, 1}),                 NpyArray::UInt8({2}, {0, 255}),
-      NpyArray::Strings({3}, {"walk", "wave — right hand", ""}), NpyArray::ScalarFloat64(29.97)};
+  const std::vector<NpyArray> arrays = {NpyArray::Float32({2, 3}, {1, 2, 3, 4, 5, -6.5f}),
+                                        NpyArray::Float64({3}, {1e300, -2, 0.5}),
+                                        NpyArray::Int32({2}, {-7, 1 << 30}),
+                                        NpyArray::Int64({1}, {-(int64_t{1} << 50)}),
+                                        NpyArray::Bool({4}, {1, 0, 0, 1}),
+                                        NpyArray::UInt8({2}, {0, 255}),
+                                        NpyArray::Strings({3}, {"walk", "wave — right hand", ""}),
+                                        NpyArray::ScalarFloat64(29.97)};
   for (const NpyArray& a : arrays) {
     const std::string bytes = SerializeNpy(a);
     // numpy aligns the data start to 64 bytes.
-    const size_t header = 10 + (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8));
+    const size_t header =
+        10 + (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8));
     EXPECT_EQ(header % 64, 0u);
     auto back = ParseNpy(bytes, "a.npy");
     ASSERT_TRUE(back.ok()) << back.status().ToString();
@@ -61,11 +66,17 @@ TEST(Npy, BadInputGivesNamedErrors) {
     EXPECT_NE(a.status().message().find(fragment), std::string::npos) << a.status().message();
   };
   expect_error("hello world", "bad magic");
-  expect_error(Header("{'descr': '|O', 'fortran_order': False, 'shape': (2,), }\n"), "object arrays");
-  expect_error(Header("{'descr': [('a', '<f4')], 'fortran_order': False, 'shape': (2,), }\n"), "structured");
-  expect_error(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }\n") + "abc", "truncated data");
-  expect_error(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (99999999999, 99999999999), }\n"), "overflows");
-  expect_error(Header("{'descr': '<f2', 'fortran_order': False, 'shape': (1,), }\n") + "ab", "unsupported dtype");
+  expect_error(Header("{'descr': '|O', 'fortran_order': False, 'shape': (2,), }\n"),
+               "object arrays");
+  expect_error(Header("{'descr': [('a', '<f4')], 'fortran_order': False, 'shape': (2,), }\n"),
+               "structured");
+  expect_error(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }\n") + "abc",
+               "truncated data");
+  expect_error(
+      Header("{'descr': '<f4', 'fortran_order': False, 'shape': (99999999999, 99999999999), }\n"),
+      "overflows");
+  expect_error(Header("{'descr': '<f2', 'fortran_order': False, 'shape': (1,), }\n") + "ab",
+               "unsupported dtype");
   expect_error(Header("{'descr': '<f4', 'shape': (1,), }\n"), "missing");
   auto strings = NpyArray::Strings({1}, {"x"});
   EXPECT_FALSE(strings.ToFloat32("s").ok());
@@ -155,10 +166,12 @@ TEST(Npz, RoundTripAndShapeChecks) {
     EXPECT_TRUE(GetShaped(*back, "poses", {-1, 22, 3}, "m.npz").ok());
     auto wrong = GetShaped(*back, "poses", {-1, 24, 3}, "m.npz");
     ASSERT_FALSE(wrong.ok());
-    EXPECT_NE(wrong.status().message().find("has shape (2, 22, 3), expected (N, 24, 3)"), std::string::npos);
+    EXPECT_NE(wrong.status().message().find("has shape (2, 22, 3), expected (N, 24, 3)"),
+              std::string::npos);
     auto missing = back->Get("trans", "m.npz");
     ASSERT_FALSE(missing.ok());
-    EXPECT_NE(missing.status().message().find("missing array 'trans' (present: poses, name)"), std::string::npos);
+    EXPECT_NE(missing.status().message().find("missing array 'trans' (present: poses, name)"),
+              std::string::npos);
   }
 }
 

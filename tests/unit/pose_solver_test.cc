@@ -9,7 +9,8 @@ namespace motionpipe {
 namespace {
 
 double Det(const Mat3& m) {
-  return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+  return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+         m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
          m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
 }
 
@@ -17,12 +18,15 @@ PoseTargets Standing(const Skeleton& s) {
   PoseTargets t;
   t.pelvis = {0.3, -0.2, 0.78};
   t.facing = 0.7;
-  const Vec3 forward{std::cos(t.facing), std::sin(t.facing), 0}, left{-std::sin(t.facing), std::cos(t.facing), 0};
+  const Vec3 forward{std::cos(t.facing), std::sin(t.facing), 0},
+      left{-std::sin(t.facing), std::cos(t.facing), 0};
   for (int side = 0; side < 2; ++side) {
     const double sign = side == 0 ? 1 : -1;
-    t.feet[static_cast<size_t>(side)] = {t.pelvis + (sign * 0.1) * left + Vec3{0, 0, -0.78} + 0.1 * forward, forward, forward};
+    t.feet[static_cast<size_t>(side)] = {
+        t.pelvis + (sign * 0.1) * left + Vec3{0, 0, -0.78} + 0.1 * forward, forward, forward};
     const UpperBodyFrame chest = ComputeUpperBody(s, t);
-    t.hands[static_cast<size_t>(side)].wrist = chest.shoulders[static_cast<size_t>(side)] + Vec3{0, 0, -0.45} + 0.1 * forward;
+    t.hands[static_cast<size_t>(side)].wrist =
+        chest.shoulders[static_cast<size_t>(side)] + Vec3{0, 0, -0.45} + 0.1 * forward;
     t.hands[static_cast<size_t>(side)].elbow_pole = -1.0 * forward;
   }
   return t;
@@ -37,14 +41,22 @@ TEST(PoseSolver, ReachesTargetsWithProperRotationsAndHinges) {
   ForwardKinematicsFrame(s, pose.local.data(), pose.translation, global.data(), position.data());
   for (int j = 0; j < kNumJoints; ++j) {
     EXPECT_NEAR(Det(pose.local[static_cast<size_t>(j)]), 1.0, 1e-9) << j;
-    EXPECT_LT(MaxAbsDiff(pose.local[static_cast<size_t>(j)] * Transpose(pose.local[static_cast<size_t>(j)]), Mat3::Identity()), 1e-9);
+    EXPECT_LT(MaxAbsDiff(pose.local[static_cast<size_t>(j)] *
+                             Transpose(pose.local[static_cast<size_t>(j)]),
+                         Mat3::Identity()),
+              1e-9);
   }
   for (int side = 0; side < 2; ++side) {
-    EXPECT_LT(Norm(position[static_cast<size_t>(side == 0 ? 7 : 8)] - t.feet[static_cast<size_t>(side)].ankle), 1e-6);
-    EXPECT_LT(Norm(position[static_cast<size_t>(side == 0 ? 20 : 21)] - t.hands[static_cast<size_t>(side)].wrist), 1e-6);
+    EXPECT_LT(Norm(position[static_cast<size_t>(side == 0 ? 7 : 8)] -
+                   t.feet[static_cast<size_t>(side)].ankle),
+              1e-6);
+    EXPECT_LT(Norm(position[static_cast<size_t>(side == 0 ? 20 : 21)] -
+                   t.hands[static_cast<size_t>(side)].wrist),
+              1e-6);
     EXPECT_EQ(pose.leg_reach_error[static_cast<size_t>(side)], 0.0);
     // The foot points where asked.
-    const Vec3 toe = position[static_cast<size_t>(side == 0 ? 10 : 11)] - position[static_cast<size_t>(side == 0 ? 7 : 8)];
+    const Vec3 toe = position[static_cast<size_t>(side == 0 ? 10 : 11)] -
+                     position[static_cast<size_t>(side == 0 ? 7 : 8)];
     EXPECT_GT(Dot(toe, t.feet[static_cast<size_t>(side)].toe_dir) / Norm(toe), 0.999);
     // Knees are hinges about x, elbows about y (SMPL's axes), bending the right way.
     const Mat3& knee = pose.local[static_cast<size_t>(side == 0 ? 4 : 5)];

@@ -69,7 +69,8 @@ TEST(Image, TextIsDrawnAndDistinctGlyphsDiffer) {
 TEST(Chart, TicksAndLabels) {
   const auto unit = NiceTicks(0, 1, 5);
   ASSERT_EQ(unit.size(), 6u);
-  for (size_t k = 0; k < unit.size(); ++k) EXPECT_NEAR(unit[k], 0.2 * static_cast<double>(k), 1e-12);
+  for (size_t k = 0; k < unit.size(); ++k)
+    EXPECT_NEAR(unit[k], 0.2 * static_cast<double>(k), 1e-12);
   const auto ticks = NiceTicks(0, 48000, 5);
   EXPECT_EQ(ticks.front(), 0);
   EXPECT_EQ(ticks[1], 10000);
@@ -89,7 +90,8 @@ TEST(Chart, TicksAndLabels) {
   const int cx = static_cast<int>(panel.PixelX(5)), cy = static_cast<int>(panel.PixelY(0.5));
   int blue = 0;
   for (int y = cy - 2; y <= cy + 2; ++y) {
-    for (int x = cx - 2; x <= cx + 2; ++x) blue += image.At(x, y).r < 100 && image.At(x, y).b > 100 ? 1 : 0;
+    for (int x = cx - 2; x <= cx + 2; ++x)
+      blue += image.At(x, y).r < 100 && image.At(x, y).b > 100 ? 1 : 0;
   }
   EXPECT_GT(blue, 2);
 }

@@ -1,21 +1,23 @@
 // The report's calibrated claim verdicts (issue 15): a claim is decided only between models that
 // learned (each beats the untrained row) with 3+ seeds a side, by two standard errors.
-#include <gtest/gtest.h>
-
 #include "report.h"
+
+#include <gtest/gtest.h>
 
 namespace motionpipe::worker {
 namespace {
 
 TEST(Claims, NotDecidableWhileAComparedModelDoesNotBeatItsUntrainedRow) {
   // Both near chance (the demo before issue 15): the untrained row is as good.
-  EXPECT_EQ(DecideClaim({4.2, 3.1, 5.2}, {5.2, 5.2, 5.2}, {4.0}, true), ClaimVerdict::kBetterNotTrained);
+  EXPECT_EQ(DecideClaim({4.2, 3.1, 5.2}, {5.2, 5.2, 5.2}, {4.0}, true),
+            ClaimVerdict::kBetterNotTrained);
   // The better one learned, the worse one did not.
   EXPECT_EQ(DecideClaim({40, 42, 41}, {4, 6, 5}, {5}, true), ClaimVerdict::kWorseNotTrained);
   // Beating the untrained row by less than two standard errors of the seeds is not beating it.
   EXPECT_EQ(DecideClaim({4, 14, 9}, {30, 31, 32}, {5}, true), ClaimVerdict::kBetterNotTrained);
   // Lower-is-better metrics (AvgR): the untrained row's is higher.
-  EXPECT_EQ(DecideClaim({3.0, 3.1, 2.9}, {16.6, 16.4, 16.5}, {16.5}, false), ClaimVerdict::kWorseNotTrained);
+  EXPECT_EQ(DecideClaim({3.0, 3.1, 2.9}, {16.6, 16.4, 16.5}, {16.5}, false),
+            ClaimVerdict::kWorseNotTrained);
 }
 
 TEST(Claims, FewerThanThreeSeedsDecideNothing) {

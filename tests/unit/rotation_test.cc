@@ -56,10 +56,12 @@ TEST(Rotation, SixDIsFirstTwoRowsAndGramSchmidtInverts) {
   EXPECT_EQ(six[3], r[1][0]);
   EXPECT_EQ(six[5], r[1][2]);
   EXPECT_LT(MaxAbsDiff(Rot6dToMatrix(six), r), 1e-12);
-  // Gram-Schmidt: a scaled, skewed pair still gives the rotation whose first row is the first vector.
+  // Gram-Schmidt: a scaled, skewed pair still gives the rotation whose first row is the first
+  // vector.
   Rot6d noisy = six;
   for (int k = 0; k < 3; ++k) noisy[static_cast<size_t>(k)] *= 3.0;
-  for (int k = 3; k < 6; ++k) noisy[static_cast<size_t>(k)] += 0.2 * six[static_cast<size_t>(k - 3)];
+  for (int k = 3; k < 6; ++k)
+    noisy[static_cast<size_t>(k)] += 0.2 * six[static_cast<size_t>(k - 3)];
   EXPECT_LT(MaxAbsDiff(Rot6dToMatrix(noisy), r), 1e-12);
   const Mat3 m = Rot6dToMatrix({0.3, -2, 0.1, 5, 1, 1});
   EXPECT_LT(MaxAbsDiff(m * Transpose(m), Mat3::Identity()), 1e-12);
@@ -75,7 +77,8 @@ TEST(Rotation, EulerRoundTripAllOrders) {
     // Gimbal lock: middle angle +-90 degrees.
     for (double middle : {kPi / 2, -kPi / 2}) {
       const Mat3 r = EulerToMatrix(order, {0.7, middle, -0.4});
-      EXPECT_LT(MaxAbsDiff(EulerToMatrix(order, MatrixToEuler(order, r)), r), 1e-9) << order << " " << middle;
+      EXPECT_LT(MaxAbsDiff(EulerToMatrix(order, MatrixToEuler(order, r)), r), 1e-9)
+          << order << " " << middle;
     }
   }
   EXPECT_FALSE(EulerOrderValid("XXY"));

@@ -1,5 +1,7 @@
 // SimMotionEdit's similarity curve, MotionSNR and classes (similarity.h), checked against naive
 // implementations written here, hand-computed cases and the core library's own rotations and FK.
+#include "motionpipe/similarity/similarity.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,7 +14,6 @@
 #include "motionpipe/math/rotation.h"
 #include "motionpipe/motion/motion.h"
 #include "motionpipe/similarity/filter.h"
-#include "motionpipe/similarity/similarity.h"
 #include "simd/kernels.h"
 
 namespace motionpipe::similarity {
@@ -39,8 +40,8 @@ std::vector<float> RandomFrames(int64_t frames, uint32_t seed) {
 }
 
 // Eq. (4) written the slow way.
-void NaiveRaw(const std::vector<float>& x, int64_t tx, const std::vector<float>& m, int64_t tm, int window,
-              std::vector<double>* rot, std::vector<double>* loc) {
+void NaiveRaw(const std::vector<float>& x, int64_t tx, const std::vector<float>& m, int64_t tm,
+              int window, std::vector<double>* rot, std::vector<double>* loc) {
   rot->assign(static_cast<size_t>(tx), 0);
   loc->assign(static_cast<size_t>(tx), 0);
   for (int64_t i = 0; i < tx; ++i) {
@@ -48,9 +49,12 @@ void NaiveRaw(const std::vector<float>& x, int64_t tx, const std::vector<float>&
     double best_r = 1e300, best_l = 1e300;
     for (int64_t j = std::max<int64_t>(c - window, 0); j < std::min<int64_t>(c + window, tm); ++j) {
       double dr = 0, dl = 0;
-      for (int d = 0; d < kRotDims; ++d) dr += std::fabs(x[static_cast<size_t>(i * kFrameStride + d)] - m[static_cast<size_t>(j * kFrameStride + d)]);
+      for (int d = 0; d < kRotDims; ++d)
+        dr += std::fabs(x[static_cast<size_t>(i * kFrameStride + d)] -
+                        m[static_cast<size_t>(j * kFrameStride + d)]);
       for (int d = 0; d < kLocDims; ++d) {
-        dl += std::fabs(x[static_cast<size_t>(i * kFrameStride + kLocOffset + d)] - m[static_cast<size_t>(j * kFrameStride + kLocOffset + d)]);
+        dl += std::fabs(x[static_cast<size_t>(i * kFrameStride + kLocOffset + d)] -
+                        m[static_cast<size_t>(j * kFrameStride + kLocOffset + d)]);
       }
       best_r = std::min(best_r, dr / kRotDims);
       best_l = std::min(best_l, dl / kLocDims);
@@ -61,19 +65,23 @@ void NaiveRaw(const std::vector<float>& x, int64_t tx, const std::vector<float>&
 }
 
 TEST(Similarity, RawSimilarityMatchesTheDefinition) {
-  for (const auto& [tx, tm, window] : std::vector<std::tuple<int64_t, int64_t, int>>{{37, 52, 15}, {60, 23, 4}, {9, 9, 1}, {40, 41, 30}}) {
+  for (const auto& [tx, tm, window] : std::vector<std::tuple<int64_t, int64_t, int>>{
+           {37, 52, 15}, {60, 23, 4}, {9, 9, 1}, {40, 41, 30}}) {
     const auto x = RandomFrames(tx, 1), m = RandomFrames(tm, 2);
     std::vector<double> want_rot, want_loc;
     NaiveRaw(x, tx, m, tm, window, &want_rot, &want_loc);
     std::vector<double> rot(static_cast<size_t>(tx)), loc(static_cast<size_t>(tx));
     RawSimilarity(x.data(), tx, m.data(), tm, window, rot.data(), loc.data());
     for (int64_t i = 0; i < tx; ++i) {
-      EXPECT_NEAR(rot[static_cast<size_t>(i)], want_rot[static_cast<size_t>(i)], 1e-6) << tx << " " << i;
-      EXPECT_NEAR(loc[static_cast<size_t>(i)], want_loc[static_cast<size_t>(i)], 1e-6) << tx << " " << i;
+      EXPECT_NEAR(rot[static_cast<size_t>(i)], want_rot[static_cast<size_t>(i)], 1e-6)
+          << tx << " " << i;
+      EXPECT_NEAR(loc[static_cast<size_t>(i)], want_loc[static_cast<size_t>(i)], 1e-6)
+          << tx << " " << i;
     }
     // Both builds of the kernel agree.
     std::vector<double> rot_g(rot.size()), loc_g(loc.size());
-    simd::generic::RawSimilarityKernel(x.data(), tx, m.data(), tm, window, rot_g.data(), loc_g.data());
+    simd::generic::RawSimilarityKernel(x.data(), tx, m.data(), tm, window, rot_g.data(),
+                                       loc_g.data());
     for (size_t i = 0; i < rot.size(); ++i) {
       EXPECT_NEAR(rot[i], rot_g[i], 1e-7);
       EXPECT_NEAR(loc[i], loc_g[i], 1e-7);
@@ -89,7 +97,8 @@ TEST(Similarity, IdenticalFramesHaveZeroDistanceAndShiftsAreForgiven) {
   std::vector<float> target(source.size());
   for (int64_t f = 0; f < t; ++f) {
     const int64_t from = std::max<int64_t>(0, f - 5);
-    std::copy_n(source.begin() + from * kFrameStride, kFrameStride, target.begin() + f * kFrameStride);
+    std::copy_n(source.begin() + from * kFrameStride, kFrameStride,
+                target.begin() + f * kFrameStride);
   }
   std::vector<double> rot(static_cast<size_t>(t)), loc(static_cast<size_t>(t));
   RawSimilarity(source.data(), t, target.data(), t, 15, rot.data(), loc.data());
@@ -111,7 +120,8 @@ TEST(Similarity, MovingAverageIsNumpySame) {
   std::vector<double> impulse(30, 0.0);
   impulse[15] = 1;
   const auto smooth = MovingAverage(impulse, 10);
-  for (size_t i = 0; i < 30; ++i) EXPECT_NEAR(smooth[i], (i >= 11 && i <= 20) ? 0.1 : 0.0, 1e-15) << i;
+  for (size_t i = 0; i < 30; ++i)
+    EXPECT_NEAR(smooth[i], (i >= 11 && i <= 20) ? 0.1 : 0.0, 1e-15) << i;
   // m = 3 (odd) is centred.
   const auto odd = MovingAverage({3, 0, 0, 6}, 3);
   EXPECT_NEAR(odd[0], 1.0, 1e-15);
@@ -152,7 +162,8 @@ TEST(Similarity, RotationKernelMatchesRodrigues) {
   std::vector<float> x, y, z;
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(-1, 1);
-  const std::vector<std::array<float, 3>> special = {{0, 0, 0}, {1e-8f, 0, 0}, {3.1f, 0, 0}, {0, 0, -3.14159f}, {4.f, 1.f, -2.f}, {0, 7.f, 0}};
+  const std::vector<std::array<float, 3>> special = {
+      {0, 0, 0}, {1e-8f, 0, 0}, {3.1f, 0, 0}, {0, 0, -3.14159f}, {4.f, 1.f, -2.f}, {0, 7.f, 0}};
   for (const auto& v : special) x.push_back(v[0]), y.push_back(v[1]), z.push_back(v[2]);
   for (int k = 0; k < 500; ++k) {
     const float scale = 3.0f * u(rng);
@@ -167,23 +178,28 @@ TEST(Similarity, RotationKernelMatchesRodrigues) {
       simd::generic::AxisAngleToMatrices(x.data(), y.data(), z.data(), n, planes.data(), n, 3);
     }
     for (int64_t r = 0; r < n; ++r) {
-      const Mat3 want = AxisAngleToMatrix({x[static_cast<size_t>(r)], y[static_cast<size_t>(r)], z[static_cast<size_t>(r)]});
+      const Mat3 want = AxisAngleToMatrix(
+          {x[static_cast<size_t>(r)], y[static_cast<size_t>(r)], z[static_cast<size_t>(r)]});
       for (int k = 0; k < 9; ++k) {
-        EXPECT_NEAR(planes[static_cast<size_t>(k * n + r)], want.m[k / 3][k % 3], 2e-6) << r << " " << k;
+        EXPECT_NEAR(planes[static_cast<size_t>(k * n + r)], want.m[k / 3][k % 3], 2e-6)
+            << r << " " << k;
       }
     }
   }
 }
 
 TEST(Similarity, TransposeMatchesNaive) {
-  for (const auto& [rows, cols] : std::vector<std::pair<int64_t, int64_t>>{{8, 8}, {21, 300}, {66, 13}, {5, 3}, {17, 9}}) {
+  for (const auto& [rows, cols] :
+       std::vector<std::pair<int64_t, int64_t>>{{8, 8}, {21, 300}, {66, 13}, {5, 3}, {17, 9}}) {
     const auto src = RandomFloats(static_cast<size_t>(rows * (cols + 3)), 7);
     std::vector<float> got(static_cast<size_t>(cols * (rows + 5)), -1.f), generic_out = got;
     simd::avx2::Transpose(src.data(), cols + 3, rows, cols, got.data(), rows + 5);
     simd::generic::Transpose(src.data(), cols + 3, rows, cols, generic_out.data(), rows + 5);
     for (int64_t r = 0; r < rows; ++r) {
       for (int64_t c = 0; c < cols; ++c) {
-        ASSERT_EQ(got[static_cast<size_t>(c * (rows + 5) + r)], src[static_cast<size_t>(r * (cols + 3) + c)]) << rows << "x" << cols;
+        ASSERT_EQ(got[static_cast<size_t>(c * (rows + 5) + r)],
+                  src[static_cast<size_t>(r * (cols + 3) + c)])
+            << rows << "x" << cols;
       }
     }
     EXPECT_EQ(got, generic_out);
@@ -197,7 +213,8 @@ Motion RandomMotion(int64_t frames, uint32_t seed) {
   std::uniform_real_distribution<float> u(-0.6f, 0.6f);
   for (int64_t f = 0; f < frames; ++f) {
     for (int j = 1; j < kNumJoints; ++j) {
-      for (int a = 0; a < 3; ++a) m.poses[static_cast<size_t>((f * kNumJoints + j) * 3 + a)] = u(rng);
+      for (int a = 0; a < 3; ++a)
+        m.poses[static_cast<size_t>((f * kNumJoints + j) * 3 + a)] = u(rng);
     }
     m.trans[static_cast<size_t>(f * 3)] = 0.01f * static_cast<float>(f);
   }
@@ -232,9 +249,11 @@ TEST(Similarity, BranchFeaturesAreSixDAndPelvisRelativeJoints) {
     }
     for (int j = 0; j < kNumJoints; ++j) {
       for (int a = 0; a < 3; ++a) {
-        const float want = joints[static_cast<size_t>((f * kNumJoints + j) * 3 + a)] - m.trans[static_cast<size_t>(f * 3 + a)];
+        const float want = joints[static_cast<size_t>((f * kNumJoints + j) * 3 + a)] -
+                           m.trans[static_cast<size_t>(f * 3 + a)];
         EXPECT_NEAR(row[kLocOffset + 3 * j + a], want, 2e-6) << f << " " << j;
-        EXPECT_NEAR(stored[static_cast<size_t>(f * kFrameStride + kLocOffset + 3 * j + a)], want, 1e-6);
+        EXPECT_NEAR(stored[static_cast<size_t>(f * kFrameStride + kLocOffset + 3 * j + a)], want,
+                    1e-6);
       }
     }
     for (int d : {126, 127, 194, 199}) EXPECT_EQ(row[d], 0.f);
@@ -247,14 +266,17 @@ TEST(Similarity, LocalEditGivesLowSimilarityWhereItHappens) {
   for (int64_t f = 0; f < 100; ++f) {
     for (int j = 1; j < kNumJoints; ++j) {
       for (int a = 0; a < 3; ++a) {
-        source.poses[static_cast<size_t>((f * kNumJoints + j) * 3 + a)] = 0.3f * std::sin(0.05f * static_cast<float>(f) + static_cast<float>(j + a));
+        source.poses[static_cast<size_t>((f * kNumJoints + j) * 3 + a)] =
+            0.3f * std::sin(0.05f * static_cast<float>(f) + static_cast<float>(j + a));
       }
     }
   }
   Motion target = source;
-  for (int64_t f = 40; f < 60; ++f) target.SetLocalRotation(f, 17, AxisAngleToMatrix({0, 0, 1.5}) * source.LocalRotation(f, 17));
+  for (int64_t f = 40; f < 60; ++f)
+    target.SetLocalRotation(f, 17, AxisAngleToMatrix({0, 0, 1.5}) * source.LocalRotation(f, 17));
   Workspace ws;
-  const SimilarityResult r = ComputeSimilarity(ViewOf(source, nullptr), ViewOf(target, nullptr), SimilarityOptions{}, &ws);
+  const SimilarityResult r =
+      ComputeSimilarity(ViewOf(source, nullptr), ViewOf(target, nullptr), SimilarityOptions{}, &ws);
   ASSERT_TRUE(r.kept()) << r.detail;
   EXPECT_GT(r.snr, 10);
   for (int64_t i = 0; i < 100; ++i) {
@@ -268,7 +290,8 @@ TEST(Similarity, LocalEditGivesLowSimilarityWhereItHappens) {
   // The combined curve is w1 S^Rr + w2 S^Rl after smoothing: with w_loc = 0 only rotations count.
   SimilarityOptions rot_only;
   rot_only.w_loc = 0;
-  const SimilarityResult r2 = ComputeSimilarity(ViewOf(source, nullptr), ViewOf(target, nullptr), rot_only, &ws);
+  const SimilarityResult r2 =
+      ComputeSimilarity(ViewOf(source, nullptr), ViewOf(target, nullptr), rot_only, &ws);
   const auto smooth = MovingAverage(r2.raw_rot, 10);
   for (size_t i = 0; i < smooth.size(); ++i) EXPECT_NEAR(r2.combined[i], smooth[i], 1e-12);
 }
@@ -316,7 +339,8 @@ TEST(Similarity, OptionsFromConfig) {
   EXPECT_EQ(paper->window, 15);
   EXPECT_EQ(paper->smooth, 10);
   EXPECT_EQ(paper->classes, 3);
-  auto reference = OptionsFromJson({{"preset", "reference"}, {"classes", "regression"}, {"locations", "fk"}}, "cfg");
+  auto reference = OptionsFromJson(
+      {{"preset", "reference"}, {"classes", "regression"}, {"locations", "fk"}}, "cfg");
   ASSERT_TRUE(reference.ok());
   EXPECT_EQ(reference->kappa, 10);
   EXPECT_EQ(reference->classes, 0);
@@ -324,9 +348,11 @@ TEST(Similarity, OptionsFromConfig) {
   auto overridden = OptionsFromJson({{"preset", "reference"}, {"kappa", 7}}, "cfg");
   ASSERT_TRUE(overridden.ok());
   EXPECT_EQ(overridden->kappa, 7);
-  for (const auto& bad : {nlohmann::json{{"kappa", 0}}, nlohmann::json{{"window", "wide"}}, nlohmann::json{{"classes", 1}},
-                          nlohmann::json{{"w_rot", 0}, {"w_loc", 0}}, nlohmann::json{{"preset", "best"}},
-                          nlohmann::json{{"kapa", 5}}, nlohmann::json{{"locations", "gps"}}}) {
+  for (const auto& bad :
+       {nlohmann::json{{"kappa", 0}}, nlohmann::json{{"window", "wide"}},
+        nlohmann::json{{"classes", 1}}, nlohmann::json{{"w_rot", 0}, {"w_loc", 0}},
+        nlohmann::json{{"preset", "best"}}, nlohmann::json{{"kapa", 5}},
+        nlohmann::json{{"locations", "gps"}}}) {
     auto r = OptionsFromJson(bad, "cfg.yaml");
     EXPECT_FALSE(r.ok()) << bad.dump();
     EXPECT_NE(r.status().message().find("cfg.yaml"), std::string::npos);
@@ -351,14 +377,17 @@ TEST(Similarity, ShardPlansCoverEveryRowOnce) {
     }
     EXPECT_EQ(total, 1620) << shards;
     for (const auto& f : files) {
-      for (int64_t r = 0; r < f.count; ++r) EXPECT_EQ(covered[f.path][static_cast<size_t>(r)], 1) << shards << f.path << r;
+      for (int64_t r = 0; r < f.count; ++r)
+        EXPECT_EQ(covered[f.path][static_cast<size_t>(r)], 1) << shards << f.path << r;
     }
   }
   // With at least as many files as shards, files are never split.
   for (int index = 0; index < 2; ++index) {
     for (const ShardSlice& s : PlanShard(files, 2, index)) {
       EXPECT_EQ(s.row_begin, 0);
-      EXPECT_EQ(s.row_end, std::find_if(files.begin(), files.end(), [&](const TripletFile& f) { return f.path == s.path; })->count);
+      EXPECT_EQ(s.row_end, std::find_if(files.begin(), files.end(), [&](const TripletFile& f) {
+                             return f.path == s.path;
+                           })->count);
     }
   }
 }
@@ -375,7 +404,9 @@ TEST(Similarity, FilterShardOutputsAreIndependentOfThreads) {
     t.split = "train";
     t.source = RandomMotion(40 + 3 * k, static_cast<uint32_t>(k));
     t.target = t.source;
-    for (int64_t f = 10; f < 20; ++f) t.target.SetLocalRotation(f, 16, AxisAngleToMatrix({0, 1.2, 0}) * t.source.LocalRotation(f, 16));
+    for (int64_t f = 10; f < 20; ++f)
+      t.target.SetLocalRotation(f, 16,
+                                AxisAngleToMatrix({0, 1.2, 0}) * t.source.LocalRotation(f, 16));
     t.edit_start = 10;
     t.edit_end = 20;
     triplets.push_back(std::move(t));

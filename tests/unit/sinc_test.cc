@@ -1,11 +1,11 @@
 // SINC: body-part composition (paper sec. 3.1), text augmentation, and the fast 135-d features.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <set>
 
 #include "motionpipe/base/file.h"
 #include "motionpipe/features/temos135.h"
-#include <filesystem>
 #include "motionpipe/sinc/composition.h"
 #include "motionpipe/sinc/texts.h"
 #include "test_util.h"
@@ -22,14 +22,17 @@ constexpr PartSet kLegs = kLeftLeg | kRightLeg;
 
 bool SameJoint(const Motion& a, int64_t fa, const Motion& b, int64_t fb, int joint) {
   for (int k = 0; k < 3; ++k) {
-    if (a.poses[static_cast<size_t>((fa * kNumJoints + joint) * 3 + k)] != b.poses[static_cast<size_t>((fb * kNumJoints + joint) * 3 + k)]) return false;
+    if (a.poses[static_cast<size_t>((fa * kNumJoints + joint) * 3 + k)] !=
+        b.poses[static_cast<size_t>((fb * kNumJoints + joint) * 3 + k)])
+      return false;
   }
   return true;
 }
 
 bool SameTrans(const Motion& a, int64_t fa, const Motion& b, int64_t fb) {
   for (int k = 0; k < 3; ++k) {
-    if (a.trans[static_cast<size_t>(fa * 3 + k)] != b.trans[static_cast<size_t>(fb * 3 + k)]) return false;
+    if (a.trans[static_cast<size_t>(fa * 3 + k)] != b.trans[static_cast<size_t>(fb * 3 + k)])
+      return false;
   }
   return true;
 }
@@ -53,18 +56,21 @@ TEST(Composition, ArmWaveOnAWalk) {
   for (int64_t f = 0; f < 60; ++f) {
     for (int j = 0; j < kNumJoints; ++j) {
       const bool arm = std::find(parts[3].begin(), parts[3].end(), j) != parts[3].end();
-      EXPECT_TRUE(arm ? SameJoint(out, f, wave, f, j) : SameJoint(out, f, walk, f, j)) << f << " " << j;
+      EXPECT_TRUE(arm ? SameJoint(out, f, wave, f, j) : SameJoint(out, f, walk, f, j))
+          << f << " " << j;
     }
     EXPECT_TRUE(SameTrans(out, f, walk, f));
   }
 }
 
 TEST(Composition, OrderCropAndLegsTravelTogether) {
-  // First argument has fewer parts: step 2 swaps. B (the kick: left leg) uses a leg, so B also gives
-  // both legs, the global orientation and the translation (step 3); A (arms + torso) keeps the rest.
+  // First argument has fewer parts: step 2 swaps. B (the kick: left leg) uses a leg, so B also
+  // gives both legs, the global orientation and the translation (step 3); A (arms + torso) keeps
+  // the rest.
   const Motion kick = SmoothMotion(50, 3), gesture = SmoothMotion(80, 4);
   CompositionPlan plan;
-  const Motion out = Compose(kick, kLeftLeg, gesture, kTorso | kLeftArm | kRightArm, CropMode::kCentre, &plan);
+  const Motion out =
+      Compose(kick, kLeftLeg, gesture, kTorso | kLeftArm | kRightArm, CropMode::kCentre, &plan);
   EXPECT_TRUE(plan.swapped);
   EXPECT_TRUE(plan.root_from_b);
   EXPECT_EQ(plan.from_b, kLegs | kGlobal);
@@ -73,8 +79,8 @@ TEST(Composition, OrderCropAndLegsTravelTogether) {
   EXPECT_EQ(plan.b_start, 0);
   for (int64_t f = 0; f < 50; ++f) {
     EXPECT_TRUE(SameTrans(out, f, kick, f));
-    EXPECT_TRUE(SameJoint(out, f, kick, f, 0));        // global orientation
-    EXPECT_TRUE(SameJoint(out, f, kick, f, 5));        // right knee (the other leg comes along)
+    EXPECT_TRUE(SameJoint(out, f, kick, f, 0));           // global orientation
+    EXPECT_TRUE(SameJoint(out, f, kick, f, 5));           // right knee (the other leg comes along)
     EXPECT_TRUE(SameJoint(out, f, gesture, f + 15, 9));   // spine3
     EXPECT_TRUE(SameJoint(out, f, gesture, f + 15, 21));  // right wrist
   }
@@ -93,13 +99,15 @@ TEST(Composition, FastFeaturesMatchTheReferenceEncoder) {
     std::vector<float> fast(static_cast<size_t>(73 * kTemosFeatureDim));
     EncodeTemos135Fast(m.poses.data(), m.trans.data(), 73, fast.data());
     double worst = 0;
-    for (size_t k = 0; k < fast.size(); ++k) worst = std::max(worst, static_cast<double>(std::fabs(fast[k] - slow.data[k])));
+    for (size_t k = 0; k < fast.size(); ++k)
+      worst = std::max(worst, static_cast<double>(std::fabs(fast[k] - slow.data[k])));
     EXPECT_LT(worst, 2e-6) << seed;
   }
 }
 
 TEST(Texts, FivePatternsWithEnglishGerunds) {
-  EXPECT_EQ(PairText("walk forward", "wave right hand", PairPattern::kWhile), "walk forward while waving right hand");
+  EXPECT_EQ(PairText("walk forward", "wave right hand", PairPattern::kWhile),
+            "walk forward while waving right hand");
   EXPECT_EQ(PairText("walk", "sit down", PairPattern::kDuring), "walk during sitting down");
   EXPECT_EQ(PairText("stand", "lie down", PairPattern::kWhile), "stand while lying down");
   EXPECT_EQ(PairText("a", "b", PairPattern::kSimultaneously), "simultaneously a and b");
@@ -152,7 +160,8 @@ SpanTable MakeTable(const std::vector<std::pair<std::string, PartSet>>& singles)
   SpanTable table;
   uint32_t seed = 10;
   for (const auto& [text, parts] : singles) {
-    table.Add("s" + std::to_string(seed), "train", "test", testing::SmoothMotion(40 + static_cast<int64_t>(seed % 7) * 5, seed), text, "");
+    table.Add("s" + std::to_string(seed), "train", "test",
+              testing::SmoothMotion(40 + static_cast<int64_t>(seed % 7) * 5, seed), text, "");
     table.parts_a.back() = parts;
     ++seed;
   }
@@ -160,8 +169,12 @@ SpanTable MakeTable(const std::vector<std::pair<std::string, PartSet>>& singles)
 }
 
 TEST(Synth, SamplerDrawsOnlyCompatiblePartners) {
-  const SpanTable table = MakeTable({{"walk", kLegs | kGlobal}, {"wave right hand", kRightArm}, {"nod", kTorso},
-                                     {"jump", kLegs | kGlobal}, {"clap", kLeftArm | kRightArm}, {"kick", kLegs}});
+  const SpanTable table = MakeTable({{"walk", kLegs | kGlobal},
+                                     {"wave right hand", kRightArm},
+                                     {"nod", kTorso},
+                                     {"jump", kLegs | kGlobal},
+                                     {"clap", kLeftArm | kRightArm},
+                                     {"kick", kLegs}});
   SynthOptions options;
   const PairSampler sampler(table, options);
   EXPECT_EQ(sampler.singles(), 6);
@@ -185,12 +198,14 @@ TEST(Synth, SamplerDrawsOnlyCompatiblePartners) {
   const PairSampler random(table, options);
   for (int k = 0; k < 200; ++k) {
     ASSERT_TRUE(random.Draw(rng, &r));
-    EXPECT_TRUE(Compatible(r.first_parts, r.second_parts)) << int(r.first_parts) << " " << int(r.second_parts);
+    EXPECT_TRUE(Compatible(r.first_parts, r.second_parts))
+        << int(r.first_parts) << " " << int(r.second_parts);
   }
 }
 
 TEST(Synth, RecipesMaterialiseTheSameMotionFeaturesAndText) {
-  const SpanTable table = MakeTable({{"walk forward", kLegs | kGlobal}, {"wave right hand", kRightArm}, {"nod", kTorso}});
+  const SpanTable table = MakeTable(
+      {{"walk forward", kLegs | kGlobal}, {"wave right hand", kRightArm}, {"nod", kTorso}});
   PairRecipe r;
   r.first = 0;
   r.second = 1;
@@ -201,7 +216,8 @@ TEST(Synth, RecipesMaterialiseTheSameMotionFeaturesAndText) {
   r.text_swapped = 1;
   EXPECT_EQ(MaterialiseText(table, r), "wave right hand while walking forward");
   const Motion m = MaterialiseMotion(table, r, CropMode::kCentre);
-  const Motion direct = Compose(table.MotionOf(0), kLegs | kGlobal, table.MotionOf(1), kRightArm, CropMode::kCentre);
+  const Motion direct =
+      Compose(table.MotionOf(0), kLegs | kGlobal, table.MotionOf(1), kRightArm, CropMode::kCentre);
   EXPECT_EQ(m.poses, direct.poses);
   EXPECT_EQ(m.trans, direct.trans);
   std::vector<float> a(static_cast<size_t>(m.num_frames() * kTemosFeatureDim)), b(a.size());
@@ -213,14 +229,17 @@ TEST(Synth, RecipesMaterialiseTheSameMotionFeaturesAndText) {
 // Standing still, waving the right arm: no foot moves.
 Motion StandingWave(int64_t frames) {
   Motion m = Motion::Rest(frames, 30, Skeleton::Smpl22().RestPelvisHeight());
-  for (int64_t f = 0; f < frames; ++f) m.SetLocalRotation(f, 17, AxisAngleToMatrix({0, 0, 0.8 * std::sin(0.3 * static_cast<double>(f))}));
+  for (int64_t f = 0; f < frames; ++f)
+    m.SetLocalRotation(f, 17,
+                       AxisAngleToMatrix({0, 0, 0.8 * std::sin(0.3 * static_cast<double>(f))}));
   return m;
 }
 
 TEST(Synth, ChecksCatchPenetrationAndJumps) {
   const Motion m = StandingWave(60);
   const CompositionScores fine = ScoreComposition(m);
-  EXPECT_EQ(FailedCheck(fine, CompositionChecks{}), "") << fine.skate_ratio << " " << fine.penetration << " " << fine.max_step;
+  EXPECT_EQ(FailedCheck(fine, CompositionChecks{}), "")
+      << fine.skate_ratio << " " << fine.penetration << " " << fine.max_step;
   EXPECT_LT(fine.penetration, 1e-4);
   EXPECT_LT(fine.skate_ratio, 1e-6);
   Motion teleport = m;
@@ -234,13 +253,18 @@ TEST(Synth, ChecksCatchPenetrationAndJumps) {
   EXPECT_EQ(FailedCheck(sunk, CompositionChecks{}), "floor_penetration");
   // Feet sliding along the floor while planted.
   Motion slide = m;
-  for (int64_t f = 0; f < 60; ++f) slide.trans[static_cast<size_t>(f * 3)] += 0.02f * static_cast<float>(f);
+  for (int64_t f = 0; f < 60; ++f)
+    slide.trans[static_cast<size_t>(f * 3)] += 0.02f * static_cast<float>(f);
   EXPECT_EQ(FailedCheck(ScoreComposition(slide), CompositionChecks{}), "foot_skate");
 }
 
 TEST(Synth, ShardsAreDeterministicAndIndependentOfThreads) {
-  SpanTable table = MakeTable({{"walk", kLegs | kGlobal}, {"wave", kRightArm}, {"nod", kTorso}, {"jump", kLegs | kGlobal},
-                               {"clap", kLeftArm | kRightArm}, {"look around", kTorso}});
+  SpanTable table = MakeTable({{"walk", kLegs | kGlobal},
+                               {"wave", kRightArm},
+                               {"nod", kTorso},
+                               {"jump", kLegs | kGlobal},
+                               {"clap", kLeftArm | kRightArm},
+                               {"look around", kTorso}});
   const std::string dir = ::testing::TempDir() + "/synth_shards";
   std::filesystem::remove_all(dir);
   ASSERT_TRUE(WriteSpans(dir + ".npz", table).ok());
@@ -276,8 +300,9 @@ namespace motionpipe::labels {
 namespace {
 
 TEST(Labels, GptAnswersAreMappedWithSincsRules) {
-  const PartSet LA = PartBit(BodyPart::kLeftArm), RA = PartBit(BodyPart::kRightArm), G = PartBit(BodyPart::kGlobal),
-                T = PartBit(BodyPart::kTorso), LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg);
+  const PartSet LA = PartBit(BodyPart::kLeftArm), RA = PartBit(BodyPart::kRightArm),
+                G = PartBit(BodyPart::kGlobal), T = PartBit(BodyPart::kTorso),
+                LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg);
   EXPECT_EQ(PartsFromGptAnswer("Answer: right leg\nleft leg\nbuttocks\nwaist"), G | LL | RL);
   EXPECT_EQ(PartsFromGptAnswer("Answer: torso\nneck"), T);
   EXPECT_EQ(PartsFromGptAnswer("Answer: shoulders"), LA | RA);
@@ -286,8 +311,9 @@ TEST(Labels, GptAnswersAreMappedWithSincsRules) {
 }
 
 TEST(Labels, LexiconReadsSidesPluralsNegationAndObjects) {
-  const PartSet LA = PartBit(BodyPart::kLeftArm), RA = PartBit(BodyPart::kRightArm), G = PartBit(BodyPart::kGlobal),
-                T = PartBit(BodyPart::kTorso), LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg);
+  const PartSet LA = PartBit(BodyPart::kLeftArm), RA = PartBit(BodyPart::kRightArm),
+                G = PartBit(BodyPart::kGlobal), T = PartBit(BodyPart::kTorso),
+                LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg);
   EXPECT_EQ(LexiconParts("walk forward"), G | LL | RL);
   EXPECT_EQ(LexiconParts("raise left arm"), LA);
   EXPECT_EQ(LexiconParts("raise both arms"), LA | RA);
@@ -307,12 +333,14 @@ TEST(Labels, ScoringIgnoresSometimes) {
   std::vector<LabelledText> truth(2);
   truth[0].truth = {1, 0, 0.5f, 0.5f, 1, 1};  // walk: arms "sometimes"
   truth[1].truth = {0, 0, 1, 0, 0, 0};
-  const PartSet G = PartBit(BodyPart::kGlobal), LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg),
-                LA = PartBit(BodyPart::kLeftArm), RA = PartBit(BodyPart::kRightArm);
-  const LabelerAccuracy acc = ScoreLabels(truth, {static_cast<PartSet>(G | LL | RL | LA), static_cast<PartSet>(LA | RA)});
-  EXPECT_EQ(acc.counted[2], 1);           // the left arm of "walk" is not counted
-  EXPECT_DOUBLE_EQ(acc.part[2], 1.0);     // text 2's left arm right
-  EXPECT_DOUBLE_EQ(acc.part[3], 0.0);     // text 2's right arm wrong
+  const PartSet G = PartBit(BodyPart::kGlobal), LL = PartBit(BodyPart::kLeftLeg),
+                RL = PartBit(BodyPart::kRightLeg), LA = PartBit(BodyPart::kLeftArm),
+                RA = PartBit(BodyPart::kRightArm);
+  const LabelerAccuracy acc =
+      ScoreLabels(truth, {static_cast<PartSet>(G | LL | RL | LA), static_cast<PartSet>(LA | RA)});
+  EXPECT_EQ(acc.counted[2], 1);        // the left arm of "walk" is not counted
+  EXPECT_DOUBLE_EQ(acc.part[2], 1.0);  // text 2's left arm right
+  EXPECT_DOUBLE_EQ(acc.part[3], 0.0);  // text 2's right arm wrong
   EXPECT_DOUBLE_EQ(acc.part[0], 1.0);
   EXPECT_NEAR(acc.mean, 5.0 / 6.0, 1e-12);
 }

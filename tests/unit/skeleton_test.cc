@@ -12,7 +12,8 @@ namespace {
 TEST(Skeleton, EmbeddedFactsMatchTheDataFile) {
   const Skeleton& s = Skeleton::Smpl22();
   ASSERT_EQ(s.joint_names().size(), 22u);
-  EXPECT_EQ(s.parents(), (std::vector<int>{-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19}));
+  EXPECT_EQ(s.parents(), (std::vector<int>{-1, 0, 0, 0, 1,  2,  3,  4,  5,  6,  7,
+                                           8,  9, 9, 9, 12, 13, 14, 16, 17, 18, 19}));
   EXPECT_EQ(s.joint_names()[15], "head");
   EXPECT_EQ(s.JointIndex("left_wrist"), 20);
   EXPECT_EQ(s.part_of_joint(0), BodyPart::kGlobal);
@@ -23,7 +24,8 @@ TEST(Skeleton, EmbeddedFactsMatchTheDataFile) {
   auto loaded = Skeleton::FromJson(*text, "smpl22.json");
   ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
   for (int j = 0; j < kNumJoints; ++j) {
-    EXPECT_NEAR(Norm(loaded->rest_offsets()[static_cast<size_t>(j)]), loaded->bone_lengths()[static_cast<size_t>(j)], 1e-12);
+    EXPECT_NEAR(Norm(loaded->rest_offsets()[static_cast<size_t>(j)]),
+                loaded->bone_lengths()[static_cast<size_t>(j)], 1e-12);
   }
 }
 
@@ -56,7 +58,7 @@ TEST(ForwardKinematics, RestPoseStandsUprightInZUp) {
   const auto x = [&](int j) { return joints[static_cast<size_t>(j * 3 + 0)]; };
   EXPECT_NEAR(z(7), 0.0, 1e-6);   // left ankle on the floor
   EXPECT_NEAR(z(10), 0.0, 1e-6);  // left foot on the floor
-  EXPECT_GT(z(15), z(12));  // head above neck above pelvis
+  EXPECT_GT(z(15), z(12));        // head above neck above pelvis
   EXPECT_GT(z(12), z(0));
   EXPECT_GT(x(1), 0);  // left hip on +x (the body's left at heading 0)
   EXPECT_GT(x(20), 0.5);
@@ -90,7 +92,8 @@ TEST(ForwardKinematics, BoneLengthsStayFixedUnderAnyPose) {
       const int p = s.parents()[static_cast<size_t>(j)];
       const float* a = &joints[static_cast<size_t>((frame * kNumJoints + j) * 3)];
       const float* b = &joints[static_cast<size_t>((frame * kNumJoints + p) * 3)];
-      const double len = std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+      const double len = std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                                   (a[2] - b[2]) * (a[2] - b[2]));
       EXPECT_NEAR(len, s.bone_lengths()[static_cast<size_t>(j)], 1e-5);
     }
   }
@@ -116,7 +119,8 @@ TEST(Motion, ResampleByIndexFollowsNumpyArange) {
   EXPECT_EQ(down.num_frames(), 249);  // len(np.arange(0, 994, 4))
   EXPECT_EQ(down.fps, 30);
   for (int64_t frame : {0, 1, 100, 248}) {
-    EXPECT_EQ(down.trans[static_cast<size_t>(frame * 3)], motion.trans[static_cast<size_t>(frame * 4 * 3)]);
+    EXPECT_EQ(down.trans[static_cast<size_t>(frame * 3)],
+              motion.trans[static_cast<size_t>(frame * 4 * 3)]);
   }
   const Motion odd = Resample(testing::SmoothMotion(100, 3, 100), 30);
   EXPECT_EQ(odd.num_frames(), 30);  // len(np.arange(0, 100, 10/3))

@@ -21,7 +21,8 @@ void RemoveDir() {
 
 const bool kIsolated = [] {
   const char* base = std::getenv("TMPDIR");
-  Dir() = std::string(base && *base ? base : "/tmp") + "/motionpipe-unit-" + std::to_string(::getpid());
+  Dir() =
+      std::string(base && *base ? base : "/tmp") + "/motionpipe-unit-" + std::to_string(::getpid());
   std::filesystem::create_directories(Dir());
   ::setenv("TEST_TMPDIR", Dir().c_str(), 1);
   std::atexit(RemoveDir);

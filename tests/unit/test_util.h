@@ -27,7 +27,8 @@ inline Motion SmoothMotion(int64_t frames, uint32_t seed, double fps = 30) {
   for (int joint = 0; joint < kNumJoints; ++joint) {
     Vec3 axis{unit(rng), unit(rng), unit(rng)};
     axis = (1.0 / Norm(axis)) * axis;
-    waves.push_back({axis, 0.2 + 0.6 * std::abs(unit(rng)), 0.3 + std::abs(unit(rng)), 3 * unit(rng)});
+    waves.push_back(
+        {axis, 0.2 + 0.6 * std::abs(unit(rng)), 0.3 + std::abs(unit(rng)), 3 * unit(rng)});
   }
   const double heading0 = 3 * unit(rng);
   for (int64_t frame = 0; frame < frames; ++frame) {
@@ -36,11 +37,13 @@ inline Motion SmoothMotion(int64_t frames, uint32_t seed, double fps = 30) {
       const Wave& w = waves[static_cast<size_t>(joint)];
       const double angle = w.amplitude * std::sin(2 * kPi * w.frequency * t + w.phase);
       Mat3 r = AxisAngleToMatrix(angle * w.axis);
-      if (joint == 0) r = RotZ(heading0 + 0.8 * t) * YUpToZUp() * AxisAngleToMatrix((0.3 * angle) * w.axis);
+      if (joint == 0)
+        r = RotZ(heading0 + 0.8 * t) * YUpToZUp() * AxisAngleToMatrix((0.3 * angle) * w.axis);
       motion.SetLocalRotation(frame, joint, r);
     }
-    motion.SetTranslation(frame, {1.0 + 0.9 * t * std::cos(0.4 * t), -2.0 + 0.7 * t * std::sin(0.5 * t),
-                                  0.9 + 0.05 * std::sin(4 * t)});
+    motion.SetTranslation(frame,
+                          {1.0 + 0.9 * t * std::cos(0.4 * t), -2.0 + 0.7 * t * std::sin(0.5 * t),
+                           0.9 + 0.05 * std::sin(4 * t)});
   }
   return motion;
 }

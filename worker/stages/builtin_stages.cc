@@ -1,4 +1,5 @@
-// Built-in stage kinds: the diagnostic ones the engine's tests and benchmarks use, `corpus` and `filter`.
+// Built-in stage kinds: the diagnostic ones the engine's tests and benchmarks use, `corpus` and
+// `filter`.
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -28,7 +29,8 @@ class SleepStage : public StageExecutor {
  public:
   std::string Description() const override { return "sleeps params.ms milliseconds"; }
   TaskReport Run(TaskContext& ctx) override {
-    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ctx.params.value("ms", 100));
+    const auto until =
+        std::chrono::steady_clock::now() + std::chrono::milliseconds(ctx.params.value("ms", 100));
     while (std::chrono::steady_clock::now() < until) {
       if (ctx.cancelled()) return TaskReport::Error("cancelled");
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
@@ -40,8 +42,10 @@ class SleepStage : public StageExecutor {
 // Appends "stage index pid" to params.log (O_APPEND: lines from many processes never interleave).
 void LogExecution(const TaskContext& ctx) {
   if (!ctx.params.contains("log")) return;
-  const std::string line = ctx.spec.stage() + " " + std::to_string(ctx.spec.index()) + " " + std::to_string(::getpid()) + "\n";
-  const int fd = ::open(ctx.params["log"].get<std::string>().c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  const std::string line = ctx.spec.stage() + " " + std::to_string(ctx.spec.index()) + " " +
+                           std::to_string(::getpid()) + "\n";
+  const int fd = ::open(ctx.params["log"].get<std::string>().c_str(),
+                        O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
   if (fd >= 0) {
     (void)!::write(fd, line.data(), line.size());
     ::close(fd);
@@ -52,10 +56,13 @@ void LogExecution(const TaskContext& ctx) {
 // and wherever it runs, so chaos runs can be compared with an undisturbed one by checksum.
 class WriteStage : public StageExecutor {
  public:
-  std::string Description() const override { return "writes a deterministic file per task (tests)"; }
+  std::string Description() const override {
+    return "writes a deterministic file per task (tests)";
+  }
   TaskReport Run(TaskContext& ctx) override {
     LogExecution(ctx);
-    // `ms` delays every attempt, `first_attempt_ms` only the first (a slow worker whose lease expires).
+    // `ms` delays every attempt, `first_attempt_ms` only the first (a slow worker whose lease
+    // expires).
     int ms = ctx.params.value("ms", 0);
     if (ctx.spec.attempt() == 0) ms += ctx.params.value("first_attempt_ms", 0);
     const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
@@ -64,7 +71,8 @@ class WriteStage : public StageExecutor {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
     std::string content;
-    const std::string seed = std::to_string(ctx.spec.seed()) + ":" + ctx.spec.stage() + ":" + std::to_string(ctx.spec.index());
+    const std::string seed = std::to_string(ctx.spec.seed()) + ":" + ctx.spec.stage() + ":" +
+                             std::to_string(ctx.spec.index());
     const int blocks = std::max(1, ctx.params.value("bytes", 64) / 64);
     std::string digest = Sha256Hex(seed);
     for (int b = 0; b < blocks; ++b) {
@@ -74,23 +82,28 @@ class WriteStage : public StageExecutor {
     std::filesystem::create_directories(ctx.output_dir());
     // `sync: false` writes as the bulk outputs do (no fsync of its own; the worker syncs the task's
     // outputs before reporting them).
-    if (const Status s = WriteFileAtomic(ctx.output_dir() + "/out.txt", content, ctx.params.value("sync", true)); !s.ok()) {
+    if (const Status s =
+            WriteFileAtomic(ctx.output_dir() + "/out.txt", content, ctx.params.value("sync", true));
+        !s.ok()) {
       return TaskReport::Error(s.message());
     }
     return TaskReport::Ok();
   }
 };
 
-// Fails its first params.fail_times attempts (ERROR), or always with BAD_INPUT when params.bad_input.
+// Fails its first params.fail_times attempts (ERROR), or always with BAD_INPUT when
+// params.bad_input.
 class FailStage : public StageExecutor {
  public:
   std::string Description() const override { return "fails on purpose (tests)"; }
   TaskReport Run(TaskContext& ctx) override {
     LogExecution(ctx);
-    if (ctx.params.value("bad_input", false)) return TaskReport::BadInput("params.bad_input is set: this input can never work");
+    if (ctx.params.value("bad_input", false))
+      return TaskReport::BadInput("params.bad_input is set: this input can never work");
     const int fail_times = ctx.params.value("fail_times", 1 << 30);
     if (ctx.spec.attempt() < fail_times) {
-      return TaskReport::Error("deliberate failure " + std::to_string(ctx.spec.attempt() + 1) + " of " + std::to_string(fail_times));
+      return TaskReport::Error("deliberate failure " + std::to_string(ctx.spec.attempt() + 1) +
+                               " of " + std::to_string(fail_times));
     }
     return TaskReport::Ok();
   }
@@ -113,7 +126,9 @@ class CrashStage : public StageExecutor {
 // them into one corpus directory (byte-identical to `motionpipe data synth-corpus`).
 class CorpusStage : public StageExecutor {
  public:
-  std::string Description() const override { return "generates the procedural motion corpus (sharded)"; }
+  std::string Description() const override {
+    return "generates the procedural motion corpus (sharded)";
+  }
   TaskReport Run(TaskContext& ctx) override {
     corpus::CorpusOptions options;
     const auto& p = ctx.params;
@@ -129,7 +144,8 @@ class CorpusStage : public StageExecutor {
     options.threads = ctx.threads;
     options.out_dir = ctx.output_dir();
     if (ctx.spec.reduce()) {
-      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(), ctx.spec.shard_dirs().end());
+      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(),
+                                            ctx.spec.shard_dirs().end());
       auto summary = corpus::FinalizeCorpus(options, shards);
       if (!summary.ok()) return TaskReport::Error(summary.status().message());
       TaskReport report;
@@ -137,8 +153,10 @@ class CorpusStage : public StageExecutor {
       report.metrics["triplets"] = static_cast<double>(summary->triplets);
       return report;
     }
-    if (const Status s = corpus::GenerateCorpusShard(options, ctx.spec.index(), ctx.output_dir()); !s.ok()) {
-      return s.code() == StatusCode::kInvalidArgument ? TaskReport::BadInput(s.message()) : TaskReport::Error(s.message());
+    if (const Status s = corpus::GenerateCorpusShard(options, ctx.spec.index(), ctx.output_dir());
+        !s.ok()) {
+      return s.code() == StatusCode::kInvalidArgument ? TaskReport::BadInput(s.message())
+                                                      : TaskReport::Error(s.message());
     }
     return TaskReport::Ok();
   }
@@ -149,8 +167,10 @@ TaskReport FromStatus(const Status& s) {
   switch (s.code()) {
     case StatusCode::kInvalidArgument:
     case StatusCode::kNotFound:
-    case StatusCode::kDataLoss: return TaskReport::BadInput(s.message());
-    default: return TaskReport::Error(s.message());
+    case StatusCode::kDataLoss:
+      return TaskReport::BadInput(s.message());
+    default:
+      return TaskReport::Error(s.message());
   }
 }
 
@@ -158,13 +178,16 @@ TaskReport FromStatus(const Status& s) {
 // their part of the triplet files; the reduce task writes the summary and its plot.
 class FilterStage : public StageExecutor {
  public:
-  std::string Description() const override { return "similarity curves, MotionSNR and classes of editing triplets"; }
+  std::string Description() const override {
+    return "similarity curves, MotionSNR and classes of editing triplets";
+  }
   TaskReport Run(TaskContext& ctx) override {
     const auto& p = ctx.params;
     auto options = similarity::OptionsFromJson(p, "params", {"triplets", "input"});
     if (!options.ok()) return TaskReport::BadInput(options.status().message());
     if (ctx.spec.reduce()) {
-      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(), ctx.spec.shard_dirs().end());
+      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(),
+                                            ctx.spec.shard_dirs().end());
       auto summary = similarity::SummarizeFilter(shards, ctx.output_dir());
       if (!summary.ok()) return FromStatus(summary.status());
       TaskReport report;
@@ -175,10 +198,13 @@ class FilterStage : public StageExecutor {
     }
     std::vector<std::string> inputs;
     if (p.contains("triplets")) {
-      if (p["triplets"].is_string()) inputs.push_back(p["triplets"].get<std::string>());
-      else for (const auto& v : p["triplets"]) inputs.push_back(v.get<std::string>());
+      if (p["triplets"].is_string())
+        inputs.push_back(p["triplets"].get<std::string>());
+      else
+        for (const auto& v : p["triplets"]) inputs.push_back(v.get<std::string>());
     } else {
-      const std::string stage = p.value("input", ctx.spec.inputs_size() > 0 ? ctx.spec.inputs(0).stage() : std::string());
+      const std::string stage =
+          p.value("input", ctx.spec.inputs_size() > 0 ? ctx.spec.inputs(0).stage() : std::string());
       std::string dir = ctx.InputResult(stage);
       if (dir.empty()) {
         const auto dirs = ctx.InputDirs(stage);
@@ -196,7 +222,8 @@ class FilterStage : public StageExecutor {
     TaskReport out;
     out.metrics["triplets"] = static_cast<double>(report->triplets);
     out.metrics["kept"] = static_cast<double>(report->kept);
-    out.metrics["triplets_per_second"] = static_cast<double>(report->triplets) / std::max(report->seconds, 1e-9);
+    out.metrics["triplets_per_second"] =
+        static_cast<double>(report->triplets) / std::max(report->seconds, 1e-9);
     return out;
   }
 };

@@ -13,11 +13,14 @@
 //   split (test), limit (0 = all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed,
 //   body_parts (MDM-BP), options (merged into the generator's configuration)
 #include <glob.h>
+#include <prometheus/gateway.h>
+#include <prometheus/gauge.h>
+#include <prometheus/registry.h>
 
 #include <algorithm>
 #include <chrono>
-#include <filesystem>
 #include <ctime>
+#include <filesystem>
 #include <map>
 #include <numeric>
 #include <optional>
@@ -31,19 +34,15 @@
 #include "motionpipe/base/log.h"
 #include "motionpipe/base/random.h"
 #include "motionpipe/eval/metrics.h"
-#include "motionpipe/motion/plausibility.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/formats/motionfix.h"
 #include "motionpipe/labels/labeler.h"
+#include "motionpipe/motion/plausibility.h"
 #include "motionpipe/render/motion_render.h"
 #include "motionpipe/sinc/composition.h"
 #include "motionpipe/sinc/spans.h"
 #include "motionpipe/sinc/texts.h"
-#include "motionpipe/formats/clip.h"
-#include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
-
-#include <prometheus/gateway.h>
-#include <prometheus/gauge.h>
-#include <prometheus/registry.h>
 
 namespace motionpipe::worker {
 
@@ -63,7 +62,8 @@ std::vector<std::string> TripletFiles(const TaskContext& ctx) {
       if (!fs::is_directory(folder)) continue;
       for (const auto& entry : fs::directory_iterator(folder)) {
         const std::string name = entry.path().filename().string();
-        if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz") files.push_back(entry.path().string()), ++found;
+        if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz")
+          files.push_back(entry.path().string()), ++found;
       }
     }
     return found;
@@ -78,8 +78,8 @@ std::vector<std::string> TripletFiles(const TaskContext& ctx) {
 }
 
 // A checkpoint named by a stage parameter: an input stage's name, or a path pattern (anything with
-// a '/', e.g. "out/train_mdt-*/mdt") whose newest checkpoint is taken: a scheduled evaluation of the
-// latest training job.
+// a '/', e.g. "out/train_mdt-*/mdt") whose newest checkpoint is taken: a scheduled evaluation of
+// the latest training job.
 std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
   if (stage.find('/') != std::string::npos) {
     glob_t matches{};
@@ -108,7 +108,8 @@ std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
 
 Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
   const auto& side = source ? c.source : c.target;
-  const int64_t begin = side.offsets[static_cast<size_t>(row)], end = side.offsets[static_cast<size_t>(row) + 1];
+  const int64_t begin = side.offsets[static_cast<size_t>(row)],
+                end = side.offsets[static_cast<size_t>(row) + 1];
   Motion m;
   m.fps = c.fps[static_cast<size_t>(row)];
   m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
@@ -117,7 +118,8 @@ Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
 }
 
 json ScoresJson(const eval::RetrievalScores& s) {
-  return {{"R@1", s.r1}, {"R@2", s.r2}, {"R@3", s.r3}, {"AvgR", s.avg_rank}, {"queries", s.queries}};
+  return {
+      {"R@1", s.r1}, {"R@2", s.r2}, {"R@3", s.r3}, {"AvgR", s.avg_rank}, {"queries", s.queries}};
 }
 
 // Physical plausibility averaged over motions: foot skating, floor penetration, floating, jerk.
@@ -125,23 +127,30 @@ json MeanPlausibility(const std::vector<Motion>& motions) {
   double skate = 0, penetration = 0, floating = 0, jerk = 0;
   for (const Motion& m : motions) {
     const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
-    skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
+    skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio,
+        jerk += r.jerk_mean;
   }
   const double n = static_cast<double>(std::max<size_t>(1, motions.size()));
-  return json{{"foot_skate_ratio", skate / n}, {"penetration_mean_m", penetration / n}, {"float_ratio", floating / n}, {"jerk_mean", jerk / n}};
+  return json{{"foot_skate_ratio", skate / n},
+              {"penetration_mean_m", penetration / n},
+              {"float_ratio", floating / n},
+              {"jerk_mean", jerk / n}};
 }
 
 // The generator of the checkpoint named by params.model (see FindCheckpoint), with `options`.
-Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins, const json& options, std::string* checkpoint) {
+Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins,
+                               const json& options, std::string* checkpoint) {
   *checkpoint = FindCheckpoint(ctx, ctx.params.value("model", std::string()));
   if (checkpoint->empty()) return NotFound("no input holds a checkpoint (a train stage's model/)");
   return LoadGenerator(plugins, *checkpoint, options);
 }
 
 // preview.npz next to metrics.json: the first evaluated example's motions as clips (ids = roles:
-// "source", "edited", "target"; "generated", "truth"), each with its text, for the report's renders.
-Status WritePreview(const TaskContext& ctx, const std::vector<std::pair<std::string, const Motion*>>& roles, const std::string& text,
-                    const std::string& example) {
+// "source", "edited", "target"; "generated", "truth"), each with its text, for the report's
+// renders.
+Status WritePreview(const TaskContext& ctx,
+                    const std::vector<std::pair<std::string, const Motion*>>& roles,
+                    const std::string& text, const std::string& example) {
   std::vector<Clip> clips;
   for (const auto& [role, motion] : roles) {
     Clip clip;
@@ -163,12 +172,15 @@ double Cosine(const std::vector<float>& a, const std::vector<float>& b) {
 
 // Embeddings from an encoder's rows.
 eval::Embeddings ToEmbeddings(const std::vector<std::vector<float>>& rows) {
-  eval::Embeddings e{static_cast<int64_t>(rows.size()), rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()), {}};
+  eval::Embeddings e{static_cast<int64_t>(rows.size()),
+                     rows.empty() ? 0 : static_cast<int64_t>(rows[0].size()),
+                     {}};
   for (const auto& row : rows) e.values.insert(e.values.end(), row.begin(), row.end());
   return e;
 }
 
-// What an evaluated stage's summary (edits.json, generate.json) says: the model's name and checkpoint.
+// What an evaluated stage's summary (edits.json, generate.json) says: the model's name and
+// checkpoint.
 void ReadSummary(const std::string& path, std::string* method, std::string* checkpoint) {
   auto text = ReadFile(path);
   if (!text.ok()) return;
@@ -181,7 +193,9 @@ void ReadSummary(const std::string& path, std::string* method, std::string* chec
 class EditStage : public StageExecutor {
  public:
   explicit EditStage(const PluginHost* plugins) : plugins_(plugins) {}
-  std::string Description() const override { return "edits the test triplets with an editing checkpoint, sharded"; }
+  std::string Description() const override {
+    return "edits the test triplets with an editing checkpoint, sharded";
+  }
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
@@ -210,19 +224,27 @@ class EditStage : public StageExecutor {
       }
       files.push_back(std::move(*columns));
     }
-    if (items.empty()) return TaskReport::BadInput("edit: no triplets of split '" + split + "' in the inputs");
-    if (limit > 0 && static_cast<int64_t>(items.size()) > limit) items.resize(static_cast<size_t>(limit));
+    if (items.empty())
+      return TaskReport::BadInput("edit: no triplets of split '" + split + "' in the inputs");
+    if (limit > 0 && static_cast<int64_t>(items.size()) > limit)
+      items.resize(static_cast<size_t>(limit));
     std::vector<Item> mine;
-    std::vector<uint64_t> place;  // each item's place in the split: its sampling seed, whatever the batching
-    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < items.size(); k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
+    std::vector<uint64_t>
+        place;  // each item's place in the split: its sampling seed, whatever the batching
+    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < items.size();
+         k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
       mine.push_back(items[k]);
       place.push_back(k);
     }
     // Batches of similar lengths: a batch is padded to its longest source.
     std::vector<size_t> order(mine.size());
     for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-    const auto length = [&](size_t k) { const auto& o = files[mine[k].file].source.offsets; return o[mine[k].row + 1] - o[mine[k].row]; };
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return length(a) > length(b); });
+    const auto length = [&](size_t k) {
+      const auto& o = files[mine[k].file].source.offsets;
+      return o[mine[k].row + 1] - o[mine[k].row];
+    };
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return length(a) > length(b); });
     {
       std::vector<Item> sorted_items;
       std::vector<uint64_t> sorted_places;
@@ -236,7 +258,8 @@ class EditStage : public StageExecutor {
       if (ctx.cancelled()) return TaskReport::Error("cancelled");
       const size_t end = std::min(mine.size(), at + static_cast<size_t>(batch_size));
       std::vector<Motion> sources;
-      for (size_t k = at; k < end; ++k) sources.push_back(SideMotion(files[mine[k].file], mine[k].row, true));
+      for (size_t k = at; k < end; ++k)
+        sources.push_back(SideMotion(files[mine[k].file], mine[k].row, true));
       std::vector<plugin::GenerateRequest> requests;
       for (size_t k = at; k < end; ++k) {
         const TripletColumns& c = files[mine[k].file];
@@ -254,21 +277,32 @@ class EditStage : public StageExecutor {
         const TripletColumns& c = files[mine[k].file];
         Clip clip;
         clip.id = c.ids[static_cast<size_t>(mine[k].row)];
-        clip.source = "edit:" + (*generator)->Name() + ":" + c.origin + "#" + std::to_string(c.first_row + mine[k].row);
+        clip.source = "edit:" + (*generator)->Name() + ":" + c.origin + "#" +
+                      std::to_string(c.first_row + mine[k].row);
         clip.motion = std::move((*edited)[k - at]);
         clip.texts = {c.texts[static_cast<size_t>(mine[k].row)]};
         clips.push_back(std::move(clip));
       }
       if (ctx.on_metric) ctx.on_metric("edited", static_cast<double>(clips.size()));
     }
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
     if (!clips.empty()) {
-      if (Status s = WriteClips(ctx.output_dir() + "/edited.npz", clips); !s.ok()) return TaskReport::Error(s.message());
+      if (Status s = WriteClips(ctx.output_dir() + "/edited.npz", clips); !s.ok())
+        return TaskReport::Error(s.message());
     }
-    const json summary = {{"model", (*generator)->Name()}, {"checkpoint", checkpoint}, {"split", split}, {"edited", clips.size()},
-                          {"seconds", seconds}, {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)},
-                          {"sampler", p.value("sampler", std::string("ddpm"))}, {"steps", p.value("steps", 0)}};
-    if (Status s = WriteFileAtomic(ctx.output_dir() + "/edits.json", summary.dump(1) + "\n"); !s.ok()) return TaskReport::Error(s.message());
+    const json summary = {
+        {"model", (*generator)->Name()},
+        {"checkpoint", checkpoint},
+        {"split", split},
+        {"edited", clips.size()},
+        {"seconds", seconds},
+        {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)},
+        {"sampler", p.value("sampler", std::string("ddpm"))},
+        {"steps", p.value("steps", 0)}};
+    if (Status s = WriteFileAtomic(ctx.output_dir() + "/edits.json", summary.dump(1) + "\n");
+        !s.ok())
+      return TaskReport::Error(s.message());
     TaskReport out = TaskReport::Ok();
     out.metrics["edited"] = static_cast<double>(clips.size());
     out.metrics["motions_per_second"] = summary["motions_per_second"].get<double>();
@@ -293,20 +327,32 @@ struct Tracked {
 // ("http://host:port"), grouped by job name and stage: motionpipe_eval_metric{method, metric},
 // motionpipe_eval_regression{method, metric} (1 when it regressed) and motionpipe_eval_regressions.
 // A gateway that cannot be reached is logged and recorded, not fatal: the metrics are on disk.
-json PushToGateway(const TaskContext& ctx, const std::string& url, const std::string& method, const std::vector<Tracked>& tracked,
+json PushToGateway(const TaskContext& ctx, const std::string& url, const std::string& method,
+                   const std::vector<Tracked>& tracked,
                    const std::vector<Regression>& regressions) {
   const size_t colon = url.rfind(':');
-  if (url.empty() || colon == std::string::npos || colon + 1 >= url.size() || url.find("//") == std::string::npos) {
+  if (url.empty() || colon == std::string::npos || colon + 1 >= url.size() ||
+      url.find("//") == std::string::npos) {
     MP_LOG(kWarn, "eval") << "pushgateway '" << url << "': expected http://host:port; not pushed";
     return {{"url", url}, {"error", "expected http://host:port"}};
   }
   auto registry = std::make_shared<prometheus::Registry>();
-  auto& value = prometheus::BuildGauge().Name("motionpipe_eval_metric").Help("Headline evaluation metrics of the last run").Register(*registry);
-  auto& regressed = prometheus::BuildGauge().Name("motionpipe_eval_regression").Help("1 when the metric regressed against its best").Register(*registry);
-  auto& count = prometheus::BuildGauge().Name("motionpipe_eval_regressions").Help("Regressions found by the last evaluation run").Register(*registry);
+  auto& value = prometheus::BuildGauge()
+                    .Name("motionpipe_eval_metric")
+                    .Help("Headline evaluation metrics of the last run")
+                    .Register(*registry);
+  auto& regressed = prometheus::BuildGauge()
+                        .Name("motionpipe_eval_regression")
+                        .Help("1 when the metric regressed against its best")
+                        .Register(*registry);
+  auto& count = prometheus::BuildGauge()
+                    .Name("motionpipe_eval_regressions")
+                    .Help("Regressions found by the last evaluation run")
+                    .Register(*registry);
   for (const Tracked& t : tracked) {
     value.Add({{"method", method}, {"metric", t.name}}).Set(t.value);
-    const bool bad = std::any_of(regressions.begin(), regressions.end(), [&](const Regression& r) { return r.metric == t.name; });
+    const bool bad = std::any_of(regressions.begin(), regressions.end(),
+                                 [&](const Regression& r) { return r.metric == t.name; });
     regressed.Add({{"method", method}, {"metric", t.name}}).Set(bad ? 1 : 0);
   }
   count.Add({{"method", method}}).Set(static_cast<double>(regressions.size()));
@@ -315,15 +361,19 @@ json PushToGateway(const TaskContext& ctx, const std::string& url, const std::st
   gateway.RegisterCollectable(registry);
   const int status = gateway.Push();
   if (status < 200 || status >= 300) {
-    MP_LOG(kWarn, "eval") << "pushgateway " << url << ": push failed (HTTP status " << status << ")";
+    MP_LOG(kWarn, "eval") << "pushgateway " << url << ": push failed (HTTP status " << status
+                          << ")";
   } else {
-    MP_LOG(kInfo, "eval") << "pushed " << tracked.size() << " metric(s) and " << regressions.size() << " regression(s) to " << url;
+    MP_LOG(kInfo, "eval") << "pushed " << tracked.size() << " metric(s) and " << regressions.size()
+                          << " regression(s) to " << url;
   }
   return {{"url", url}, {"status", status}};
 }
 
-std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics, const std::string& method, const std::string& checkpoint,
-                                        const std::vector<std::string>& ids, const std::vector<Tracked>& tracked) {
+std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics,
+                                        const std::string& method, const std::string& checkpoint,
+                                        const std::vector<std::string>& ids,
+                                        const std::vector<Tracked>& tracked) {
   const json& p = ctx.params;
   const std::string path = p.value("history", std::string());
   if (path.empty()) return std::nullopt;
@@ -349,43 +399,59 @@ std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics, c
   (*metrics)["history"] = path;
   (*metrics)["regressions"] = json::array();
   for (const auto& r : *regressions) {
-    (*metrics)["regressions"].push_back({{"metric", r.metric}, {"value", r.value}, {"best", r.best}, {"best_checkpoint", r.best_checkpoint}});
+    (*metrics)["regressions"].push_back({{"metric", r.metric},
+                                         {"value", r.value},
+                                         {"best", r.best},
+                                         {"best_checkpoint", r.best_checkpoint}});
     MP_LOG(kWarn, "eval") << "regression: " << r.Describe();
   }
-  if (p.contains("pushgateway")) (*metrics)["pushgateway"] = PushToGateway(ctx, p.value("pushgateway", std::string()), method, tracked, *regressions);
+  if (p.contains("pushgateway"))
+    (*metrics)["pushgateway"] =
+        PushToGateway(ctx, p.value("pushgateway", std::string()), method, tracked, *regressions);
   if (!regressions->empty() && p.value("fail_on_regression", false)) {
-    (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics->dump(1) + "\n");  // for the record; the task fails
+    (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json",
+                          metrics->dump(1) + "\n");  // for the record; the task fails
     return TaskReport::BadInput("regression: " + regressions->front().Describe() +
-                                (regressions->size() > 1 ? " (and " + std::to_string(regressions->size() - 1) + " more)" : ""));
+                                (regressions->size() > 1
+                                     ? " (and " + std::to_string(regressions->size() - 1) + " more)"
+                                     : ""));
   }
   return std::nullopt;
 }
 
 // The scoring's wall time (loading the evaluators, encoding, metrics) and its throughput in motions
 // scored (generated and reference motions alike) per second: the evaluation benchmark reads these.
-void AddTiming(json* metrics, std::chrono::steady_clock::time_point started, size_t motions_scored) {
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+void AddTiming(json* metrics, std::chrono::steady_clock::time_point started,
+               size_t motions_scored) {
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   (*metrics)["seconds"] = seconds;
   (*metrics)["motions_scored"] = motions_scored;
-  (*metrics)["motions_scored_per_second"] = seconds > 0 ? static_cast<double>(motions_scored) / seconds : 0.0;
+  (*metrics)["motions_scored_per_second"] =
+      seconds > 0 ? static_cast<double>(motions_scored) / seconds : 0.0;
 }
 
 // Writes metrics.json; the task's report carries the number of regressions.
 TaskReport WriteMetrics(const TaskContext& ctx, const json& metrics) {
-  if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+  if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n");
+      !st.ok())
+    return TaskReport::Error(st.message());
   TaskReport out = TaskReport::Ok();
-  out.metrics["regressions"] = metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
+  out.metrics["regressions"] =
+      metrics.contains("regressions") ? static_cast<double>(metrics["regressions"].size()) : 0.0;
   return out;
 }
 
 // Retrieval of edits `g` among the targets and among the sources (batches and all), and how far the
 // edits move towards their targets: generated-to-target minus generated-to-source R@1 (the copy of
 // the source scores about -(target-to-source R@1), the target itself about +that).
-json EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t, const eval::Embeddings& s, int64_t batch, uint64_t seed) {
+json EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t, const eval::Embeddings& s,
+                   int64_t batch, uint64_t seed) {
   json out;
   for (const char* protocol : {"batches", "all"}) {
     const int64_t b = std::string(protocol) == "batches" ? batch : 0;
-    const auto to_target = eval::Retrieval(g, t, b, seed), to_source = eval::Retrieval(g, s, b, seed);
+    const auto to_target = eval::Retrieval(g, t, b, seed),
+               to_source = eval::Retrieval(g, s, b, seed);
     out["generated_to_target"][protocol] = ScoresJson(to_target);
     out["generated_to_source"][protocol] = ScoresJson(to_source);
     out["towards_target"][protocol] = {{"R@1", to_target.r1 - to_source.r1}};
@@ -399,7 +465,9 @@ json EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t, const e
 class EvalEditStage : public StageExecutor {
  public:
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
-  std::string Description() const override { return "scores edited motions: retrieval against targets and sources, plausibility"; }
+  std::string Description() const override {
+    return "scores edited motions: retrieval against targets and sources, plausibility";
+  }
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
@@ -408,7 +476,9 @@ class EvalEditStage : public StageExecutor {
     const auto started = std::chrono::steady_clock::now();
     const std::string evaluator_stage = p.value("evaluator", std::string("evaluator"));
     const std::string evaluator = FindCheckpoint(ctx, evaluator_stage);
-    if (evaluator.empty()) return TaskReport::BadInput("eval_edit: input stage '" + evaluator_stage + "' holds no evaluator checkpoint");
+    if (evaluator.empty())
+      return TaskReport::BadInput("eval_edit: input stage '" + evaluator_stage +
+                                  "' holds no evaluator checkpoint");
     auto encoder = LoadGenerator(*plugins_, evaluator);
     if (!encoder.ok()) return TaskReport::BadInput(encoder.status().message());
     // The edited motions by triplet id, from every edit task.
@@ -425,7 +495,9 @@ class EvalEditStage : public StageExecutor {
         ReadSummary(dir + "/edits.json", &method, &edited_checkpoint);
       }
     }
-    if (edited.size() < 2) return TaskReport::BadInput("eval_edit: fewer than 2 edited motions in the inputs (an edit stage)");
+    if (edited.size() < 2)
+      return TaskReport::BadInput(
+          "eval_edit: fewer than 2 edited motions in the inputs (an edit stage)");
     // Their triplets' sources and targets.
     std::vector<Motion> generated, targets, sources;
     std::vector<std::string> ids, edit_texts;
@@ -444,9 +516,11 @@ class EvalEditStage : public StageExecutor {
       }
     }
     if (generated.size() != edited.size()) {
-      return TaskReport::BadInput("eval_edit: " + std::to_string(edited.size() - generated.size()) + " edited motion(s) have no triplet in the inputs");
+      return TaskReport::BadInput("eval_edit: " + std::to_string(edited.size() - generated.size()) +
+                                  " edited motion(s) have no triplet in the inputs");
     }
-    auto g_rows = (*encoder)->EncodeMotions(generated), t_rows = (*encoder)->EncodeMotions(targets), s_rows = (*encoder)->EncodeMotions(sources);
+    auto g_rows = (*encoder)->EncodeMotions(generated), t_rows = (*encoder)->EncodeMotions(targets),
+         s_rows = (*encoder)->EncodeMotions(sources);
     for (const auto* e : {&g_rows, &t_rows, &s_rows}) {
       if (!e->ok()) return TaskReport::Error("eval_edit: " + e->status().message());
     }
@@ -454,33 +528,45 @@ class EvalEditStage : public StageExecutor {
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
     json metrics = EditRetrieval(g, t, s, batch, seed);
-    metrics.update({{"method", method}, {"evaluator", evaluator}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
-    if (p.contains("yardstick")) metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+    metrics.update({{"method", method},
+                    {"evaluator", evaluator},
+                    {"motions", generated.size()},
+                    {"batch", batch},
+                    {"seed", seed}});
+    if (p.contains("yardstick"))
+      metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
     // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere)
     // and the target as the edit (the upper bound).
-    metrics["yardsticks"] = {{"copy", EditRetrieval(s, t, s, batch, seed)}, {"target", EditRetrieval(t, t, s, batch, seed)}};
+    metrics["yardsticks"] = {{"copy", EditRetrieval(s, t, s, batch, seed)},
+                             {"target", EditRetrieval(t, t, s, batch, seed)}};
     metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(t, s, batch, seed))}};
-    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"target", MeanPlausibility(targets)}};
+    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
+                               {"target", MeanPlausibility(targets)}};
     const json& g2t = metrics["generated_to_target"]["all"];
-    if (auto failed = RecordHistory(ctx, &metrics, method, edited_checkpoint, ids,
-                                    {{"generated_to_target.all.R@1", g2t["R@1"].get<double>(), true},
-                                     {"generated_to_target.all.AvgR", g2t["AvgR"].get<double>(), false}})) {
+    if (auto failed =
+            RecordHistory(ctx, &metrics, method, edited_checkpoint, ids,
+                          {{"generated_to_target.all.R@1", g2t["R@1"].get<double>(), true},
+                           {"generated_to_target.all.AvgR", g2t["AvgR"].get<double>(), false}})) {
       return *failed;
     }
-    if (Status st = WritePreview(ctx, {{"source", &sources[0]}, {"edited", &generated[0]}, {"target", &targets[0]}}, edit_texts[0], ids[0]); !st.ok()) {
+    if (Status st = WritePreview(
+            ctx, {{"source", &sources[0]}, {"edited", &generated[0]}, {"target", &targets[0]}},
+            edit_texts[0], ids[0]);
+        !st.ok()) {
       return TaskReport::Error("eval_edit: " + st.message());
     }
     AddTiming(&metrics, started, generated.size() * 3);
     TaskReport out = WriteMetrics(ctx, metrics);
-    out.metrics["R1_generated_to_target"] = metrics["generated_to_target"]["batches"]["R@1"].get<double>();
-    out.metrics["AvgR_generated_to_target"] = metrics["generated_to_target"]["batches"]["AvgR"].get<double>();
+    out.metrics["R1_generated_to_target"] =
+        metrics["generated_to_target"]["batches"]["R@1"].get<double>();
+    out.metrics["AvgR_generated_to_target"] =
+        metrics["generated_to_target"]["batches"]["AvgR"].get<double>();
     return out;
   }
 
  private:
   const PluginHost* plugins_;
 };
-
 
 // The spans table of an input `singles` stage.
 Result<sinc::SpanTable> InputSpans(const TaskContext& ctx) {
@@ -494,7 +580,8 @@ Result<sinc::SpanTable> InputSpans(const TaskContext& ctx) {
 
 // The spans a generation covers: split, kind (pairs | singles | all), limit; in table order.
 std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p) {
-  const std::string split = p.value("split", std::string("test")), kind = p.value("spans", std::string("pairs"));
+  const std::string split = p.value("split", std::string("test")),
+                    kind = p.value("spans", std::string("pairs"));
   const int64_t limit = p.value("limit", int64_t{0});
   std::vector<int64_t> out;
   for (int64_t i = 0; i < table.size(); ++i) {
@@ -507,7 +594,9 @@ std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p) {
 }
 
 std::string SpanText(const sinc::SpanTable& table, int64_t i) {
-  return table.single(i) ? table.text_a[static_cast<size_t>(i)] : sinc::EvalPairText(table.text_a[static_cast<size_t>(i)], table.text_b[static_cast<size_t>(i)]);
+  return table.single(i) ? table.text_a[static_cast<size_t>(i)]
+                         : sinc::EvalPairText(table.text_a[static_cast<size_t>(i)],
+                                              table.text_b[static_cast<size_t>(i)]);
 }
 
 // params: model (the train stage), split (test), spans (pairs | singles | all), limit, compositing
@@ -515,7 +604,9 @@ std::string SpanText(const sinc::SpanTable& table, int64_t i) {
 class GenerateStage : public StageExecutor {
  public:
   explicit GenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
-  std::string Description() const override { return "generates the test split's action texts with a text-to-motion checkpoint, sharded"; }
+  std::string Description() const override {
+    return "generates the test split's action texts with a text-to-motion checkpoint, sharded";
+  }
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
@@ -529,11 +620,13 @@ class GenerateStage : public StageExecutor {
     auto table = InputSpans(ctx);
     if (!table.ok()) return TaskReport::BadInput("generate: " + table.status().message());
     const auto spans = SelectSpans(*table, p);
-    if (spans.empty()) return TaskReport::BadInput("generate: no spans of that split and kind in the inputs");
+    if (spans.empty())
+      return TaskReport::BadInput("generate: no spans of that split and kind in the inputs");
     const int samples = std::max(1, p.value("samples", 1));
     std::vector<Clip> clips;
     const auto started = std::chrono::steady_clock::now();
-    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < spans.size(); k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
+    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < spans.size();
+         k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
       if (ctx.cancelled()) return TaskReport::Error("cancelled");
       const int64_t i = spans[k];
       for (int sample = 0; sample < samples; ++sample) {
@@ -546,20 +639,29 @@ class GenerateStage : public StageExecutor {
         auto motion = (*generator)->Generate(r);
         if (!motion.ok()) return TaskReport::Error(motion.status().message());
         Clip clip;
-        clip.id = table->ids[static_cast<size_t>(i)] + (samples > 1 ? "#" + std::to_string(sample) : "");
+        clip.id =
+            table->ids[static_cast<size_t>(i)] + (samples > 1 ? "#" + std::to_string(sample) : "");
         clip.source = "generate:" + (*generator)->Name();
         clip.motion = std::move(*motion);
         clip.texts = {SpanText(*table, i)};
         clips.push_back(std::move(clip));
       }
     }
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
     if (!clips.empty()) {
-      if (Status st = WriteClips(ctx.output_dir() + "/generated.npz", clips); !st.ok()) return TaskReport::Error(st.message());
+      if (Status st = WriteClips(ctx.output_dir() + "/generated.npz", clips); !st.ok())
+        return TaskReport::Error(st.message());
     }
-    const json summary = {{"model", (*generator)->Name()}, {"checkpoint", checkpoint}, {"generated", clips.size()}, {"seconds", seconds},
-                          {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)}};
-    if (Status st = WriteFileAtomic(ctx.output_dir() + "/generate.json", summary.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    const json summary = {
+        {"model", (*generator)->Name()},
+        {"checkpoint", checkpoint},
+        {"generated", clips.size()},
+        {"seconds", seconds},
+        {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)}};
+    if (Status st = WriteFileAtomic(ctx.output_dir() + "/generate.json", summary.dump(1) + "\n");
+        !st.ok())
+      return TaskReport::Error(st.message());
     TaskReport out = TaskReport::Ok();
     out.metrics["generated"] = static_cast<double>(clips.size());
     return out;
@@ -572,29 +674,42 @@ class GenerateStage : public StageExecutor {
 // What eval_generate measures of motions against their ground truth (SINC Tables 2-3), from their
 // TEMOS-evaluator features and TMR embeddings: the TEMOS score, APE/AVE, and TMR retrieval
 // text-to-generated and generated-to-truth (batches and all).
-json GenerationScores(const std::vector<Motion>& generated, const std::vector<Motion>& truth, const std::vector<std::vector<float>>& g_temos,
-                      const std::vector<std::vector<float>>& t_temos, const eval::Embeddings& gen, const eval::Embeddings& gt,
-                      const eval::Embeddings& txt, int64_t batch, uint64_t seed) {
+json GenerationScores(const std::vector<Motion>& generated, const std::vector<Motion>& truth,
+                      const std::vector<std::vector<float>>& g_temos,
+                      const std::vector<std::vector<float>>& t_temos, const eval::Embeddings& gen,
+                      const eval::Embeddings& gt, const eval::Embeddings& txt, int64_t batch,
+                      uint64_t seed) {
   // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
   double temos_score = 0;
-  for (size_t i = 0; i < generated.size(); ++i) temos_score += (1 + Cosine(g_temos[i], t_temos[i])) / 2;
+  for (size_t i = 0; i < generated.size(); ++i)
+    temos_score += (1 + Cosine(g_temos[i], t_temos[i])) / 2;
   const double n = static_cast<double>(generated.size());
   // APE / AVE on joint positions, both motions in their first frame's body frame (REFERENCE 4.5).
   eval::PositionErrors ape, ave;
   for (size_t i = 0; i < generated.size(); ++i) {
-    auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]), tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
+    auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]),
+         tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
     eval::Canonicalize(&gj, kNumJoints, eval::kSmpl22Hips);
     eval::Canonicalize(&tj, kNumJoints, eval::kSmpl22Hips);
-    const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips), v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
-    ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local, ape.mean_global += a.mean_global;
-    ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local, ave.mean_global += v.mean_global;
+    const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips),
+               v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
+    ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local,
+        ape.mean_global += a.mean_global;
+    ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local,
+        ave.mean_global += v.mean_global;
   }
   const auto errors_json = [n](const eval::PositionErrors& e) {
-    return json{{"root", e.root / n}, {"trajectory", e.trajectory / n}, {"mean_local", e.mean_local / n}, {"mean_global", e.mean_global / n}};
+    return json{{"root", e.root / n},
+                {"trajectory", e.trajectory / n},
+                {"mean_local", e.mean_local / n},
+                {"mean_global", e.mean_global / n}};
   };
-  json out = {{"temos_score", temos_score / n}, {"APE", errors_json(ape)}, {"AVE", errors_json(ave)}};
-  out["text_to_generated"] = {{"batches", ScoresJson(eval::Retrieval(txt, gen, batch, seed))}, {"all", ScoresJson(eval::Retrieval(txt, gen, 0, seed))}};
-  out["generated_to_truth"] = {{"batches", ScoresJson(eval::Retrieval(gen, gt, batch, seed))}, {"all", ScoresJson(eval::Retrieval(gen, gt, 0, seed))}};
+  json out = {
+      {"temos_score", temos_score / n}, {"APE", errors_json(ape)}, {"AVE", errors_json(ave)}};
+  out["text_to_generated"] = {{"batches", ScoresJson(eval::Retrieval(txt, gen, batch, seed))},
+                              {"all", ScoresJson(eval::Retrieval(txt, gen, 0, seed))}};
+  out["generated_to_truth"] = {{"batches", ScoresJson(eval::Retrieval(gen, gt, batch, seed))},
+                               {"all", ScoresJson(eval::Retrieval(gen, gt, 0, seed))}};
   return out;
 }
 
@@ -603,22 +718,27 @@ json GenerationScores(const std::vector<Motion>& generated, const std::vector<Mo
 std::vector<size_t> SameLengthClassPartner(const std::vector<Motion>& motions) {
   std::vector<size_t> order(motions.size());
   std::iota(order.begin(), order.end(), size_t{0});
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return motions[a].num_frames() < motions[b].num_frames(); });
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return motions[a].num_frames() < motions[b].num_frames();
+  });
   std::vector<size_t> partner(motions.size());
-  for (size_t k = 0; k < order.size(); ++k) partner[order[k]] = order[k + 1 < order.size() ? k + 1 : k - 1];
+  for (size_t k = 0; k < order.size(); ++k)
+    partner[order[k]] = order[k + 1 < order.size() ? k + 1 : k - 1];
   return partner;
 }
 
 // The TMR evaluator's own retrieval on the held-out test split (issue 15): text-to-motion and
 // motion-to-text R@1/R@3 in batches, on single actions and on two-action spans ("A while B").
-Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& table, int64_t batch, uint64_t seed) {
+Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& table, int64_t batch,
+                              uint64_t seed) {
   json out;
   for (const char* kind : {"singles", "pairs"}) {
     const auto spans = SelectSpans(table, {{"split", "test"}, {"spans", kind}});
     if (spans.size() < 2) continue;
     std::vector<Motion> motions;
     std::vector<std::string> texts;
-    for (const int64_t i : spans) motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
+    for (const int64_t i : spans)
+      motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
     MP_ASSIGN_OR_RETURN(auto m_rows, tmr.EncodeMotions(motions));
     MP_ASSIGN_OR_RETURN(auto t_rows, tmr.EncodeTexts(texts));
     const auto m = ToEmbeddings(m_rows), t = ToEmbeddings(t_rows);
@@ -632,12 +752,14 @@ Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& tab
 
 // params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
 // evaluator), generated (the generate stage), batch (32), seed, diversity_pairs (300), method.
-// yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the TMR's
-// own retrieval on the test singles and two-action spans).
+// yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the
+// TMR's own retrieval on the test singles and two-action spans).
 class EvalGenerateStage : public StageExecutor {
  public:
   explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
-  std::string Description() const override { return "scores generated motions against the ground truth: TEMOS score, APE/AVE, retrieval"; }
+  std::string Description() const override {
+    return "scores generated motions against the ground truth: TEMOS score, APE/AVE, retrieval";
+  }
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
@@ -652,8 +774,10 @@ class EvalGenerateStage : public StageExecutor {
     auto tmr = load(p.value("evaluator", std::string("evaluator")));
     if (!tmr.ok()) return TaskReport::BadInput("eval_generate: " + tmr.status().message());
     const std::string temos_stage = p.value("temos", std::string());
-    Result<GeneratorPtr> temos = temos_stage.empty() ? Result<GeneratorPtr>(NotFound("")) : load(temos_stage);
-    if (!temos_stage.empty() && !temos.ok()) return TaskReport::BadInput("eval_generate: " + temos.status().message());
+    Result<GeneratorPtr> temos =
+        temos_stage.empty() ? Result<GeneratorPtr>(NotFound("")) : load(temos_stage);
+    if (!temos_stage.empty() && !temos.ok())
+      return TaskReport::BadInput("eval_generate: " + temos.status().message());
     plugin::Generator& temos_encoder = temos_stage.empty() ? **tmr : **temos;
     auto table = InputSpans(ctx);
     if (!table.ok()) return TaskReport::BadInput("eval_generate: " + table.status().message());
@@ -681,20 +805,27 @@ class EvalGenerateStage : public StageExecutor {
         ReadSummary(dir + "/generate.json", &method, &generated_checkpoint);
       }
     }
-    if (generated.size() < 2) return TaskReport::BadInput("eval_generate: fewer than 2 generated motions with a ground truth in the inputs");
-    auto g_tmr = (*tmr)->EncodeMotions(generated), t_tmr = (*tmr)->EncodeMotions(truth), text_tmr = (*tmr)->EncodeTexts(texts);
-    auto g_temos = temos_encoder.EncodeMotions(generated), t_temos = temos_encoder.EncodeMotions(truth);
+    if (generated.size() < 2)
+      return TaskReport::BadInput(
+          "eval_generate: fewer than 2 generated motions with a ground truth in the inputs");
+    auto g_tmr = (*tmr)->EncodeMotions(generated), t_tmr = (*tmr)->EncodeMotions(truth),
+         text_tmr = (*tmr)->EncodeTexts(texts);
+    auto g_temos = temos_encoder.EncodeMotions(generated),
+         t_temos = temos_encoder.EncodeMotions(truth);
     for (const auto* r : {&g_tmr, &t_tmr, &text_tmr, &g_temos, &t_temos}) {
       if (!r->ok()) return TaskReport::Error("eval_generate: " + r->status().message());
     }
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
     const auto gen = ToEmbeddings(*g_tmr), gt = ToEmbeddings(*t_tmr), txt = ToEmbeddings(*text_tmr);
-    json metrics = GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
-    metrics.update({{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
-    if (p.contains("yardstick")) metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
-    // The yardsticks, in the same evaluation (issue 15): the ground truth itself, and shuffled ground
-    // truth (each test motion stands in for the one nearest in length to it).
+    json metrics =
+        GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
+    metrics.update(
+        {{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
+    if (p.contains("yardstick"))
+      metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+    // The yardsticks, in the same evaluation (issue 15): the ground truth itself, and shuffled
+    // ground truth (each test motion stands in for the one nearest in length to it).
     const std::vector<size_t> other = SameLengthClassPartner(truth);
     std::vector<Motion> shuffled;
     std::vector<std::vector<float>> shuffled_temos, shuffled_tmr;
@@ -703,8 +834,10 @@ class EvalGenerateStage : public StageExecutor {
       shuffled_temos.push_back((*t_temos)[other[i]]);
       shuffled_tmr.push_back((*t_tmr)[other[i]]);
     }
-    metrics["yardsticks"] = {{"truth", GenerationScores(truth, truth, *t_temos, *t_temos, gt, gt, txt, batch, seed)},
-                             {"shuffled", GenerationScores(shuffled, truth, shuffled_temos, *t_temos, ToEmbeddings(shuffled_tmr), gt, txt, batch, seed)}};
+    metrics["yardsticks"] = {
+        {"truth", GenerationScores(truth, truth, *t_temos, *t_temos, gt, gt, txt, batch, seed)},
+        {"shuffled", GenerationScores(shuffled, truth, shuffled_temos, *t_temos,
+                                      ToEmbeddings(shuffled_tmr), gt, txt, batch, seed)}};
     if (p.value("evaluator_quality", false)) {
       auto quality = EvaluatorQuality(**tmr, *table, batch, seed);
       if (!quality.ok()) return TaskReport::Error("eval_generate: " + quality.status().message());
@@ -712,16 +845,23 @@ class EvalGenerateStage : public StageExecutor {
     }
     const double temos_score = metrics["temos_score"].get<double>();
     const int64_t pairs = p.value("diversity_pairs", int64_t{300});
-    metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)}, {"truth", eval::Diversity(gt, pairs, seed)}};
-    metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen)) : json(nullptr);  // needs more motions than dimensions
-    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)}, {"truth", MeanPlausibility(truth)}};
-    if (auto failed = RecordHistory(ctx, &metrics, method, generated_checkpoint, ids,
-                                    {{"temos_score", temos_score, true},
-                                     {"APE.mean_global", metrics["APE"]["mean_global"].get<double>(), false},
-                                     {"text_to_generated.all.R@1", metrics["text_to_generated"]["all"]["R@1"].get<double>(), true}})) {
+    metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)},
+                            {"truth", eval::Diversity(gt, pairs, seed)}};
+    metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen))
+                                   : json(nullptr);  // needs more motions than dimensions
+    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
+                               {"truth", MeanPlausibility(truth)}};
+    if (auto failed =
+            RecordHistory(ctx, &metrics, method, generated_checkpoint, ids,
+                          {{"temos_score", temos_score, true},
+                           {"APE.mean_global", metrics["APE"]["mean_global"].get<double>(), false},
+                           {"text_to_generated.all.R@1",
+                            metrics["text_to_generated"]["all"]["R@1"].get<double>(), true}})) {
       return *failed;
     }
-    if (Status st = WritePreview(ctx, {{"generated", &generated[0]}, {"truth", &truth[0]}}, texts[0], ids[0]); !st.ok()) {
+    if (Status st = WritePreview(ctx, {{"generated", &generated[0]}, {"truth", &truth[0]}},
+                                 texts[0], ids[0]);
+        !st.ok()) {
       return TaskReport::Error("eval_generate: " + st.message());
     }
     AddTiming(&metrics, started, generated.size() * 2);
@@ -738,18 +878,21 @@ class EvalGenerateStage : public StageExecutor {
 
 // The real CMU clips through the trained system, for the report: each clip imported (BVH, 120 fps,
 // 31 joints -> SMPL-22 at 30 fps); the first clip composed with a corpus action by body parts
-// (SINC sec. 3.1: the clip keeps legs, trajectory and torso, the corpus action brings its arm) and the
-// composition's text generated by the SINC model; the first clip edited by the MDT editor; the
+// (SINC sec. 3.1: the clip keeps legs, trajectory and torso, the corpus action brings its arm) and
+// the composition's text generated by the SINC model; the first clip edited by the MDT editor; the
 // plausibility of every motion and the TMR evaluator's cosine similarity to the CMU source; GIFs.
 // params: clips (BVH files or a directory; default data/mocap/cmu), max_frames (150), editor,
 // generator, evaluator (input stages with the checkpoints), edit_text, clip_text (the first clip's
-// action, labelled for its body parts), partner_text (the corpus action to compose with; default: the
-// first test single moving only the arms), steps (DDIM, 50), panel_size (200).
-// Outputs: showcase.json (read by the report), *.gif, cmu.npz (the imported clips), composed.npz, edited.npz.
+// action, labelled for its body parts), partner_text (the corpus action to compose with; default:
+// the first test single moving only the arms), steps (DDIM, 50), panel_size (200). Outputs:
+// showcase.json (read by the report), *.gif, cmu.npz (the imported clips), composed.npz,
+// edited.npz.
 class ShowcaseStage : public StageExecutor {
  public:
   explicit ShowcaseStage(const PluginHost* plugins) : plugins_(plugins) {}
-  std::string Description() const override { return "the CMU clips through import, SINC composition, MDT editing, metrics and rendering"; }
+  std::string Description() const override {
+    return "the CMU clips through import, SINC composition, MDT editing, metrics and rendering";
+  }
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
@@ -774,7 +917,8 @@ class ShowcaseStage : public StageExecutor {
       add(clips_param.get<std::string>());
     }
     std::sort(files.begin(), files.end());
-    if (files.empty()) return TaskReport::BadInput("showcase: no BVH files in " + clips_param.dump());
+    if (files.empty())
+      return TaskReport::BadInput("showcase: no BVH files in " + clips_param.dump());
     const int64_t max_frames = p.value("max_frames", int64_t{150});
     std::vector<Clip> cmu;
     for (const std::string& f : files) {
@@ -791,14 +935,17 @@ class ShowcaseStage : public StageExecutor {
       clip.segments.clear();
       cmu.push_back(std::move(clip));
     }
-    if (Status st = WriteClips(out + "/cmu.npz", cmu); !st.ok()) return TaskReport::Error(st.message());
+    if (Status st = WriteClips(out + "/cmu.npz", cmu); !st.ok())
+      return TaskReport::Error(st.message());
     const Motion& source = cmu.front().motion;
     const std::string clip_text = p.value("clip_text", std::string("walk forward"));
     const std::string edit_text = p.value("edit_text", std::string("raise the right arm higher"));
     const auto load = [&](const char* key) -> Result<GeneratorPtr> {
       const std::string stage = p.value(key, std::string(key));
       const std::string dir = FindCheckpoint(ctx, stage);
-      if (dir.empty()) return NotFound(std::string("showcase: params.") + key + ": input stage '" + stage + "' holds no checkpoint");
+      if (dir.empty())
+        return NotFound(std::string("showcase: params.") + key + ": input stage '" + stage +
+                        "' holds no checkpoint");
       return LoadGenerator(*plugins_, dir);
     };
     auto evaluator = load("evaluator");
@@ -807,17 +954,21 @@ class ShowcaseStage : public StageExecutor {
     for (const auto* g : {&evaluator, &editor, &generator}) {
       if (!g->ok()) return TaskReport::BadInput(g->status().message());
     }
-    // 2. Composition with a corpus action whose parts are disjoint from the clip's (test split, arms).
+    // 2. Composition with a corpus action whose parts are disjoint from the clip's (test split,
+    // arms).
     auto table = InputSpans(ctx);
     if (!table.ok()) return TaskReport::BadInput("showcase: " + table.status().message());
     const PartSet clip_parts = labels::LexiconParts(clip_text);
-    // The partner: params.partner_text if given, else the first test single that moves only the arms
-    // (what SINC composes with a walk), else the first compatible one.
+    // The partner: params.partner_text if given, else the first test single that moves only the
+    // arms (what SINC composes with a walk), else the first compatible one.
     const std::string wanted = p.value("partner_text", std::string());
-    const PartSet arms = static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm));
+    const PartSet arms =
+        static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm));
     int64_t partner = -1, fallback = -1;
     for (int64_t i = 0; i < table->size() && partner < 0; ++i) {
-      if (!table->single(i) || table->splits[static_cast<size_t>(i)] != "test" || table->frames(i) < 30) continue;
+      if (!table->single(i) || table->splits[static_cast<size_t>(i)] != "test" ||
+          table->frames(i) < 30)
+        continue;
       const PartSet parts = table->parts_a[static_cast<size_t>(i)];
       if (!sinc::Compatible(clip_parts, parts)) continue;
       if (!wanted.empty()) {
@@ -829,11 +980,14 @@ class ShowcaseStage : public StageExecutor {
       }
     }
     if (partner < 0 && wanted.empty()) partner = fallback;
-    if (partner < 0) return TaskReport::BadInput("showcase: no test single in the spans table is compatible with '" + clip_text + "'");
+    if (partner < 0)
+      return TaskReport::BadInput(
+          "showcase: no test single in the spans table is compatible with '" + clip_text + "'");
     const Motion corpus_motion = table->MotionOf(partner);
     const std::string partner_text = table->text_a[static_cast<size_t>(partner)];
     const PartSet partner_parts = table->parts_a[static_cast<size_t>(partner)];
-    const Motion composed = sinc::Compose(source, clip_parts, corpus_motion, partner_parts, sinc::CropMode::kFirst);
+    const Motion composed =
+        sinc::Compose(source, clip_parts, corpus_motion, partner_parts, sinc::CropMode::kFirst);
     const std::string pair_text = sinc::EvalPairText(clip_text, partner_text);
     // 3. The SINC model's own motion for the pair's text, and the MDT's edit of the clip.
     plugin::GenerateRequest gen_request;
@@ -841,7 +995,8 @@ class ShowcaseStage : public StageExecutor {
     gen_request.frames = composed.num_frames();
     gen_request.seed = ctx.spec.seed();
     auto generated = (*generator)->Generate(gen_request);
-    if (!generated.ok()) return TaskReport::Error("showcase: generation: " + generated.status().message());
+    if (!generated.ok())
+      return TaskReport::Error("showcase: generation: " + generated.status().message());
     plugin::GenerateRequest edit_request;
     edit_request.texts = {edit_text};
     edit_request.source = &source;
@@ -851,14 +1006,16 @@ class ShowcaseStage : public StageExecutor {
     auto edited = (*editor)->Generate(edit_request);
     if (!edited.ok()) return TaskReport::Error("showcase: editing: " + edited.status().message());
     using Output = std::tuple<std::string, const Motion*, std::string>;
-    for (const auto& [name, motion, text] : {Output{"composed.npz", &composed, pair_text}, Output{"generated.npz", &*generated, pair_text},
-                                            Output{"edited.npz", &*edited, edit_text}}) {
+    for (const auto& [name, motion, text] : {Output{"composed.npz", &composed, pair_text},
+                                             Output{"generated.npz", &*generated, pair_text},
+                                             Output{"edited.npz", &*edited, edit_text}}) {
       Clip clip;
       clip.id = fs::path(name).stem().string();
       clip.source = cmu.front().source;
       clip.motion = *motion;
       clip.texts = {text};
-      if (Status st = WriteClips(out + "/" + name, {clip}); !st.ok()) return TaskReport::Error(st.message());
+      if (Status st = WriteClips(out + "/" + name, {clip}); !st.ok())
+        return TaskReport::Error(st.message());
     }
     // 4. Metrics: plausibility, and the evaluator's cosine similarity to the CMU source.
     std::vector<std::pair<std::string, const Motion*>> rows = {};
@@ -874,40 +1031,57 @@ class ShowcaseStage : public StageExecutor {
     json table_rows = json::array();
     for (size_t i = 0; i < rows.size(); ++i) {
       const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), *rows[i].second);
-      table_rows.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio, r.penetration_mean, r.float_ratio, r.jerk_mean,
+      table_rows.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio,
+                            r.penetration_mean, r.float_ratio, r.jerk_mean,
                             Cosine((*embeddings)[i], (*embeddings)[0])});
     }
     // 5. Renders.
     render::RenderOptions options;
-    options.panel_width = options.panel_height = static_cast<int>(p.value("panel_size", int64_t{200}));
+    options.panel_width = options.panel_height =
+        static_cast<int>(p.value("panel_size", int64_t{200}));
     options.fps = 10;
     std::vector<render::MotionPanel> import_panels;
     for (const Clip& c : cmu) import_panels.push_back({c.motion, "CMU " + c.id, c.source});
     const std::vector<std::pair<std::string, std::vector<render::MotionPanel>>> gifs = {
         {"cmu_import.gif", import_panels},
         {"cmu_composition.gif",
-         {{source, "CMU " + cmu.front().id, clip_text}, {corpus_motion, "corpus", partner_text}, {composed, "SINC composition", pair_text},
+         {{source, "CMU " + cmu.front().id, clip_text},
+          {corpus_motion, "corpus", partner_text},
+          {composed, "SINC composition", pair_text},
           {*generated, "SINC model", pair_text}}},
-        {"cmu_edit.gif", {{source, "CMU " + cmu.front().id, "source"}, {*edited, "MDT edit", edit_text}}}};
+        {"cmu_edit.gif",
+         {{source, "CMU " + cmu.front().id, "source"}, {*edited, "MDT edit", edit_text}}}};
     for (const auto& [name, panels] : gifs) {
-      if (Status st = render::RenderMotionFile(out + "/" + name, panels, options); !st.ok()) return TaskReport::Error(st.message());
+      if (Status st = render::RenderMotionFile(out + "/" + name, panels, options); !st.ok())
+        return TaskReport::Error(st.message());
     }
     const json showcase = {
         {"title", "Real data: the CMU clips through the system"},
-        {"text", "The CMU clips (BVH, 120 fps, 31 joints) imported onto SMPL-22 at 30 fps and cut to " + std::to_string(max_frames) +
-                     " frames; " + cmu.front().id + " (\"" + clip_text + "\", parts " + PartSetToString(clip_parts) +
-                     ") composed by body parts with the corpus's test action \"" + partner_text + "\" (parts " + PartSetToString(partner_parts) +
-                     "), next to the SINC model's own motion for the pair's text; and edited by the MDT with \"" + edit_text +
-                     "\" (DDIM " + std::to_string(edit_request.steps) + " steps)."},
+        {"text",
+         "The CMU clips (BVH, 120 fps, 31 joints) imported onto SMPL-22 at 30 fps and cut to " +
+             std::to_string(max_frames) + " frames; " + cmu.front().id + " (\"" + clip_text +
+             "\", parts " + PartSetToString(clip_parts) +
+             ") composed by body parts with the corpus's test action \"" + partner_text +
+             "\" (parts " + PartSetToString(partner_parts) +
+             "), next to the SINC model's own motion for the pair's text; and edited by the MDT "
+             "with \"" +
+             edit_text + "\" (DDIM " + std::to_string(edit_request.steps) + " steps)."},
         {"items",
          {{{"image", "cmu_import.gif"}, {"caption", "The imported CMU clips"}},
           {{"image", "cmu_composition.gif"}, {"caption", "SINC composition: " + pair_text}},
-          {{"image", "cmu_edit.gif"}, {"caption", "MDT edit of " + cmu.front().id + ": " + edit_text}}}},
+          {{"image", "cmu_edit.gif"},
+           {"caption", "MDT edit of " + cmu.front().id + ": " + edit_text}}}},
         {"table",
-         {{"caption", "Plausibility of the real, composed, generated and edited motions, and the TMR evaluator's cosine similarity to CMU " + cmu.front().id},
-          {"columns", {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk", "cos to " + cmu.front().id}},
+         {{"caption",
+           "Plausibility of the real, composed, generated and edited motions, and the TMR "
+           "evaluator's cosine similarity to CMU " +
+               cmu.front().id},
+          {"columns",
+           {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk",
+            "cos to " + cmu.front().id}},
           {"rows", table_rows}}}};
-    if (Status st = WriteFileAtomic(out + "/showcase.json", showcase.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    if (Status st = WriteFileAtomic(out + "/showcase.json", showcase.dump(1) + "\n"); !st.ok())
+      return TaskReport::Error(st.message());
     return TaskReport::Ok();
   }
 
@@ -920,7 +1094,9 @@ class ShowcaseStage : public StageExecutor {
 // previews (true), panel_size (200).
 class ReportStage : public StageExecutor {
  public:
-  std::string Description() const override { return "writes the job's HTML report: tables, claims, curves, previews"; }
+  std::string Description() const override {
+    return "writes the job's HTML report: tables, claims, curves, previews";
+  }
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
@@ -929,23 +1105,34 @@ class ReportStage : public StageExecutor {
     for (const auto& input : ctx.spec.inputs()) {
       if (input.dirs_size() > 0) job = fs::path(input.dirs(0)).parent_path().parent_path().string();
     }
-    if (job.empty()) return TaskReport::BadInput("report: needs inputs (the job's evaluation stages)");
+    if (job.empty())
+      return TaskReport::BadInput("report: needs inputs (the job's evaluation stages)");
     ReportOptions options;
     options.job_dir = job;
     options.out_path = ctx.output_dir() + "/report.html";
     options.history = p.value("history", std::string());
-    if (!options.history.empty() && !fs::exists(options.history)) options.history.clear();  // nothing recorded yet
+    if (!options.history.empty() && !fs::exists(options.history))
+      options.history.clear();  // nothing recorded yet
     options.title = p.value("title", ctx.spec.job_name() + "-" + std::to_string(ctx.spec.job_id()));
     options.previews = p.value("previews", true);
     options.panel_size = static_cast<int>(p.value("panel_size", int64_t{200}));
     auto summary = WriteReport(options);
     if (!summary.ok()) return TaskReport::Error("report: " + summary.status().message());
     json claims = json::array();
-    for (const ClaimCheck& c : summary->claims) claims.push_back({{"paper", c.paper}, {"claim", c.claim}, {"verdict", c.verdict}, {"detail", c.detail}});
-    const json out = {{"report", "report.html"}, {"tables", summary->tables}, {"images", summary->images}, {"claims", claims},
-                      {"edit_methods", summary->edit_methods}, {"generation_methods", summary->generation_methods}};
-    if (Status st = WriteFileAtomic(ctx.output_dir() + "/report.json", out.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
-    MP_LOG(kInfo, "report") << "report of " << job << ": " << summary->tables << " tables, " << summary->images << " images";
+    for (const ClaimCheck& c : summary->claims)
+      claims.push_back(
+          {{"paper", c.paper}, {"claim", c.claim}, {"verdict", c.verdict}, {"detail", c.detail}});
+    const json out = {{"report", "report.html"},
+                      {"tables", summary->tables},
+                      {"images", summary->images},
+                      {"claims", claims},
+                      {"edit_methods", summary->edit_methods},
+                      {"generation_methods", summary->generation_methods}};
+    if (Status st = WriteFileAtomic(ctx.output_dir() + "/report.json", out.dump(1) + "\n");
+        !st.ok())
+      return TaskReport::Error(st.message());
+    MP_LOG(kInfo, "report") << "report of " << job << ": " << summary->tables << " tables, "
+                            << summary->images << " images";
     TaskReport report = TaskReport::Ok();
     report.metrics["tables"] = summary->tables;
     report.metrics["images"] = summary->images;

@@ -21,8 +21,10 @@ TaskReport FromStatus(const Status& s) {
   switch (s.code()) {
     case StatusCode::kInvalidArgument:
     case StatusCode::kNotFound:
-    case StatusCode::kDataLoss: return TaskReport::BadInput(s.message());
-    default: return TaskReport::Error(s.message());
+    case StatusCode::kDataLoss:
+      return TaskReport::BadInput(s.message());
+    default:
+      return TaskReport::Error(s.message());
   }
 }
 
@@ -47,13 +49,15 @@ std::vector<std::string> StringList(const json& v) {
 
 // `dataset`: real data in place of the procedural corpus, laid out as the corpus stage lays out its
 // result, so that every later stage runs unchanged: DIR/motionfix/triplets-*.npz (converted
-// MotionFix, tools/motionfix_convert.py), DIR/babel/{train,val,test}.json (BABEL) and DIR/amass_root
-// (the AMASS root BABEL's feat_p paths are relative to). Files are linked, not copied.
-// params: motionfix (converted .npz files or directories of them), babel (a directory holding
-// train/val/test.json, or the files), amass_root. Either source may be absent.
+// MotionFix, tools/motionfix_convert.py), DIR/babel/{train,val,test}.json (BABEL) and
+// DIR/amass_root (the AMASS root BABEL's feat_p paths are relative to). Files are linked, not
+// copied. params: motionfix (converted .npz files or directories of them), babel (a directory
+// holding train/val/test.json, or the files), amass_root. Either source may be absent.
 class DatasetStage : public StageExecutor {
  public:
-  std::string Description() const override { return "links real data (converted MotionFix, BABEL + AMASS) in the corpus layout"; }
+  std::string Description() const override {
+    return "links real data (converted MotionFix, BABEL + AMASS) in the corpus layout";
+  }
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
     const std::string out = ctx.output_dir();
@@ -79,12 +83,17 @@ class DatasetStage : public StageExecutor {
       }
       std::sort(files.begin(), files.end());
       for (const std::string& f : files) {
-        auto columns = ReadTripletColumns(f, {0, -1, false, false});  // checked now, not in a later stage
+        auto columns =
+            ReadTripletColumns(f, {0, -1, false, false});  // checked now, not in a later stage
         if (!columns.ok()) return TaskReport::BadInput("dataset: " + columns.status().message());
         const std::string name = fs::path(f).stem().string();
-        const std::string linked = out + "/motionfix/" + (name.rfind("triplets", 0) == 0 ? name : "triplets-" + name) + ".npz";
-        if (Status st = link(f, linked); !st.ok()) return TaskReport::BadInput("dataset: " + st.message());
-        manifest["motionfix"].push_back({{"file", fs::absolute(f).string()}, {"triplets", columns->rows}});
+        const std::string linked = out + "/motionfix/" +
+                                   (name.rfind("triplets", 0) == 0 ? name : "triplets-" + name) +
+                                   ".npz";
+        if (Status st = link(f, linked); !st.ok())
+          return TaskReport::BadInput("dataset: " + st.message());
+        manifest["motionfix"].push_back(
+            {{"file", fs::absolute(f).string()}, {"triplets", columns->rows}});
       }
     }
     const json babel_param = p.value("babel", json());
@@ -92,7 +101,8 @@ class DatasetStage : public StageExecutor {
     for (const std::string& entry : StringList(babel_param)) {
       if (fs::is_directory(entry)) {
         for (const char* split : {"train", "val", "test"}) {
-          if (fs::exists(entry + "/" + split + ".json")) babel.push_back({entry + "/" + split + ".json", split});
+          if (fs::exists(entry + "/" + split + ".json"))
+            babel.push_back({entry + "/" + split + ".json", split});
         }
       } else if (fs::is_regular_file(entry)) {
         babel.push_back({entry, fs::path(entry).stem().string()});
@@ -102,19 +112,26 @@ class DatasetStage : public StageExecutor {
     }
     for (const auto& [file, split] : babel) {
       if (split != "train" && split != "val" && split != "test") {
-        return TaskReport::BadInput("dataset: params.babel: " + file + ": BABEL files are named train.json, val.json or test.json");
+        return TaskReport::BadInput("dataset: params.babel: " + file +
+                                    ": BABEL files are named train.json, val.json or test.json");
       }
-      if (Status st = link(file, out + "/babel/" + split + ".json"); !st.ok()) return TaskReport::BadInput("dataset: " + st.message());
+      if (Status st = link(file, out + "/babel/" + split + ".json"); !st.ok())
+        return TaskReport::BadInput("dataset: " + st.message());
       manifest["babel"].push_back(fs::absolute(file).string());
     }
     if (!babel.empty()) {
       const std::string root = p.value("amass_root", std::string());
-      if (root.empty() || !fs::is_directory(root)) return TaskReport::BadInput("dataset: params.amass_root: the AMASS directory BABEL's feat_p paths start from");
-      if (Status st = WriteFileAtomic(out + "/amass_root", fs::absolute(root).string()); !st.ok()) return TaskReport::Error(st.message());
+      if (root.empty() || !fs::is_directory(root))
+        return TaskReport::BadInput(
+            "dataset: params.amass_root: the AMASS directory BABEL's feat_p paths start from");
+      if (Status st = WriteFileAtomic(out + "/amass_root", fs::absolute(root).string()); !st.ok())
+        return TaskReport::Error(st.message());
       manifest["amass_root"] = fs::absolute(root).string();
     }
-    if (manifest["motionfix"].empty() && babel.empty()) return TaskReport::BadInput("dataset: give params.motionfix and/or params.babel");
-    if (Status st = WriteFileAtomic(out + "/manifest.json", manifest.dump(1) + "\n"); !st.ok()) return TaskReport::Error(st.message());
+    if (manifest["motionfix"].empty() && babel.empty())
+      return TaskReport::BadInput("dataset: give params.motionfix and/or params.babel");
+    if (Status st = WriteFileAtomic(out + "/manifest.json", manifest.dump(1) + "\n"); !st.ok())
+      return TaskReport::Error(st.message());
     return TaskReport::Ok();
   }
 };
@@ -123,19 +140,23 @@ class DatasetStage : public StageExecutor {
 class SinglesStage : public StageExecutor {
  public:
   explicit SinglesStage(const PluginHost* plugins) : plugins_(plugins) {}
-  std::string Description() const override { return "single-action and two-action spans from BABEL + AMASS, body parts labelled"; }
+  std::string Description() const override {
+    return "single-action and two-action spans from BABEL + AMASS, body parts labelled";
+  }
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
     std::vector<std::string> babel = StringList(p.value("babel", json()));
     std::string amass_root = p.value("amass_root", std::string());
-    if (babel.empty()) {  // a corpus from an input stage: DIR/babel/{train,val,test}.json, AMASS under DIR
+    if (babel.empty()) {  // a corpus from an input stage: DIR/babel/{train,val,test}.json, AMASS
+                          // under DIR
       for (const std::string& dir : AllInputDirs(ctx)) {
         for (const char* split : {"train", "val", "test"}) {
           const std::string file = dir + "/babel/" + split + ".json";
           if (fs::exists(file)) babel.push_back(file);
         }
         if (!babel.empty()) {
-          // A `dataset` stage names the user's AMASS root in DIR/amass_root; a corpus holds its own.
+          // A `dataset` stage names the user's AMASS root in DIR/amass_root; a corpus holds its
+          // own.
           if (amass_root.empty()) {
             auto named = ReadFile(dir + "/amass_root");
             amass_root = named.ok() && !named->empty() ? *named : dir;
@@ -144,7 +165,9 @@ class SinglesStage : public StageExecutor {
         }
       }
     }
-    if (babel.empty()) return TaskReport::BadInput("singles: no BABEL files (params.babel, or an input stage holding babel/*.json)");
+    if (babel.empty())
+      return TaskReport::BadInput(
+          "singles: no BABEL files (params.babel, or an input stage holding babel/*.json)");
     sinc::SpanExtraction extraction;
     extraction.fps = p.value("fps", 30.0);
     extraction.sweep.min_frames = p.value("min_frames", 15);
@@ -154,7 +177,9 @@ class SinglesStage : public StageExecutor {
     std::string problem;
     auto table = sinc::ExtractBabelSpans(babel, amass_root, extraction, &skipped, &problem);
     if (!table.ok()) return FromStatus(table.status());
-    if (table->size() == 0) return TaskReport::BadInput("singles: no spans (" + std::to_string(skipped) + " sequences skipped: " + problem + ")");
+    if (table->size() == 0)
+      return TaskReport::BadInput("singles: no spans (" + std::to_string(skipped) +
+                                  " sequences skipped: " + problem + ")");
 
     // Labels for every distinct text, from the configured labeler.
     const std::string labeler_name = p.value("labeler", std::string("lexicon"));
@@ -166,7 +191,9 @@ class SinglesStage : public StageExecutor {
     }
     auto labeler = MakeLabeler(labeler_name, labeler_config, plugins_);
     if (!labeler.ok()) return FromStatus(labeler.status());
-    if ((*labeler)->NeedsMotion()) return TaskReport::BadInput("singles: labeler '" + labeler_name + "' labels motions; choose a text labeler");
+    if ((*labeler)->NeedsMotion())
+      return TaskReport::BadInput("singles: labeler '" + labeler_name +
+                                  "' labels motions; choose a text labeler");
     std::map<std::string, PartSet> parts;
     for (int64_t i = 0; i < table->size(); ++i) {
       parts[table->text_a[static_cast<size_t>(i)]] = 0;
@@ -191,11 +218,16 @@ class SinglesStage : public StageExecutor {
     }
     table->labeler = labeler_name;
     std::filesystem::create_directories(ctx.output_dir());
-    if (Status s = sinc::WriteSpans(ctx.output_dir() + "/spans.npz", *table); !s.ok()) return TaskReport::Error(s.message());
-    const json stats = {{"spans", table->size()}, {"singles", singles}, {"pairs", pairs}, {"frames", frames},
-                        {"texts", parts.size()},  {"labeler", labeler_name}, {"by_split", per_split},
-                        {"single_parts", per_parts}, {"sequences_skipped", skipped}, {"first_problem", problem}};
-    if (Status s = WriteFileAtomic(ctx.output_dir() + "/stats.json", stats.dump(1) + "\n", false); !s.ok()) return TaskReport::Error(s.message());
+    if (Status s = sinc::WriteSpans(ctx.output_dir() + "/spans.npz", *table); !s.ok())
+      return TaskReport::Error(s.message());
+    const json stats = {
+        {"spans", table->size()},  {"singles", singles},        {"pairs", pairs},
+        {"frames", frames},        {"texts", parts.size()},     {"labeler", labeler_name},
+        {"by_split", per_split},   {"single_parts", per_parts}, {"sequences_skipped", skipped},
+        {"first_problem", problem}};
+    if (Status s = WriteFileAtomic(ctx.output_dir() + "/stats.json", stats.dump(1) + "\n", false);
+        !s.ok())
+      return TaskReport::Error(s.message());
     TaskReport report;
     report.metrics["singles"] = static_cast<double>(singles);
     report.metrics["pairs"] = static_cast<double>(pairs);
@@ -217,12 +249,16 @@ std::string FindSpans(const TaskContext& ctx, const json& p) {
 // `synth`: shard i makes pairs [i * shard_size, ...) of params.pairs; the reduce task sums up.
 class SynthStage : public StageExecutor {
  public:
-  std::string Description() const override { return "SINC synthetic pairs: compatible singles composed, checked, stored as recipes"; }
+  std::string Description() const override {
+    return "SINC synthetic pairs: compatible singles composed, checked, stored as recipes";
+  }
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
     if (ctx.spec.reduce()) return Summarise(ctx);
     const std::string spans_path = FindSpans(ctx, p);
-    if (spans_path.empty()) return TaskReport::BadInput("synth: no spans.npz (params.spans, or an input `singles` stage)");
+    if (spans_path.empty())
+      return TaskReport::BadInput(
+          "synth: no spans.npz (params.spans, or an input `singles` stage)");
     auto table = sinc::ReadSpans(spans_path);
     if (!table.ok()) return FromStatus(table.status());
     json merged = p;
@@ -234,14 +270,20 @@ class SynthStage : public StageExecutor {
     const int64_t begin = static_cast<int64_t>(ctx.spec.index()) * shard_size;
     const int64_t count = std::min(shard_size, total - begin);
     if (count <= 0) return TaskReport::Ok();
-    auto report = sinc::SynthesiseShard(*table, *options, ctx.spec.index(), count, ctx.threads, ctx.output_dir());
+    auto report = sinc::SynthesiseShard(*table, *options, ctx.spec.index(), count, ctx.threads,
+                                        ctx.output_dir());
     if (!report.ok()) return FromStatus(report.status());
     // The spans file the recipes index, for loaders and exports.
-    const json source = {{"spans", fs::absolute(spans_path).string()}, {"first_pair", begin}, {"pairs", report->pairs}};
-    if (Status s = WriteFileAtomic(ctx.output_dir() + "/source.json", source.dump(1) + "\n", false); !s.ok()) return TaskReport::Error(s.message());
+    const json source = {{"spans", fs::absolute(spans_path).string()},
+                         {"first_pair", begin},
+                         {"pairs", report->pairs}};
+    if (Status s = WriteFileAtomic(ctx.output_dir() + "/source.json", source.dump(1) + "\n", false);
+        !s.ok())
+      return TaskReport::Error(s.message());
     TaskReport out;
     out.metrics["pairs"] = static_cast<double>(report->pairs);
-    out.metrics["pairs_per_second"] = static_cast<double>(report->pairs) / std::max(report->seconds, 1e-9);
+    out.metrics["pairs_per_second"] =
+        static_cast<double>(report->pairs) / std::max(report->seconds, 1e-9);
     out.metrics["peak_rss_bytes"] = static_cast<double>(report->peak_rss_bytes);
     return out;
   }
@@ -254,7 +296,8 @@ class SynthStage : public StageExecutor {
     struct Rss {
       int64_t tasks = 0, first = 0, last = 0, peak = 0;
     };
-    std::map<int64_t, Rss> rss;  // per worker process: resident memory after its first and last shard
+    std::map<int64_t, Rss>
+        rss;  // per worker process: resident memory after its first and last shard
     json shards = json::array();
     for (const std::string& dir : ctx.spec.shard_dirs()) {
       auto text = ReadFile(dir + "/stats.json");
@@ -265,32 +308,43 @@ class SynthStage : public StageExecutor {
       candidates += stats.value("candidates", int64_t{0});
       bytes += stats.value("bytes", int64_t{0});
       seconds += stats.value("seconds", 0.0);
-      for (const auto& item : stats["dropped"].items()) dropped[item.key()] += item.value().get<int64_t>();
+      for (const auto& item : stats["dropped"].items())
+        dropped[item.key()] += item.value().get<int64_t>();
       const int64_t pid = stats.value("pid", int64_t{0});
       Rss& r = rss[pid];
       const int64_t now = stats.value("rss_bytes", int64_t{0});
       if (r.tasks++ == 0) r.first = now;
       r.last = now;
       r.peak = std::max(r.peak, stats.value("peak_rss_bytes", int64_t{0}));
-      shards.push_back({{"dir", fs::path(dir).filename().string()}, {"pairs", stats.value("pairs", int64_t{0})}});
+      shards.push_back({{"dir", fs::path(dir).filename().string()},
+                        {"pairs", stats.value("pairs", int64_t{0})}});
     }
     json workers = json::array();
     for (const auto& [pid, r] : rss) {
-      workers.push_back({{"pid", pid}, {"shards", r.tasks}, {"rss_after_first_shard", r.first}, {"rss_after_last_shard", r.last},
+      workers.push_back({{"pid", pid},
+                         {"shards", r.tasks},
+                         {"rss_after_first_shard", r.first},
+                         {"rss_after_last_shard", r.last},
                          {"peak_rss", r.peak}});
     }
-    const json summary = {{"pairs", pairs},
-                          {"candidates", candidates},
-                          {"dropped", dropped},
-                          {"kept_fraction", candidates > 0 ? static_cast<double>(pairs) / static_cast<double>(candidates) : 0.0},
-                          {"recipe_bytes", bytes},
-                          {"bytes_per_pair", pairs > 0 ? static_cast<double>(bytes) / static_cast<double>(pairs) : 0.0},
-                          {"task_seconds", seconds},
-                          {"pairs_per_task_second", seconds > 0 ? static_cast<double>(pairs) / seconds : 0.0},
-                          {"workers", workers},
-                          {"shards", shards}};
+    const json summary = {
+        {"pairs", pairs},
+        {"candidates", candidates},
+        {"dropped", dropped},
+        {"kept_fraction",
+         candidates > 0 ? static_cast<double>(pairs) / static_cast<double>(candidates) : 0.0},
+        {"recipe_bytes", bytes},
+        {"bytes_per_pair",
+         pairs > 0 ? static_cast<double>(bytes) / static_cast<double>(pairs) : 0.0},
+        {"task_seconds", seconds},
+        {"pairs_per_task_second", seconds > 0 ? static_cast<double>(pairs) / seconds : 0.0},
+        {"workers", workers},
+        {"shards", shards}};
     std::filesystem::create_directories(ctx.output_dir());
-    if (Status s = WriteFileAtomic(ctx.output_dir() + "/summary.json", summary.dump(1) + "\n", false); !s.ok()) return TaskReport::Error(s.message());
+    if (Status s =
+            WriteFileAtomic(ctx.output_dir() + "/summary.json", summary.dump(1) + "\n", false);
+        !s.ok())
+      return TaskReport::Error(s.message());
     TaskReport report;
     report.metrics["pairs"] = static_cast<double>(pairs);
     return report;

@@ -169,7 +169,14 @@ void Sha256Block(std::array<uint32_t, 8>& h, const unsigned char* block) {
     b = a;
     a = t1 + t2;
   }
-  h[0] += a; h[1] += b; h[2] += c; h[3] += d; h[4] += e; h[5] += f; h[6] += g; h[7] += hh;
+  h[0] += a;
+  h[1] += b;
+  h[2] += c;
+  h[3] += d;
+  h[4] += e;
+  h[5] += f;
+  h[6] += g;
+  h[7] += hh;
 }
 }  // namespace
 
@@ -218,8 +225,8 @@ Status SyncTree(const std::string& dir) {
   std::error_code ec;
   if (!std::filesystem::is_directory(dir, ec)) return Status::Ok();
   std::vector<std::string> dirs;
-  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec); !ec && it != std::filesystem::recursive_directory_iterator();
-       it.increment(ec)) {
+  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec);
+       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
     if (it->is_symlink()) continue;  // links to the user's data are not ours to sync
     if (it->is_directory()) {
       dirs.push_back(it->path().string());
@@ -228,7 +235,8 @@ Status SyncTree(const std::string& dir) {
     }
   }
   if (ec) return IoError(dir + ": cannot list to fsync: " + ec.message());
-  for (auto d = dirs.rbegin(); d != dirs.rend(); ++d) MP_RETURN_IF_ERROR(SyncPath(*d, true));  // deepest first
+  for (auto d = dirs.rbegin(); d != dirs.rend(); ++d)
+    MP_RETURN_IF_ERROR(SyncPath(*d, true));  // deepest first
   return SyncPath(dir, true);
 }
 
@@ -243,10 +251,12 @@ Result<FileLock> FileLock::Acquire(const std::string& path) {
     const ssize_t n = ::pread(lock.fd_, holder.data(), holder.size(), 0);
     holder.resize(n > 0 ? static_cast<size_t>(n) : 0);
     while (!holder.empty() && (holder.back() == '\n' || holder.back() == ' ')) holder.pop_back();
-    return FailedPrecondition(path + " is held by another process" + (holder.empty() ? std::string() : " (pid " + holder + ")"));
+    return FailedPrecondition(path + " is held by another process" +
+                              (holder.empty() ? std::string() : " (pid " + holder + ")"));
   }
   const std::string pid = std::to_string(::getpid()) + "\n";
-  if (::ftruncate(lock.fd_, 0) != 0 || ::pwrite(lock.fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
+  if (::ftruncate(lock.fd_, 0) != 0 ||
+      ::pwrite(lock.fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
     return IoError(path + ": cannot write the holder's pid: " + std::strerror(errno));
   }
   return lock;

@@ -1,6 +1,5 @@
 #include "motionpipe/corpus/corpus.h"
 
-#include <nlohmann/json.hpp>
 #include <omp.h>
 
 #include <algorithm>
@@ -8,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <set>
 
 #include "motionpipe/base/file.h"
@@ -26,11 +26,13 @@ namespace {
 constexpr uint64_t kClipStream = 0xC11B;
 constexpr uint64_t kTripletStream = 0x7121;
 
-bool PassesGate(const Synthesis& synthesis, const PlausibilityGate& gate, const Skeleton& skeleton) {
+bool PassesGate(const Synthesis& synthesis, const PlausibilityGate& gate,
+                const Skeleton& skeleton) {
   if (synthesis.max_reach_error > gate.max_reach_error) return false;
   const PlausibilityReport r = EvaluateMotionPlausibility(skeleton, synthesis.motion);
   return r.foot_skate_ratio <= gate.max_skate_ratio && r.penetration_max <= gate.max_penetration &&
-         r.max_joint_step <= gate.max_joint_step && (!gate.joint_limits || r.joint_limit_violations == 0);
+         r.max_joint_step <= gate.max_joint_step &&
+         (!gate.joint_limits || r.joint_limit_violations == 0);
 }
 
 std::string StripSubject(const std::string& caption) {
@@ -50,7 +52,8 @@ std::string ClipCaption(const ClipScript& s) {
     std::string part = k == 0 ? b.caption : StripSubject(b.caption);
     std::vector<std::string> during;
     for (const ActionInstance& o : s.overlays) {
-      if (o.start >= b.start && o.start < b.end) during.push_back(text::GerundPhrase(VerbPhrase(o, Person::kThird)));
+      if (o.start >= b.start && o.start < b.end)
+        during.push_back(text::GerundPhrase(VerbPhrase(o, Person::kThird)));
     }
     for (size_t j = 0; j < during.size(); ++j) part += (j == 0 ? " while " : " and ") + during[j];
     if (b.id == ActionId::kStand && !during.empty() && s.base.size() == 1) {
@@ -64,12 +67,18 @@ std::string ClipCaption(const ClipScript& s) {
 
 std::string ActCat(ActionId id) {
   switch (Def(id).kind) {
-    case ActionKind::kLocomotion: return id == ActionId::kStand ? "stand" : "locomotion";
-    case ActionKind::kWholeBody: return "body movement";
-    case ActionKind::kLeg: return "leg movement";
-    case ActionKind::kArm: return "arm movement";
-    case ActionKind::kTorso: return "torso movement";
-    case ActionKind::kHead: return "head movement";
+    case ActionKind::kLocomotion:
+      return id == ActionId::kStand ? "stand" : "locomotion";
+    case ActionKind::kWholeBody:
+      return "body movement";
+    case ActionKind::kLeg:
+      return "leg movement";
+    case ActionKind::kArm:
+      return "arm movement";
+    case ActionKind::kTorso:
+      return "torso movement";
+    case ActionKind::kHead:
+      return "head movement";
   }
   return "action";
 }
@@ -89,8 +98,8 @@ struct GeneratedClip {
   std::vector<TextFact> facts;
 };
 
-Synthesis SynthesizeGated(ClipScript* script, const CorpusOptions& options, uint64_t base_seed, const std::string& id,
-                          int64_t* rejected) {
+Synthesis SynthesizeGated(ClipScript* script, const CorpusOptions& options, uint64_t base_seed,
+                          const std::string& id, int64_t* rejected) {
   const Skeleton& skeleton = Skeleton::Smpl22();
   Synthesis synthesis;
   for (int attempt = 0; attempt < options.gate.max_attempts; ++attempt) {
@@ -108,8 +117,8 @@ GeneratedClip MakeClip(const CorpusOptions& options, int64_t index) {
   char id[32];
   std::snprintf(id, sizeof(id), "c%07lld", static_cast<long long>(index));
   ClipScript script;
-  const Synthesis synthesis = SynthesizeGated(&script, options, MixSeed(MixSeed(options.seed, kClipStream), index), id,
-                                              &out.rejected);
+  const Synthesis synthesis = SynthesizeGated(
+      &script, options, MixSeed(MixSeed(options.seed, kClipStream), index), id, &out.rejected);
   out.split = SplitOf(options.seed, kClipStream, index);
   Clip& clip = out.clip;
   clip.id = id;
@@ -151,12 +160,13 @@ GeneratedClip MakeClip(const CorpusOptions& options, int64_t index) {
   for (size_t k = 1; k < script.base.size(); ++k) {
     if (!transition_rng.Bernoulli(0.3)) continue;
     const double t = script.base[k].start;
-    frame_labels.push_back({{"raw_label", "transition"},
-                            {"proc_label", "transition"},
-                            {"seg_id", clip.id + "_" + std::to_string(seg_id++)},
-                            {"act_cat", {"transition"}},
-                            {"start_t", std::round(std::max(0.0, t - 0.3) * 1000) / 1000},
-                            {"end_t", std::round(std::min(script.duration, t + 0.3) * 1000) / 1000}});
+    frame_labels.push_back(
+        {{"raw_label", "transition"},
+         {"proc_label", "transition"},
+         {"seg_id", clip.id + "_" + std::to_string(seg_id++)},
+         {"act_cat", {"transition"}},
+         {"start_t", std::round(std::max(0.0, t - 0.3) * 1000) / 1000},
+         {"end_t", std::round(std::min(script.duration, t + 0.3) * 1000) / 1000}});
   }
   out.babel = {{"babel_sid", index},
                {"url", ""},
@@ -165,11 +175,17 @@ GeneratedClip MakeClip(const CorpusOptions& options, int64_t index) {
                {"split", out.split},
                {"seq_ann",
                 {{"mul_act", annotated.size() > 1},
-                 {"labels", {{{"raw_label", caption}, {"proc_label", caption}, {"seg_id", clip.id + "_seq"}, {"act_cat", {"action"}}}}}}},
+                 {"labels",
+                  {{{"raw_label", caption},
+                    {"proc_label", caption},
+                    {"seg_id", clip.id + "_seq"},
+                    {"act_cat", {"action"}}}}}}},
                {"frame_ann", {{"labels", frame_labels}}}};
   PartSet caption_parts = 0;  // the caption describes every action of the clip
-  for (const ActionInstance& a : script.base) caption_parts = static_cast<PartSet>(caption_parts | PartsOf(a.id, a.side));
-  for (const ActionInstance& a : script.overlays) caption_parts = static_cast<PartSet>(caption_parts | PartsOf(a.id, a.side));
+  for (const ActionInstance& a : script.base)
+    caption_parts = static_cast<PartSet>(caption_parts | PartsOf(a.id, a.side));
+  for (const ActionInstance& a : script.overlays)
+    caption_parts = static_cast<PartSet>(caption_parts | PartsOf(a.id, a.side));
   out.facts.push_back({caption, caption_parts, ""});
   if (options.write_amass) out.amass = SerializeNpz(AmassNpzFromMotion(clip.motion), false);
   return out;
@@ -198,7 +214,8 @@ GeneratedTriplet MakeTriplet(const CorpusOptions& options, int64_t index) {
     t.text = edit.text;
     t.edit_kind = EditKindName(edit.kind);
     t.edit_start = static_cast<int32_t>(std::llround(edit.edit_start * options.fps));
-    t.edit_end = static_cast<int32_t>(std::min<int64_t>(std::llround(edit.edit_end * options.fps), a.motion.num_frames()));
+    t.edit_end = static_cast<int32_t>(
+        std::min<int64_t>(std::llround(edit.edit_end * options.fps), a.motion.num_frames()));
     if (PassesGate(a, options.gate, skeleton) && PassesGate(b, options.gate, skeleton)) break;
     ++out.rejected;
   }
@@ -235,11 +252,13 @@ Status ValidateOptions(const CorpusOptions& options) {
   return Status::Ok();
 }
 
-int64_t TripletCount(const CorpusOptions& options) { return options.triplets < 0 ? options.clips : options.triplets; }
+int64_t TripletCount(const CorpusOptions& options) {
+  return options.triplets < 0 ? options.clips : options.triplets;
+}
 
 // Writes bytes under dir and records the file for the shard's file list.
-Status WriteRecorded(const std::string& dir, const std::string& relative, const std::string& bytes, bool sync,
-                     nlohmann::json* files) {
+Status WriteRecorded(const std::string& dir, const std::string& relative, const std::string& bytes,
+                     bool sync, nlohmann::json* files) {
   MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes, sync));
   files->push_back({{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
   return Status::Ok();
@@ -254,8 +273,10 @@ int64_t ShardCount(const CorpusOptions& options) {
 
 Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const std::string& dir) {
   MP_RETURN_IF_ERROR(ValidateOptions(options));
-  if (index < 0 || index >= ShardCount(options)) return InvalidArgument("corpus shard " + std::to_string(index) + " out of range");
-  for (const char* sub : {"", "/clips", "/amass", "/motionfix"}) MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
+  if (index < 0 || index >= ShardCount(options))
+    return InvalidArgument("corpus shard " + std::to_string(index) + " out of range");
+  for (const char* sub : {"", "/clips", "/amass", "/motionfix"})
+    MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
   if (options.threads > 0) omp_set_num_threads(options.threads);
   CorpusOptions opts = options;
   opts.script.fps = options.fps;
@@ -272,7 +293,8 @@ Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const st
   if (clip_begin < clip_end) {
     std::vector<GeneratedClip> generated(static_cast<size_t>(clip_end - clip_begin));
 #pragma omp parallel for schedule(dynamic)
-    for (int64_t k = 0; k < clip_end - clip_begin; ++k) generated[static_cast<size_t>(k)] = MakeClip(opts, clip_begin + k);
+    for (int64_t k = 0; k < clip_end - clip_begin; ++k)
+      generated[static_cast<size_t>(k)] = MakeClip(opts, clip_begin + k);
     std::vector<Clip> clips;
     for (GeneratedClip& g : generated) {
       rejected += g.rejected;
@@ -281,17 +303,21 @@ Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const st
       babel[g.split][std::to_string(g.babel["babel_sid"].get<int64_t>())] = g.babel;
       for (const TextFact& fact : g.facts) facts.push_back({fact.text, fact.parts, fact.action});
       if (options.write_amass) {
-        MP_RETURN_IF_ERROR(WriteRecorded(dir, "amass/" + g.clip.id + "_poses.npz", g.amass, false, &files));
+        MP_RETURN_IF_ERROR(
+            WriteRecorded(dir, "amass/" + g.clip.id + "_poses.npz", g.amass, false, &files));
       }
       clips.push_back(std::move(g.clip));
     }
-    MP_RETURN_IF_ERROR(WriteRecorded(dir, "clips/" + ShardName("clips", index), SerializeNpz(ClipsToNpz(clips), true), true, &files));
+    MP_RETURN_IF_ERROR(WriteRecorded(dir, "clips/" + ShardName("clips", index),
+                                     SerializeNpz(ClipsToNpz(clips), true), true, &files));
   }
-  const int64_t triplet_begin = index * size, triplet_end = std::min(TripletCount(options), triplet_begin + size);
+  const int64_t triplet_begin = index * size,
+                triplet_end = std::min(TripletCount(options), triplet_begin + size);
   if (triplet_begin < triplet_end) {
     std::vector<GeneratedTriplet> generated(static_cast<size_t>(triplet_end - triplet_begin));
 #pragma omp parallel for schedule(dynamic)
-    for (int64_t k = 0; k < triplet_end - triplet_begin; ++k) generated[static_cast<size_t>(k)] = MakeTriplet(opts, triplet_begin + k);
+    for (int64_t k = 0; k < triplet_end - triplet_begin; ++k)
+      generated[static_cast<size_t>(k)] = MakeTriplet(opts, triplet_begin + k);
     std::vector<Triplet> triplets;
     for (GeneratedTriplet& g : generated) {
       rejected += g.rejected;
@@ -300,10 +326,10 @@ Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const st
       edit_kinds[g.triplet.edit_kind] += 1;
       triplets.push_back(std::move(g.triplet));
     }
-    // Uncompressed (as np.savez): readers map the file and use the arrays in place; the filter and the
-    // trainers read the triplets far more often than they are written.
-    MP_RETURN_IF_ERROR(
-        WriteRecorded(dir, "motionfix/" + ShardName("triplets", index), SerializeNpz(TripletsToNpz(triplets), false), true, &files));
+    // Uncompressed (as np.savez): readers map the file and use the arrays in place; the filter and
+    // the trainers read the triplets far more often than they are written.
+    MP_RETURN_IF_ERROR(WriteRecorded(dir, "motionfix/" + ShardName("triplets", index),
+                                     SerializeNpz(TripletsToNpz(triplets), false), true, &files));
   }
   shard["rejected"] = rejected;
   shard["frames"] = frames;
@@ -319,16 +345,21 @@ Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const st
   return WriteFileAtomic(dir + "/shard.json", shard.dump() + "\n");
 }
 
-Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options, const std::vector<std::string>& shard_dirs) {
+Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options,
+                                     const std::vector<std::string>& shard_dirs) {
   MP_RETURN_IF_ERROR(ValidateOptions(options));
   const std::string& dir = options.out_dir;
-  for (const char* sub : {"", "/clips", "/amass", "/babel", "/motionfix", "/texts"}) MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
+  for (const char* sub : {"", "/clips", "/amass", "/babel", "/motionfix", "/texts"})
+    MP_RETURN_IF_ERROR(MakeDirs(dir + sub));
   CorpusSummary summary;
   nlohmann::json manifest_files = nlohmann::json::array();
   std::map<std::string, nlohmann::json> babel;
-  std::map<std::string, std::vector<double>> fact_parts;  // text -> summed part indicators (6) + count
+  std::map<std::string, std::vector<double>>
+      fact_parts;  // text -> summed part indicators (6) + count
   std::map<std::string, std::set<std::string>> fact_actions;
-  nlohmann::json splits = {{"train", nlohmann::json::array()}, {"val", nlohmann::json::array()}, {"test", nlohmann::json::array()}};
+  nlohmann::json splits = {{"train", nlohmann::json::array()},
+                           {"val", nlohmann::json::array()},
+                           {"test", nlohmann::json::array()}};
   std::map<std::string, int64_t> edit_kinds;
   for (const std::string& shard_dir : shard_dirs) {
     MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(shard_dir + "/shard.json"));
@@ -356,8 +387,10 @@ Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options, const std::ve
     summary.frames += shard["frames"].get<int64_t>();
     summary.triplet_frames += shard["triplet_frames"].get<int64_t>();
     summary.rejected += shard["rejected"].get<int64_t>();
-    for (const auto& [split, count] : shard["split_clips"].items()) summary.split_clips[split] += count.get<int64_t>();
-    for (const auto& [kind, count] : shard["edit_kinds"].items()) edit_kinds[kind] += count.get<int64_t>();
+    for (const auto& [split, count] : shard["split_clips"].items())
+      summary.split_clips[split] += count.get<int64_t>();
+    for (const auto& [kind, count] : shard["edit_kinds"].items())
+      edit_kinds[kind] += count.get<int64_t>();
     for (const auto& [split, sequences] : shard["babel"].items()) {
       for (const auto& [sid, seq] : sequences.items()) babel[split][sid] = seq;
     }
@@ -369,35 +402,43 @@ Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options, const std::ve
       const auto parts_bits = fact[1].get<int>();
       auto& parts = fact_parts[text_key];
       if (parts.empty()) parts.assign(kNumBodyParts + 1, 0.0);
-      for (int p = 0; p < kNumBodyParts; ++p) parts[static_cast<size_t>(p)] += (parts_bits >> p) & 1;
+      for (int p = 0; p < kNumBodyParts; ++p)
+        parts[static_cast<size_t>(p)] += (parts_bits >> p) & 1;
       parts[kNumBodyParts] += 1;
-      if (!fact[2].get<std::string>().empty()) fact_actions[text_key].insert(fact[2].get<std::string>());
+      if (!fact[2].get<std::string>().empty())
+        fact_actions[text_key].insert(fact[2].get<std::string>());
     }
   }
   const auto write_json = [&](const std::string& relative, const nlohmann::json& doc) -> Status {
     const std::string bytes = doc.dump(1) + "\n";
     MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/" + relative, bytes));
-    manifest_files.push_back({{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
+    manifest_files.push_back(
+        {{"path", relative}, {"bytes", bytes.size()}, {"sha256", Sha256Hex(bytes)}});
     return Status::Ok();
   };
   for (const char* split : {"train", "val", "test"}) {
-    MP_RETURN_IF_ERROR(write_json(std::string("babel/") + split + ".json", babel.count(split) ? babel[split] : nlohmann::json::object()));
+    MP_RETURN_IF_ERROR(write_json(std::string("babel/") + split + ".json",
+                                  babel.count(split) ? babel[split] : nlohmann::json::object()));
   }
   MP_RETURN_IF_ERROR(write_json("motionfix/splits.json", splits));
   nlohmann::json labels = nlohmann::json::object();
   for (const auto& [text_key, parts] : fact_parts) {
     nlohmann::json fractions = nlohmann::json::array();
     for (int p = 0; p < kNumBodyParts; ++p) {
-      fractions.push_back(std::round(parts[static_cast<size_t>(p)] / parts[kNumBodyParts] * 1000) / 1000);
+      fractions.push_back(std::round(parts[static_cast<size_t>(p)] / parts[kNumBodyParts] * 1000) /
+                          1000);
     }
-    labels[text_key] = {{"parts", fractions}, {"count", static_cast<int64_t>(parts[kNumBodyParts])}};
+    labels[text_key] = {{"parts", fractions},
+                        {"count", static_cast<int64_t>(parts[kNumBodyParts])}};
     if (fact_actions.count(text_key)) labels[text_key]["actions"] = fact_actions[text_key];
   }
-  MP_RETURN_IF_ERROR(write_json("texts/labels.json", {{"order", BodyPartNames()},
-                                                      {"about", "ground-truth body parts of every corpus text: the fraction of "
-                                                                "occurrences in which each part moves (1 always, 0 never, "
-                                                                "in between: the text does not say, e.g. 'wave' without a side)"},
-                                                      {"labels", labels}}));
+  MP_RETURN_IF_ERROR(write_json("texts/labels.json",
+                                {{"order", BodyPartNames()},
+                                 {"about",
+                                  "ground-truth body parts of every corpus text: the fraction of "
+                                  "occurrences in which each part moves (1 always, 0 never, "
+                                  "in between: the text does not say, e.g. 'wave' without a side)"},
+                                 {"labels", labels}}));
   nlohmann::json manifest = {{"format", "motionpipe.corpus/1"},
                              {"seed", options.seed},
                              {"fps", options.fps},
@@ -427,7 +468,8 @@ Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options) {
   MP_ASSIGN_OR_RETURN(CorpusSummary summary, FinalizeCorpus(options, shard_dirs));
   std::error_code ec;
   std::filesystem::remove_all(shards_root, ec);  // the corpus holds the other links to the files
-  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  summary.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return summary;
 }
 

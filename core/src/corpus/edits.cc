@@ -19,7 +19,8 @@ std::string Noun(const ActionInstance& a) {
 }
 
 std::string Times(int n) {
-  static const char* kWords[] = {"zero times", "once", "twice", "three times", "four times", "five times", "six times"};
+  static const char* kWords[] = {"zero times", "once",       "twice",    "three times",
+                                 "four times", "five times", "six times"};
   return n >= 0 && n <= 6 ? kWords[n] : std::to_string(n) + " times";
 }
 
@@ -81,10 +82,28 @@ bool SpeedMatters(ActionId id) {
 
 bool AmplitudeMatters(ActionId id) {
   switch (id) {
-    case A::kWave: case A::kRaiseArm: case A::kPunch: case A::kReachForward: case A::kKick: case A::kKneeLift:
-    case A::kStomp: case A::kSquat: case A::kCrouch: case A::kBow: case A::kBendForward: case A::kLean: case A::kTwist:
-    case A::kJump: case A::kHop: case A::kNod: case A::kShakeHead: case A::kLookAround: case A::kLookUp:
-    case A::kSway: case A::kStretchLeg: case A::kShrug:
+    case A::kWave:
+    case A::kRaiseArm:
+    case A::kPunch:
+    case A::kReachForward:
+    case A::kKick:
+    case A::kKneeLift:
+    case A::kStomp:
+    case A::kSquat:
+    case A::kCrouch:
+    case A::kBow:
+    case A::kBendForward:
+    case A::kLean:
+    case A::kTwist:
+    case A::kJump:
+    case A::kHop:
+    case A::kNod:
+    case A::kShakeHead:
+    case A::kLookAround:
+    case A::kLookUp:
+    case A::kSway:
+    case A::kStretchLeg:
+    case A::kShrug:
       return true;
     default:
       return false;
@@ -96,28 +115,40 @@ std::string AmplitudeText(const ActionInstance& a, bool more, Rng& rng) {
   const std::string side = a.side == Side::kLeft ? "left" : "right";
   std::vector<std::string> options;
   if (kind == ActionKind::kArm) {
-    options = more ? std::vector<std::string>{"raise your {side} arm higher", "{verb} with bigger movements",
-                                              "lift the hand higher", "make the arm movement bigger", "extend the arm further"}
-                   : std::vector<std::string>{"keep your {side} hand lower", "{verb} with smaller movements",
-                                              "don't raise the arm so high", "make the arm movement smaller"};
+    options =
+        more ? std::vector<std::string>{"raise your {side} arm higher",
+                                        "{verb} with bigger movements", "lift the hand higher",
+                                        "make the arm movement bigger", "extend the arm further"}
+             : std::vector<std::string>{
+                   "keep your {side} hand lower", "{verb} with smaller movements",
+                   "don't raise the arm so high", "make the arm movement smaller"};
     if (a.side == Side::kBoth) {
-      options = more ? std::vector<std::string>{"raise both arms higher", "make the arm movements bigger"}
-                     : std::vector<std::string>{"keep both hands lower", "make the arm movements smaller"};
+      options =
+          more
+              ? std::vector<std::string>{"raise both arms higher", "make the arm movements bigger"}
+              : std::vector<std::string>{"keep both hands lower", "make the arm movements smaller"};
     }
-  } else if (a.id == A::kKick || a.id == A::kKneeLift || a.id == A::kStomp || a.id == A::kStretchLeg) {
-    options = more ? std::vector<std::string>{"kick higher", "lift the {side} leg higher", "raise the knee higher",
-                                              "{verb} further"}
-                   : std::vector<std::string>{"don't lift the {side} leg so high", "keep the foot lower", "{verb} less"};
+  } else if (a.id == A::kKick || a.id == A::kKneeLift || a.id == A::kStomp ||
+             a.id == A::kStretchLeg) {
+    options = more ? std::vector<std::string>{"kick higher", "lift the {side} leg higher",
+                                              "raise the knee higher", "{verb} further"}
+                   : std::vector<std::string>{"don't lift the {side} leg so high",
+                                              "keep the foot lower", "{verb} less"};
     if (a.id == A::kKick) options.push_back(more ? "kick higher and further" : "kick lower");
   } else if (a.id == A::kJump || a.id == A::kHop) {
-    options = more ? std::vector<std::string>{"jump higher", "jump further", "make bigger jumps"}
-                   : std::vector<std::string>{"jump lower", "make smaller jumps", "don't jump so high"};
+    options =
+        more ? std::vector<std::string>{"jump higher", "jump further", "make bigger jumps"}
+             : std::vector<std::string>{"jump lower", "make smaller jumps", "don't jump so high"};
   } else if (kind == ActionKind::kHead) {
-    options = more ? std::vector<std::string>{"move your head more", "{verb} more clearly", "make the head movement bigger"}
-                   : std::vector<std::string>{"move your head less", "only {verb} slightly", "make the head movement smaller"};
+    options = more ? std::vector<std::string>{"move your head more", "{verb} more clearly",
+                                              "make the head movement bigger"}
+                   : std::vector<std::string>{"move your head less", "only {verb} slightly",
+                                              "make the head movement smaller"};
   } else {
-    options = more ? std::vector<std::string>{"bend down more", "go lower", "bend further", "{verb} more", "{verb} deeper"}
-                   : std::vector<std::string>{"don't bend so much", "bend less", "stay higher", "only {verb} a little"};
+    options = more ? std::vector<std::string>{"bend down more", "go lower", "bend further",
+                                              "{verb} more", "{verb} deeper"}
+                   : std::vector<std::string>{"don't bend so much", "bend less", "stay higher",
+                                              "only {verb} a little"};
   }
   return Fill(rng.Pick(options), {{"{verb}", VerbPhrase(a, Person::kSecond)}, {"{side}", side}});
 }
@@ -132,17 +163,28 @@ struct Candidate {
 
 const char* EditKindName(EditKind kind) {
   switch (kind) {
-    case EditKind::kSpeed: return "speed";
-    case EditKind::kAmplitude: return "amplitude";
-    case EditKind::kSide: return "side";
-    case EditKind::kAddAction: return "add_action";
-    case EditKind::kRemoveAction: return "remove_action";
-    case EditKind::kReplaceAction: return "replace_action";
-    case EditKind::kRepetitions: return "repetitions";
-    case EditKind::kTiming: return "timing";
-    case EditKind::kReplaceBase: return "replace_base";
-    case EditKind::kPosture: return "posture";
-    case EditKind::kCount: break;
+    case EditKind::kSpeed:
+      return "speed";
+    case EditKind::kAmplitude:
+      return "amplitude";
+    case EditKind::kSide:
+      return "side";
+    case EditKind::kAddAction:
+      return "add_action";
+    case EditKind::kRemoveAction:
+      return "remove_action";
+    case EditKind::kReplaceAction:
+      return "replace_action";
+    case EditKind::kRepetitions:
+      return "repetitions";
+    case EditKind::kTiming:
+      return "timing";
+    case EditKind::kReplaceBase:
+      return "replace_base";
+    case EditKind::kPosture:
+      return "posture";
+    case EditKind::kCount:
+      break;
   }
   return "unknown";
 }
@@ -154,11 +196,13 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
     const ActionInstance& b = source.base[k];
     if (SpeedMatters(b.id)) candidates.push_back({EditKind::kSpeed, false, k});
     if (AmplitudeMatters(b.id)) candidates.push_back({EditKind::kAmplitude, false, k});
-    if (Def(b.id).sided || b.id == A::kTurnInPlace || b.id == A::kSideStep || b.id == A::kWalkCircle) {
+    if (Def(b.id).sided || b.id == A::kTurnInPlace || b.id == A::kSideStep ||
+        b.id == A::kWalkCircle) {
       candidates.push_back({EditKind::kSide, false, k});
     }
     if (b.reps > 0) candidates.push_back({EditKind::kRepetitions, false, k});
-    if (b.id != A::kSitDown && b.id != A::kStandUp && b.id != A::kJumpingJacks && b.duration() > 1.8) {
+    if (b.id != A::kSitDown && b.id != A::kStandUp && b.id != A::kJumpingJacks &&
+        b.duration() > 1.8) {
       candidates.push_back({EditKind::kAddAction, false, k});
     }
     if (IsBaseKind(Def(b.id).kind) && b.id != A::kSitDown && b.id != A::kStandUp) {
@@ -174,7 +218,8 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
     if (Def(o.id).sided && o.side != Side::kBoth) candidates.push_back({EditKind::kSide, true, k});
     if (o.reps > 0) candidates.push_back({EditKind::kRepetitions, true, k});
   }
-  const bool sit_pair = source.base.size() >= 2 && source.base[source.base.size() - 2].id == A::kSitDown;
+  const bool sit_pair =
+      source.base.size() >= 2 && source.base[source.base.size() - 2].id == A::kSitDown;
   if (source.base.size() >= 2 && !sit_pair && source.base.back().id != A::kStandUp) {
     candidates.push_back({EditKind::kTiming, false, source.base.size() - 1});
   }
@@ -184,7 +229,8 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
   // the action it applies to.
   static const double kKindWeight[] = {1.0, 1.2, 1.0, 1.2, 1.0, 0.8, 0.8, 0.6, 0.8, 0.4};
   std::vector<double> weights(static_cast<size_t>(EditKind::kCount), 0.0);
-  for (const Candidate& c : candidates) weights[static_cast<size_t>(c.kind)] = kKindWeight[static_cast<size_t>(c.kind)];
+  for (const Candidate& c : candidates)
+    weights[static_cast<size_t>(c.kind)] = kKindWeight[static_cast<size_t>(c.kind)];
   const auto chosen = static_cast<EditKind>(rng.Weighted(weights));
   std::vector<Candidate> of_kind;
   for (const Candidate& c : candidates) {
@@ -197,7 +243,8 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
   edit.target.style = JitterStyle(source.style, rng);
   ClipScript& t = edit.target;
   ActionInstance& inst = pick.overlay ? t.overlays[pick.index] : t.base[pick.index];
-  const ActionInstance original = pick.overlay ? source.overlays[pick.index] : source.base[pick.index];
+  const ActionInstance original =
+      pick.overlay ? source.overlays[pick.index] : source.base[pick.index];
   edit.edit_start = original.start;
   edit.edit_end = original.end;
   const std::string verb = VerbPhrase(original, Person::kSecond);
@@ -208,19 +255,26 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       const double factor = faster ? rng.Uniform(1.35, 1.6) : rng.Uniform(0.6, 0.72);
       inst.speed = original.speed * factor;
       const ActionKind kind = Def(inst.id).kind;
-      const bool continuous = kind == ActionKind::kLocomotion && inst.reps == 0 && inst.id != A::kTurnInPlace;
+      const bool continuous =
+          kind == ActionKind::kLocomotion && inst.reps == 0 && inst.id != A::kTurnInPlace;
       if (!continuous) {
-        const double new_duration = std::max(0.8, original.duration() / (inst.reps > 0 ? factor : std::sqrt(factor)));
-        if (pick.overlay) RetimeOverlay(&t, pick.index, new_duration); else RetimeBase(&t, pick.index, new_duration);
+        const double new_duration =
+            std::max(0.8, original.duration() / (inst.reps > 0 ? factor : std::sqrt(factor)));
+        if (pick.overlay)
+          RetimeOverlay(&t, pick.index, new_duration);
+        else
+          RetimeBase(&t, pick.index, new_duration);
       }
       const std::string word = faster ? "faster" : "slower";
-      edit.text = Fill(rng.Pick(std::vector<std::string>{"{verb} {word}", "do it {word}", "move {word}", "{verb} a bit {word}",
-                                                          faster ? "speed up" : "slow down", "{verb}, but {word}"}),
+      edit.text = Fill(rng.Pick(std::vector<std::string>{
+                           "{verb} {word}", "do it {word}", "move {word}", "{verb} a bit {word}",
+                           faster ? "speed up" : "slow down", "{verb}, but {word}"}),
                        {{"{verb}", verb}, {"{word}", word}, {"{noun}", Noun(original)}});
       break;
     }
     case EditKind::kAmplitude: {
-      const bool more = original.amplitude < 1.15 && (original.amplitude < 0.8 || rng.Bernoulli(0.5));
+      const bool more =
+          original.amplitude < 1.15 && (original.amplitude < 0.8 || rng.Bernoulli(0.5));
       inst.amplitude = original.amplitude * (more ? rng.Uniform(1.4, 1.7) : rng.Uniform(0.45, 0.6));
       edit.text = AmplitudeText(original, more, rng);
       break;
@@ -229,20 +283,28 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       if (Def(inst.id).sided) {
         inst.side = original.side == Side::kLeft ? Side::kRight : Side::kLeft;
         const std::string other = inst.side == Side::kLeft ? "left" : "right";
-        const bool leg = Def(inst.id).kind == ActionKind::kLeg || inst.id == A::kHop || inst.id == A::kKneel;
-        const std::string limb = leg ? "leg" : (Def(inst.id).kind == ActionKind::kArm ? "hand" : "side");
-        edit.text = Fill(rng.Pick(std::vector<std::string>{"use your {other} {limb} instead", "do it with the other {limb}",
-                                                            "use the {other} {limb} instead of the {side} one",
-                                                            "switch to the {other} {limb}", "{new_verb} instead"}),
-                         {{"{other}", other}, {"{limb}", limb}, {"{side}", original.side == Side::kLeft ? "left" : "right"},
+        const bool leg =
+            Def(inst.id).kind == ActionKind::kLeg || inst.id == A::kHop || inst.id == A::kKneel;
+        const std::string limb =
+            leg ? "leg" : (Def(inst.id).kind == ActionKind::kArm ? "hand" : "side");
+        edit.text = Fill(rng.Pick(std::vector<std::string>{
+                             "use your {other} {limb} instead", "do it with the other {limb}",
+                             "use the {other} {limb} instead of the {side} one",
+                             "switch to the {other} {limb}", "{new_verb} instead"}),
+                         {{"{other}", other},
+                          {"{limb}", limb},
+                          {"{side}", original.side == Side::kLeft ? "left" : "right"},
                           {"{new_verb}", VerbPhrase(inst, Person::kSecond)}});
       } else {
         inst.turn_left = !original.turn_left;
         inst.angle = -original.angle;
         const std::string other = inst.turn_left ? "left" : "right";
-        edit.text = Fill(rng.Pick(std::vector<std::string>{"{new_verb} instead", "go {other} instead",
-                                                            "to the {other} instead of the {old}", "{new_verb}, not {old}"}),
-                         {{"{new_verb}", VerbPhrase(inst, Person::kSecond)}, {"{other}", other}, {"{old}", original.turn_left ? "left" : "right"}});
+        edit.text = Fill(rng.Pick(std::vector<std::string>{
+                             "{new_verb} instead", "go {other} instead",
+                             "to the {other} instead of the {old}", "{new_verb}, not {old}"}),
+                         {{"{new_verb}", VerbPhrase(inst, Person::kSecond)},
+                          {"{other}", other},
+                          {"{old}", original.turn_left ? "left" : "right"}});
       }
       break;
     }
@@ -251,14 +313,19 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       int reps = original.reps;
       while (reps == original.reps) reps = rng.Int(std::max(1, def.min_reps - 1), def.max_reps + 1);
       inst.reps = reps;
-      const double new_duration = std::max(0.8, original.duration() + (reps - original.reps) * RepPeriod(original));
-      if (pick.overlay) RetimeOverlay(&t, pick.index, new_duration); else RetimeBase(&t, pick.index, new_duration);
+      const double new_duration =
+          std::max(0.8, original.duration() + (reps - original.reps) * RepPeriod(original));
+      if (pick.overlay)
+        RetimeOverlay(&t, pick.index, new_duration);
+      else
+        RetimeBase(&t, pick.index, new_duration);
       std::vector<std::string> options = {"do it {times}", "{verb} {times}", "repeat it {times}"};
       if (reps == 1) options = {"{verb} only once", "just once"};
       if (reps == 1 && verb.find(' ') == std::string::npos) options.push_back("do only one {noun}");
       if (reps == original.reps + 1) options.push_back("one more time");
       if (reps < original.reps) options.push_back("fewer repetitions, only {times}");
-      edit.text = Fill(rng.Pick(options), {{"{verb}", verb}, {"{times}", Times(reps)}, {"{noun}", Noun(original)}});
+      edit.text = Fill(rng.Pick(options),
+                       {{"{verb}", verb}, {"{times}", Times(reps)}, {"{noun}", Noun(original)}});
       break;
     }
     case EditKind::kAddAction: {
@@ -271,7 +338,8 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       ActionInstance added;
       bool found = false;
       for (int attempt = 0; attempt < 30 && !found; ++attempt) {
-        const ActionId id = static_cast<ActionId>(rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
+        const ActionId id = static_cast<ActionId>(
+            rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
         added = SampleInstance(id, rng);
         found = (PartsOf(added.id, added.side) & used) == 0 &&
                 (Def(id).kind != ActionKind::kTorso || base.id == A::kStand || base.id == A::kWalk);
@@ -292,20 +360,27 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       edit.edit_start = added.start;
       edit.edit_end = added.end;
       const bool at_end = added.end > base.end - 0.6;
-      std::vector<std::string> options = {"also {new}", "{new} while {base_ing}", "{new} at the same time",
-                                          "while {base_ing}, {new}", "add: {new}"};
+      std::vector<std::string> options = {"also {new}", "{new} while {base_ing}",
+                                          "{new} at the same time", "while {base_ing}, {new}",
+                                          "add: {new}"};
       if (at_end) options.push_back("{new} at the end");
-      edit.text = Fill(rng.Pick(options), {{"{new}", VerbPhrase(added, Person::kSecond)}, {"{base_ing}", text::GerundPhrase(VerbPhrase(base, Person::kSecond))}});
+      edit.text = Fill(rng.Pick(options),
+                       {{"{new}", VerbPhrase(added, Person::kSecond)},
+                        {"{base_ing}", text::GerundPhrase(VerbPhrase(base, Person::kSecond))}});
       break;
     }
     case EditKind::kRemoveAction: {
       t.overlays.erase(t.overlays.begin() + static_cast<std::ptrdiff_t>(pick.index));
-      std::vector<std::string> options = {"don't {verb}", "do not {verb}", "skip {verb_ing}", "without {verb_ing}",
-                                          "just {base}, without {verb_ing}"};
+      std::vector<std::string> options = {"don't {verb}", "do not {verb}", "skip {verb_ing}",
+                                          "without {verb_ing}", "just {base}, without {verb_ing}"};
       if (Def(original.id).kind == ActionKind::kArm) options.push_back("keep your arms down");
       if (Def(original.id).kind == ActionKind::kHead) options.push_back("keep your head still");
-      edit.text = Fill(rng.Pick(options), {{"{verb}", verb}, {"{noun}", Noun(original)}, {"{verb_ing}", text::GerundPhrase(verb)},
-                                           {"{base}", VerbPhrase(source.base[source.BaseAt(original.start)], Person::kSecond)}});
+      edit.text = Fill(
+          rng.Pick(options),
+          {{"{verb}", verb},
+           {"{noun}", Noun(original)},
+           {"{verb_ing}", text::GerundPhrase(verb)},
+           {"{base}", VerbPhrase(source.base[source.BaseAt(original.start)], Person::kSecond)}});
       break;
     }
     case EditKind::kReplaceAction: {
@@ -313,14 +388,17 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       PartSet used = PartsOf(base.id, base.side);
       for (size_t k = 0; k < source.overlays.size(); ++k) {
         const ActionInstance& o = source.overlays[k];
-        if (k != pick.index && o.start < original.end && o.end > original.start) used |= PartsOf(o.id, o.side);
+        if (k != pick.index && o.start < original.end && o.end > original.start)
+          used |= PartsOf(o.id, o.side);
       }
       ActionInstance replacement;
       bool found = false;
       for (int attempt = 0; attempt < 30 && !found; ++attempt) {
-        const ActionId id = static_cast<ActionId>(rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
+        const ActionId id = static_cast<ActionId>(
+            rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
         replacement = SampleInstance(id, rng);
-        found = id != original.id && (PartsOf(id, replacement.side) & used) == 0 && Def(id).kind != ActionKind::kTorso;
+        found = id != original.id && (PartsOf(id, replacement.side) & used) == 0 &&
+                Def(id).kind != ActionKind::kTorso;
       }
       if (!found) {
         t.overlays.erase(t.overlays.begin() + static_cast<std::ptrdiff_t>(pick.index));
@@ -331,9 +409,12 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       replacement.start = original.start;
       replacement.end = original.end;
       inst = replacement;
-      edit.text = Fill(rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}", "instead of {old_ing}, {new}",
-                                                          "{new} instead", "don't {old}, {new}"}),
-                       {{"{new}", VerbPhrase(replacement, Person::kSecond)}, {"{old}", verb}, {"{old_ing}", text::GerundPhrase(verb)}});
+      edit.text = Fill(rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
+                                                         "instead of {old_ing}, {new}",
+                                                         "{new} instead", "don't {old}, {new}"}),
+                       {{"{new}", VerbPhrase(replacement, Person::kSecond)},
+                        {"{old}", verb},
+                        {"{old_ing}", text::GerundPhrase(verb)}});
       break;
     }
     case EditKind::kTiming: {
@@ -345,52 +426,68 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
       edit.edit_end = source.duration;
       t.base.pop_back();
       t.base.back().end = removed.end;
-      t.overlays.erase(std::remove_if(t.overlays.begin(), t.overlays.end(),
-                                      [&](const ActionInstance& o) { return o.start >= removed.start - 1e-9; }),
-                       t.overlays.end());
+      t.overlays.erase(
+          std::remove_if(t.overlays.begin(), t.overlays.end(),
+                         [&](const ActionInstance& o) { return o.start >= removed.start - 1e-9; }),
+          t.overlays.end());
       RetextInstance(&t.base.back(), rng);
-      edit.text = Fill(rng.Pick(std::vector<std::string>{"do not {last} at the end, keep {prev_ing}",
-                                                          "don't {last} at the end", "keep {prev_ing} instead of {last_ing}",
-                                                          "skip {last_ing} at the end", "don't {last} at the end, just keep {prev_ing}"}),
-                       {{"{last}", VerbPhrase(removed, Person::kSecond)}, {"{prev_ing}", text::GerundPhrase(VerbPhrase(previous, Person::kSecond))},
-                        {"{last_ing}", text::GerundPhrase(VerbPhrase(removed, Person::kSecond))}, {"{last_noun}", Noun(removed)}});
+      edit.text = Fill(rng.Pick(std::vector<std::string>{
+                           "do not {last} at the end, keep {prev_ing}", "don't {last} at the end",
+                           "keep {prev_ing} instead of {last_ing}", "skip {last_ing} at the end",
+                           "don't {last} at the end, just keep {prev_ing}"}),
+                       {{"{last}", VerbPhrase(removed, Person::kSecond)},
+                        {"{prev_ing}", text::GerundPhrase(VerbPhrase(previous, Person::kSecond))},
+                        {"{last_ing}", text::GerundPhrase(VerbPhrase(removed, Person::kSecond))},
+                        {"{last_noun}", Noun(removed)}});
       break;
     }
     case EditKind::kReplaceBase: {
       const ActionKind kind = Def(original.id).kind;
       ActionInstance replacement;
       for (int attempt = 0; attempt < 30; ++attempt) {
-        const ActionId id = static_cast<ActionId>(rng.Int(static_cast<int>(A::kStand), static_cast<int>(A::kStretchLeg)));
+        const ActionId id = static_cast<ActionId>(
+            rng.Int(static_cast<int>(A::kStand), static_cast<int>(A::kStretchLeg)));
         if (id == original.id || id == A::kSitDown || id == A::kStandUp) continue;
-        if (Def(id).kind != kind && !(kind == ActionKind::kLeg && Def(id).kind == ActionKind::kWholeBody)) continue;
+        if (Def(id).kind != kind &&
+            !(kind == ActionKind::kLeg && Def(id).kind == ActionKind::kWholeBody))
+          continue;
         replacement = SampleInstance(id, rng);
         break;
       }
-      if (replacement.id == A::kStand && original.id == A::kStand) replacement = SampleInstance(A::kWalk, rng);
+      if (replacement.id == A::kStand && original.id == A::kStand)
+        replacement = SampleInstance(A::kWalk, rng);
       // Overlays that would clash with the new action's parts are dropped.
       const PartSet parts = PartsOf(replacement.id, replacement.side);
       t.overlays.erase(std::remove_if(t.overlays.begin(), t.overlays.end(),
                                       [&](const ActionInstance& o) {
-                                        return o.start >= original.start && o.end <= original.end + 1e-9 &&
+                                        return o.start >= original.start &&
+                                               o.end <= original.end + 1e-9 &&
                                                (PartsOf(o.id, o.side) & parts) != 0;
                                       }),
                        t.overlays.end());
       replacement.start = original.start;
       replacement.end = original.end;
       inst = replacement;
-      RetimeBase(&t, pick.index, std::max(original.duration(), std::min(replacement.duration(), original.duration() * 1.5)));
-      edit.text = Fill(rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}", "instead of {old_ing}, {new}",
-                                                          "{new} instead", "don't {old}, {new}"}),
-                       {{"{new}", VerbPhrase(replacement, Person::kSecond)}, {"{old}", verb}, {"{old_ing}", text::GerundPhrase(verb)}});
+      RetimeBase(&t, pick.index,
+                 std::max(original.duration(),
+                          std::min(replacement.duration(), original.duration() * 1.5)));
+      edit.text = Fill(rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
+                                                         "instead of {old_ing}, {new}",
+                                                         "{new} instead", "don't {old}, {new}"}),
+                       {{"{new}", VerbPhrase(replacement, Person::kSecond)},
+                        {"{old}", verb},
+                        {"{old_ing}", text::GerundPhrase(verb)}});
       break;
     }
     case EditKind::kPosture: {
       const bool straighter = source.style.posture_lean > -0.02;
       t.style.posture_lean = source.style.posture_lean + (straighter ? -0.12 : 0.15);
-      edit.text = rng.Pick(straighter ? std::vector<std::string>{"stand up straighter", "keep your back straight",
-                                                                 "stand a little straighter", "lean back a bit"}
-                                      : std::vector<std::string>{"lean forward more", "hunch over a little",
-                                                                 "bend your upper body forward a bit", "lean forward"});
+      edit.text = rng.Pick(
+          straighter
+              ? std::vector<std::string>{"stand up straighter", "keep your back straight",
+                                         "stand a little straighter", "lean back a bit"}
+              : std::vector<std::string>{"lean forward more", "hunch over a little",
+                                         "bend your upper body forward a bit", "lean forward"});
       edit.edit_start = 0;
       edit.edit_end = source.duration;
       break;
@@ -400,8 +497,9 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
   }
   // The edited instance gets texts for its new parameters (it no longer exists after a removal, and
   // a fallback may have changed the kind, so decide on the final kind).
-  if (edit.kind == EditKind::kSpeed || edit.kind == EditKind::kAmplitude || edit.kind == EditKind::kSide ||
-      edit.kind == EditKind::kRepetitions || edit.kind == EditKind::kReplaceAction || edit.kind == EditKind::kReplaceBase) {
+  if (edit.kind == EditKind::kSpeed || edit.kind == EditKind::kAmplitude ||
+      edit.kind == EditKind::kSide || edit.kind == EditKind::kRepetitions ||
+      edit.kind == EditKind::kReplaceAction || edit.kind == EditKind::kReplaceBase) {
     RetextInstance(&inst, rng);
   }
   t.duration = t.base.back().end;

@@ -1,10 +1,9 @@
 #include "motionpipe/corpus/inspect.h"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <vector>
 
@@ -22,7 +21,8 @@ std::vector<std::string> ShardFiles(const std::string& dir, const std::string& p
   std::error_code ec;
   for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
-    if (name.rfind(prefix, 0) == 0 && entry.path().extension() == ".npz") files.push_back(entry.path().string());
+    if (name.rfind(prefix, 0) == 0 && entry.path().extension() == ".npz")
+      files.push_back(entry.path().string());
   }
   std::sort(files.begin(), files.end());
   return files;
@@ -41,7 +41,8 @@ Result<CorpusReport> InspectCorpus(const std::string& dir) {
   } catch (const nlohmann::json::exception& error) {
     return DataLoss(dir + "/manifest.json: " + error.what());
   }
-  if (manifest.value("format", "") != "motionpipe.corpus/1") return DataLoss(dir + "/manifest.json: not a motionpipe corpus");
+  if (manifest.value("format", "") != "motionpipe.corpus/1")
+    return DataLoss(dir + "/manifest.json: not a motionpipe corpus");
 
   const Skeleton& skeleton = Skeleton::Smpl22();
   std::vector<double> skates, seconds;
@@ -58,7 +59,8 @@ Result<CorpusReport> InspectCorpus(const std::string& dir) {
         ++report.segments;
         labels.insert(seg.text);
         if (!seg.action.empty()) ++report.actions[seg.action];
-        for (int p = 0; p < kNumBodyParts; ++p) report.part_segments[static_cast<size_t>(p)] += (seg.parts >> p) & 1;
+        for (int p = 0; p < kNumBodyParts; ++p)
+          report.part_segments[static_cast<size_t>(p)] += (seg.parts >> p) & 1;
       }
       const PlausibilityReport r = EvaluateMotionPlausibility(skeleton, clip.motion);
       skates.push_back(r.foot_skate_ratio);
@@ -86,9 +88,12 @@ Result<CorpusReport> InspectCorpus(const std::string& dir) {
     for (const BabelSequence& seq : sequences) {
       ++report.babel_sequences;
       for (const ActionSpan& span : SweepActionSpans(seq, {report.fps, 15, 600, 4})) {
-        if (span.labels.size() == 1) ++report.babel_singles;
-        else if (span.labels.size() == 2) ++report.babel_pairs;
-        else ++report.babel_multi;
+        if (span.labels.size() == 1)
+          ++report.babel_singles;
+        else if (span.labels.size() == 2)
+          ++report.babel_pairs;
+        else
+          ++report.babel_multi;
       }
     }
   }
@@ -104,7 +109,8 @@ Result<CorpusReport> InspectCorpus(const std::string& dir) {
       source_seconds += t.source.duration_seconds();
       target_seconds += t.target.duration_seconds();
       if (t.edit_start >= 0 && t.edit_end > t.edit_start) {
-        edited += static_cast<double>(t.edit_end - t.edit_start) / static_cast<double>(t.source.num_frames());
+        edited += static_cast<double>(t.edit_end - t.edit_start) /
+                  static_cast<double>(t.source.num_frames());
         ++with_range;
       }
     }
@@ -125,20 +131,28 @@ std::string FormatCorpusReport(const CorpusReport& r) {
     out += line;
   };
   add("corpus: seed %llu, %.0f fps\n", static_cast<unsigned long long>(r.seed), r.fps);
-  add("clips: %lld (train %lld, val %lld, test %lld), %lld frames, %.1f min; %.1f-%.1f s, mean %.1f s\n",
-      static_cast<long long>(r.clips), static_cast<long long>(r.split_clips.count("train") ? r.split_clips.at("train") : 0),
+  add("clips: %lld (train %lld, val %lld, test %lld), %lld frames, %.1f min; %.1f-%.1f s, mean "
+      "%.1f s\n",
+      static_cast<long long>(r.clips),
+      static_cast<long long>(r.split_clips.count("train") ? r.split_clips.at("train") : 0),
       static_cast<long long>(r.split_clips.count("val") ? r.split_clips.at("val") : 0),
-      static_cast<long long>(r.split_clips.count("test") ? r.split_clips.at("test") : 0), static_cast<long long>(r.frames),
-      static_cast<double>(r.frames) / r.fps / 60.0, r.min_seconds, r.max_seconds, r.mean_seconds);
-  add("segments: %lld labelled actions, %lld distinct labels, %lld distinct captions, %zu actions used\n",
-      static_cast<long long>(r.segments), static_cast<long long>(r.distinct_labels), static_cast<long long>(r.distinct_captions),
-      r.actions.size());
-  add("BABEL sweep: %lld sequences -> %lld single-action spans, %lld simultaneous pairs, %lld with 3-4 actions\n",
-      static_cast<long long>(r.babel_sequences), static_cast<long long>(r.babel_singles), static_cast<long long>(r.babel_pairs),
-      static_cast<long long>(r.babel_multi));
+      static_cast<long long>(r.split_clips.count("test") ? r.split_clips.at("test") : 0),
+      static_cast<long long>(r.frames), static_cast<double>(r.frames) / r.fps / 60.0, r.min_seconds,
+      r.max_seconds, r.mean_seconds);
+  add("segments: %lld labelled actions, %lld distinct labels, %lld distinct captions, %zu actions "
+      "used\n",
+      static_cast<long long>(r.segments), static_cast<long long>(r.distinct_labels),
+      static_cast<long long>(r.distinct_captions), r.actions.size());
+  add("BABEL sweep: %lld sequences -> %lld single-action spans, %lld simultaneous pairs, %lld with "
+      "3-4 actions\n",
+      static_cast<long long>(r.babel_sequences), static_cast<long long>(r.babel_singles),
+      static_cast<long long>(r.babel_pairs), static_cast<long long>(r.babel_multi));
   out += "parts (segments using each):";
-  static const char* kParts[] = {"global", "torso", "left arm", "right arm", "left leg", "right leg"};
-  for (int p = 0; p < 6; ++p) add(" %s %lld%s", kParts[p], static_cast<long long>(r.part_segments[static_cast<size_t>(p)]), p < 5 ? "," : "\n");
+  static const char* kParts[] = {"global",    "torso",    "left arm",
+                                 "right arm", "left leg", "right leg"};
+  for (int p = 0; p < 6; ++p)
+    add(" %s %lld%s", kParts[p], static_cast<long long>(r.part_segments[static_cast<size_t>(p)]),
+        p < 5 ? "," : "\n");
   out += "actions:";
   int column = 0;
   std::vector<std::pair<int64_t, std::string>> sorted;
@@ -149,18 +163,24 @@ std::string FormatCorpusReport(const CorpusReport& r) {
     ++column;
   }
   out += "\n";
-  add("triplets: %lld (train %lld, val %lld, test %lld); source %.1f s, target %.1f s on average; edited range %.0f%% of the source\n",
-      static_cast<long long>(r.triplets), static_cast<long long>(r.split_triplets.count("train") ? r.split_triplets.at("train") : 0),
+  add("triplets: %lld (train %lld, val %lld, test %lld); source %.1f s, target %.1f s on average; "
+      "edited range %.0f%% of the source\n",
+      static_cast<long long>(r.triplets),
+      static_cast<long long>(r.split_triplets.count("train") ? r.split_triplets.at("train") : 0),
       static_cast<long long>(r.split_triplets.count("val") ? r.split_triplets.at("val") : 0),
-      static_cast<long long>(r.split_triplets.count("test") ? r.split_triplets.at("test") : 0), r.mean_source_seconds,
-      r.mean_target_seconds, 100 * r.mean_edited_fraction);
+      static_cast<long long>(r.split_triplets.count("test") ? r.split_triplets.at("test") : 0),
+      r.mean_source_seconds, r.mean_target_seconds, 100 * r.mean_edited_fraction);
   out += "edits:";
-  for (const auto& [kind, count] : r.edit_kinds) add(" %s %lld", kind.c_str(), static_cast<long long>(count));
+  for (const auto& [kind, count] : r.edit_kinds)
+    add(" %s %lld", kind.c_str(), static_cast<long long>(count));
   out += "\n";
-  add("plausibility: foot skate ratio mean %.4f, p95 %.4f, max %.4f; floor penetration max %.4f m; bone-length error max %.1e m;\n"
-      "              joint-limit violations %lld; mean jerk %.0f m/s^3; %lld scripts resampled by the gate\n",
-      r.skate_mean, r.skate_p95, r.skate_max, r.penetration_max, r.bone_error_max, static_cast<long long>(r.joint_limit_violations),
-      r.jerk_mean, static_cast<long long>(r.rejected));
+  add("plausibility: foot skate ratio mean %.4f, p95 %.4f, max %.4f; floor penetration max %.4f m; "
+      "bone-length error max %.1e m;\n"
+      "              joint-limit violations %lld; mean jerk %.0f m/s^3; %lld scripts resampled by "
+      "the gate\n",
+      r.skate_mean, r.skate_p95, r.skate_max, r.penetration_max, r.bone_error_max,
+      static_cast<long long>(r.joint_limit_violations), r.jerk_mean,
+      static_cast<long long>(r.rejected));
   return out;
 }
 

@@ -17,31 +17,39 @@ struct Weighted {
 // How often each base action starts a segment (standing posture).
 const std::vector<Weighted>& BaseWeights() {
   static const std::vector<Weighted> weights = {
-      {A::kStand, 1.0},    {A::kWalk, 1.8},         {A::kJog, 0.6},         {A::kRun, 0.4},
-      {A::kWalkBackwards, 0.5}, {A::kSideStep, 0.5}, {A::kTurnInPlace, 0.8}, {A::kWalkCircle, 0.4},
-      {A::kJump, 0.5},     {A::kHop, 0.35},         {A::kMarchInPlace, 0.35}, {A::kSitDown, 0.6},
-      {A::kSquat, 0.5},    {A::kKneel, 0.35},       {A::kCrouch, 0.35},     {A::kBow, 0.4},
-      {A::kJumpingJacks, 0.35}, {A::kSway, 0.35},   {A::kTiptoe, 0.3},      {A::kKick, 0.5},
-      {A::kKneeLift, 0.4}, {A::kStomp, 0.35},       {A::kStretchLeg, 0.3}};
+      {A::kStand, 1.0},       {A::kWalk, 1.8},          {A::kJog, 0.6},
+      {A::kRun, 0.4},         {A::kWalkBackwards, 0.5}, {A::kSideStep, 0.5},
+      {A::kTurnInPlace, 0.8}, {A::kWalkCircle, 0.4},    {A::kJump, 0.5},
+      {A::kHop, 0.35},        {A::kMarchInPlace, 0.35}, {A::kSitDown, 0.6},
+      {A::kSquat, 0.5},       {A::kKneel, 0.35},        {A::kCrouch, 0.35},
+      {A::kBow, 0.4},         {A::kJumpingJacks, 0.35}, {A::kSway, 0.35},
+      {A::kTiptoe, 0.3},      {A::kKick, 0.5},          {A::kKneeLift, 0.4},
+      {A::kStomp, 0.35},      {A::kStretchLeg, 0.3}};
   return weights;
 }
 
 const std::vector<Weighted>& OverlayWeights() {
   static const std::vector<Weighted> weights = {
-      {A::kWave, 1.2},        {A::kRaiseArm, 1.0},   {A::kPunch, 0.7},      {A::kClap, 0.7},
-      {A::kReachForward, 0.6}, {A::kArmCircle, 0.5}, {A::kThrow, 0.5},      {A::kDrink, 0.5},
-      {A::kHandsOnHips, 0.6}, {A::kCrossArms, 0.6},  {A::kPoint, 0.6},      {A::kSalute, 0.35},
-      {A::kScratchHead, 0.4}, {A::kShrug, 0.4},      {A::kStretchArms, 0.4}, {A::kBendForward, 0.5},
-      {A::kLean, 0.4},        {A::kTwist, 0.4},      {A::kNod, 0.4},        {A::kShakeHead, 0.4},
-      {A::kLookAround, 0.6},  {A::kLookUp, 0.4}};
+      {A::kWave, 1.2},         {A::kRaiseArm, 1.0},  {A::kPunch, 0.7},       {A::kClap, 0.7},
+      {A::kReachForward, 0.6}, {A::kArmCircle, 0.5}, {A::kThrow, 0.5},       {A::kDrink, 0.5},
+      {A::kHandsOnHips, 0.6},  {A::kCrossArms, 0.6}, {A::kPoint, 0.6},       {A::kSalute, 0.35},
+      {A::kScratchHead, 0.4},  {A::kShrug, 0.4},     {A::kStretchArms, 0.4}, {A::kBendForward, 0.5},
+      {A::kLean, 0.4},         {A::kTwist, 0.4},     {A::kNod, 0.4},         {A::kShakeHead, 0.4},
+      {A::kLookAround, 0.6},   {A::kLookUp, 0.4}};
   return weights;
 }
 
 // Base actions under which a torso action is performed naturally.
 bool TorsoOverlayAllowed(ActionId base) {
   switch (base) {
-    case A::kStand: case A::kWalk: case A::kWalkCircle: case A::kSideStep: case A::kSitDown: case A::kKneel:
-    case A::kTiptoe: case A::kMarchInPlace:
+    case A::kStand:
+    case A::kWalk:
+    case A::kWalkCircle:
+    case A::kSideStep:
+    case A::kSitDown:
+    case A::kKneel:
+    case A::kTiptoe:
+    case A::kMarchInPlace:
       return true;
     default:
       return false;
@@ -55,21 +63,36 @@ struct Tempo {
 };
 Tempo TempoOf(ActionId id) {
   switch (id) {
-    case A::kJump: return {1.25, 0.4};
-    case A::kHop: return {0.55, 0.8};
-    case A::kMarchInPlace: return {0.55, 0.4};
-    case A::kSquat: return {2.2, 0.3};
-    case A::kJumpingJacks: return {1.0, 0.4};
-    case A::kKick: return {1.3, 0.8};
-    case A::kKneeLift: return {1.3, 0.8};
-    case A::kStomp: return {1.0, 0.8};
-    case A::kWave: return {0.55, 0.9};
-    case A::kPunch: return {0.6, 0.7};
-    case A::kClap: return {0.45, 0.7};
-    case A::kArmCircle: return {1.1, 0.7};
-    case A::kNod: return {0.6, 0.4};
-    case A::kShakeHead: return {0.6, 0.4};
-    default: return {0, 0};
+    case A::kJump:
+      return {1.25, 0.4};
+    case A::kHop:
+      return {0.55, 0.8};
+    case A::kMarchInPlace:
+      return {0.55, 0.4};
+    case A::kSquat:
+      return {2.2, 0.3};
+    case A::kJumpingJacks:
+      return {1.0, 0.4};
+    case A::kKick:
+      return {1.3, 0.8};
+    case A::kKneeLift:
+      return {1.3, 0.8};
+    case A::kStomp:
+      return {1.0, 0.8};
+    case A::kWave:
+      return {0.55, 0.9};
+    case A::kPunch:
+      return {0.6, 0.7};
+    case A::kClap:
+      return {0.45, 0.7};
+    case A::kArmCircle:
+      return {1.1, 0.7};
+    case A::kNod:
+      return {0.6, 0.4};
+    case A::kShakeHead:
+      return {0.6, 0.4};
+    default:
+      return {0, 0};
   }
 }
 
@@ -88,7 +111,9 @@ ActionId PickWeighted(const std::vector<Weighted>& options, Rng& rng) {
 
 }  // namespace
 
-int64_t ClipScript::num_frames() const { return std::max<int64_t>(1, static_cast<int64_t>(std::llround(duration * fps))); }
+int64_t ClipScript::num_frames() const {
+  return std::max<int64_t>(1, static_cast<int64_t>(std::llround(duration * fps)));
+}
 
 size_t ClipScript::BaseAt(double t) const {
   for (size_t k = 0; k < base.size(); ++k) {
@@ -100,8 +125,10 @@ size_t ClipScript::BaseAt(double t) const {
 double NaturalDuration(const ActionInstance& instance, Rng& rng) {
   const ActionDef& def = Def(instance.id);
   const Tempo tempo = TempoOf(instance.id);
-  if (tempo.period > 0 && instance.reps > 0) return tempo.lead + instance.reps * tempo.period / instance.speed;
-  if (instance.id == A::kTurnInPlace) return 0.7 + std::abs(instance.angle) / (1.8 * instance.speed);
+  if (tempo.period > 0 && instance.reps > 0)
+    return tempo.lead + instance.reps * tempo.period / instance.speed;
+  if (instance.id == A::kTurnInPlace)
+    return 0.7 + std::abs(instance.angle) / (1.8 * instance.speed);
   return rng.Uniform(def.min_seconds, def.max_seconds) / std::sqrt(instance.speed);
 }
 
@@ -227,8 +254,9 @@ ClipScript SampleScript(Rng& rng, const ScriptOptions& options, const std::strin
       if (room < 1.0) break;
       const double length = std::min(o.end, room);
       // Two overlays may overlap in time (wave while looking around) or follow each other.
-      const double start = count == 2 && n == 1 && rng.Bernoulli(0.5) ? rng.Uniform(window_start, window_end - length)
-                                                                       : cursor + rng.Uniform(0, room - length);
+      const double start = count == 2 && n == 1 && rng.Bernoulli(0.5)
+                               ? rng.Uniform(window_start, window_end - length)
+                               : cursor + rng.Uniform(0, room - length);
       o.start = start;
       o.end = start + length;
       used |= PartsOf(o.id, o.side);
@@ -250,53 +278,100 @@ std::string VerbPhrase(const ActionInstance& a, Person person) {
   const std::string arm = a.side == Side::kBoth ? "both arms" : "the " + side + " arm";
   const std::string hand = a.side == Side::kBoth ? "both hands" : "the " + side + " hand";
   switch (a.id) {
-    case A::kStand: return "stand still";
-    case A::kWalk: return "walk";
-    case A::kJog: return "jog";
-    case A::kRun: return "run";
-    case A::kWalkBackwards: return "walk backwards";
-    case A::kSideStep: return "step to the " + dir;
-    case A::kTurnInPlace: return "turn " + dir;
-    case A::kWalkCircle: return "walk in a circle";
-    case A::kJump: return "jump";
-    case A::kHop: return "hop on the " + side + " foot";
-    case A::kMarchInPlace: return "march in place";
-    case A::kSitDown: return "sit down";
-    case A::kStandUp: return "stand up";
-    case A::kSquat: return "squat";
-    case A::kKneel: return "kneel";
-    case A::kCrouch: return "crouch";
-    case A::kBow: return "bow";
-    case A::kJumpingJacks: return "do jumping jacks";
-    case A::kSway: return "sway";
-    case A::kTiptoe: return "stand on " + your + " toes";
-    case A::kKick: return "kick with the " + side + " leg";
-    case A::kKneeLift: return "lift the " + side + " knee";
-    case A::kStomp: return "stomp with the " + side + " foot";
-    case A::kStretchLeg: return "stretch the " + side + " leg";
-    case A::kWave: return "wave with " + hand;
-    case A::kRaiseArm: return "raise " + arm;
-    case A::kPunch: return "punch with " + hand;
-    case A::kClap: return "clap";
-    case A::kReachForward: return "reach forward with " + hand;
-    case A::kArmCircle: return "circle " + arm;
-    case A::kThrow: return "throw with " + hand;
-    case A::kDrink: return "drink";
-    case A::kHandsOnHips: return "put " + your + " hands on " + your + " hips";
-    case A::kCrossArms: return "cross " + your + " arms";
-    case A::kPoint: return "point with " + hand;
-    case A::kSalute: return "salute";
-    case A::kScratchHead: return "scratch " + your + " head";
-    case A::kShrug: return "shrug";
-    case A::kStretchArms: return "stretch " + your + " arms up";
-    case A::kBendForward: return "bend forward";
-    case A::kLean: return "lean to the " + side;
-    case A::kTwist: return "twist to the " + side;
-    case A::kNod: return "nod";
-    case A::kShakeHead: return "shake " + your + " head";
-    case A::kLookAround: return "look around";
-    case A::kLookUp: return "look up";
-    default: return "move";
+    case A::kStand:
+      return "stand still";
+    case A::kWalk:
+      return "walk";
+    case A::kJog:
+      return "jog";
+    case A::kRun:
+      return "run";
+    case A::kWalkBackwards:
+      return "walk backwards";
+    case A::kSideStep:
+      return "step to the " + dir;
+    case A::kTurnInPlace:
+      return "turn " + dir;
+    case A::kWalkCircle:
+      return "walk in a circle";
+    case A::kJump:
+      return "jump";
+    case A::kHop:
+      return "hop on the " + side + " foot";
+    case A::kMarchInPlace:
+      return "march in place";
+    case A::kSitDown:
+      return "sit down";
+    case A::kStandUp:
+      return "stand up";
+    case A::kSquat:
+      return "squat";
+    case A::kKneel:
+      return "kneel";
+    case A::kCrouch:
+      return "crouch";
+    case A::kBow:
+      return "bow";
+    case A::kJumpingJacks:
+      return "do jumping jacks";
+    case A::kSway:
+      return "sway";
+    case A::kTiptoe:
+      return "stand on " + your + " toes";
+    case A::kKick:
+      return "kick with the " + side + " leg";
+    case A::kKneeLift:
+      return "lift the " + side + " knee";
+    case A::kStomp:
+      return "stomp with the " + side + " foot";
+    case A::kStretchLeg:
+      return "stretch the " + side + " leg";
+    case A::kWave:
+      return "wave with " + hand;
+    case A::kRaiseArm:
+      return "raise " + arm;
+    case A::kPunch:
+      return "punch with " + hand;
+    case A::kClap:
+      return "clap";
+    case A::kReachForward:
+      return "reach forward with " + hand;
+    case A::kArmCircle:
+      return "circle " + arm;
+    case A::kThrow:
+      return "throw with " + hand;
+    case A::kDrink:
+      return "drink";
+    case A::kHandsOnHips:
+      return "put " + your + " hands on " + your + " hips";
+    case A::kCrossArms:
+      return "cross " + your + " arms";
+    case A::kPoint:
+      return "point with " + hand;
+    case A::kSalute:
+      return "salute";
+    case A::kScratchHead:
+      return "scratch " + your + " head";
+    case A::kShrug:
+      return "shrug";
+    case A::kStretchArms:
+      return "stretch " + your + " arms up";
+    case A::kBendForward:
+      return "bend forward";
+    case A::kLean:
+      return "lean to the " + side;
+    case A::kTwist:
+      return "twist to the " + side;
+    case A::kNod:
+      return "nod";
+    case A::kShakeHead:
+      return "shake " + your + " head";
+    case A::kLookAround:
+      return "look around";
+    case A::kLookUp:
+      return "look up";
+    default:
+      return "move";
   }
 }
 

@@ -12,7 +12,7 @@ namespace {
 
 using A = ActionId;
 
-constexpr double kFadeSeconds = 0.4;   // cross-fade between consecutive base actions
+constexpr double kFadeSeconds = 0.4;    // cross-fade between consecutive base actions
 constexpr double kReachMargin = 0.985;  // planted legs never fully straighten
 constexpr int kLeft = 0, kRight = 1;
 
@@ -59,7 +59,8 @@ class SmoothNoise {
     }
   }
   double operator()(double t) const {
-    return 0.5 * std::sin(2 * kPi * frequency_[0] * t + phase_[0]) + 0.3 * std::sin(2 * kPi * frequency_[1] * t + phase_[1]) +
+    return 0.5 * std::sin(2 * kPi * frequency_[0] * t + phase_[0]) +
+           0.3 * std::sin(2 * kPi * frequency_[1] * t + phase_[1]) +
            0.2 * std::sin(2 * kPi * frequency_[2] * t + phase_[2]);
   }
 
@@ -83,7 +84,8 @@ Vec3 ArcBlend(const Vec3& a, const Vec3& b, double w) {
     if (Norm(dir) < 1e-6) dir = Vec3{0, 0, 1};
     dir = (1.0 / Norm(dir)) * dir;
   } else {
-    dir = (std::sin((1 - w) * angle) / std::sin(angle)) * ua + (std::sin(w * angle) / std::sin(angle)) * ub;
+    dir = (std::sin((1 - w) * angle) / std::sin(angle)) * ua +
+          (std::sin(w * angle) / std::sin(angle)) * ub;
   }
   return Lerp(la, lb, w) * dir;
 }
@@ -121,7 +123,7 @@ struct BaseFrame {
   double arm_param = 0;
   ArmStyle previous_arm_style = ArmStyle::kHang;  // during a cross-fade: the previous action's arms
   double previous_arm_param = 0;
-  double arm_fade = 1;  // weight of this action's arms (1 = no fade)
+  double arm_fade = 1;   // weight of this action's arms (1 = no fade)
   double arm_swing = 0;  // gait arm swing amount
   double stance_width = 0.1;
   double heel_raise = 0;  // radians: planted feet pivot on their toes
@@ -195,7 +197,8 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
     case A::kJog:
     case A::kRun: {
       const bool jog = a.id == A::kJog;
-      const double v = jog ? std::clamp(2.3 * v_scale, 1.5, 3.2) : std::clamp(3.3 * v_scale, 2.4, 4.3);
+      const double v =
+          jog ? std::clamp(2.3 * v_scale, 1.5, 3.2) : std::clamp(3.3 * v_scale, 2.4, 4.3);
       f.speed_forward = v * ramp;
       f.gait = true;
       f.duty = jog ? 0.40 : 0.33;
@@ -277,7 +280,8 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
       const double lift = Envelope(tau, D, 0.35, 0.35);
       f.feet[other].mode = FootMode::kScripted;
       f.feet[other].reference = ScriptReference::kPath;
-      f.feet[other].offset = {-0.12 * Smooth((lift - 0.3) / 0.7), 0, 0.28 * lift};  // up first, then back
+      f.feet[other].offset = {-0.12 * Smooth((lift - 0.3) / 0.7), 0,
+                              0.28 * lift};  // up first, then back
       f.feet[other].pitch = -0.3 * lift;
       f.offset_left = SideSign(side) * 0.08 * lift;
       f.arm_style = ArmStyle::kBalance;
@@ -357,9 +361,14 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
       FootRequest& knee = f.feet[side];
       knee.mode = FootMode::kScripted;
       knee.reference = ScriptReference::kPlant;
-      // Step back with the foot lifted, then rest on the toes: ankle height = foot length * sin(pitch).
+      // Step back with the foot lifted, then rest on the toes: ankle height = foot length *
+      // sin(pitch).
       const double toe_height = len_foot_kneel * std::sin(1.15);
-      knee.offset = Keys<Vec3>({{0, {0, 0, 0}}, {0.3, {-0.06, 0, 0.10}}, {0.65, {-0.30, 0, 0.14}}, {1, {-0.40, 0, toe_height}}}, u);
+      knee.offset = Keys<Vec3>({{0, {0, 0, 0}},
+                                {0.3, {-0.06, 0, 0.10}},
+                                {0.65, {-0.30, 0, 0.14}},
+                                {1, {-0.40, 0, toe_height}}},
+                               u);
       knee.pitch = -1.15 * Smooth((u - 0.2) / 0.8);
       knee.knee_down = Smooth(u);
       f.height = Lerp(H0, 0.47, Smooth(u));
@@ -380,7 +389,8 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
       break;
     }
     case A::kBow: {
-      const double u = Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(tau / D));
+      const double u =
+          Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(tau / D));
       f.spine = {0.55 * amp * u, 0, 0};
       f.pelvis_angles = {0.25 * amp * u, 0, 0};
       f.offset_forward = -0.06 * amp * u;
@@ -393,7 +403,7 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
       const int rep = static_cast<int>(std::floor(local / period));
       if (local < 0 || rep >= std::max(1, a.reps)) break;
       const double u = (local - rep * period) / period;
-      const bool out = u < 0.5;          // this half-cycle lands wide (arms up)
+      const bool out = u < 0.5;  // this half-cycle lands wide (arms up)
       const double h = out ? u / 0.5 : (u - 0.5) / 0.5;
       const double half_start = a.start + 0.2 + rep * period + (out ? 0 : 0.5 * period);
       const double width_from = out ? style.stance_width : 0.26;
@@ -466,11 +476,20 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
         foot.pitch = -0.45 * Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.85, 0.0}}, u);
         f.spine = {-0.15 * Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.8, 0.0}}, u), 0, 0};
       } else if (a.id == A::kKneeLift) {
-        foot.offset = Keys<Vec3>({{0, {0, 0, 0}}, {0.12, {0.0, 0, 0.08}}, {0.35, {0.15, 0, 0.38 * reach}},
-                                  {0.6, {0.15, 0, 0.38 * reach}}, {0.9, {0.0, 0, 0.06}}, {1, {0, 0, 0}}}, u);
+        foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
+                                  {0.12, {0.0, 0, 0.08}},
+                                  {0.35, {0.15, 0, 0.38 * reach}},
+                                  {0.6, {0.15, 0, 0.38 * reach}},
+                                  {0.9, {0.0, 0, 0.06}},
+                                  {1, {0, 0, 0}}},
+                                 u);
         foot.pitch = -0.3 * Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, u);
       } else {
-        foot.offset = Keys<Vec3>({{0, {0, 0, 0}}, {0.55, {0.04, 0, 0.24 * reach}}, {0.65, {0.02, 0, 0.0}}, {1, {0, 0, 0}}}, u);
+        foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
+                                  {0.55, {0.04, 0, 0.24 * reach}},
+                                  {0.65, {0.02, 0, 0.0}},
+                                  {1, {0, 0, 0}}},
+                                 u);
       }
       break;
     }
@@ -482,9 +501,11 @@ BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) 
       foot.reference = ScriptReference::kPlant;
       const double reach = 0.40 * std::clamp(amp, 0.7, 1.2);
       // The foot rises, travels sideways and is set down; the way back mirrors it.
-      const double lift = std::sin(kPi * Clamp01(tau / out_time)) + std::sin(kPi * Clamp01((tau - (D - out_time)) / out_time));
-      const double travel = Smooth((tau - 0.15 * out_time) / (0.7 * out_time)) *
-                            (1 - Smooth((tau - (D - out_time) - 0.15 * out_time) / (0.7 * out_time)));
+      const double lift = std::sin(kPi * Clamp01(tau / out_time)) +
+                          std::sin(kPi * Clamp01((tau - (D - out_time)) / out_time));
+      const double travel =
+          Smooth((tau - 0.15 * out_time) / (0.7 * out_time)) *
+          (1 - Smooth((tau - (D - out_time) - 0.15 * out_time) / (0.7 * out_time)));
       foot.offset = {0, SideSign(side) * reach * travel, 0.09 * lift};
       f.offset_left = -SideSign(side) * 0.10 * hold;  // over the bending leg
       f.height = H0 - 0.14 * hold * std::clamp(amp, 0.7, 1.2);
@@ -517,15 +538,16 @@ struct OverlayFrame {
   double slow = 0;
 };
 
-void AddArm(OverlayFrame* out, int side, double weight, const Vec3& offset, const Vec3& pole, double collar = 0,
-            const Vec3& wrist = {}) {
+void AddArm(OverlayFrame* out, int side, double weight, const Vec3& offset, const Vec3& pole,
+            double collar = 0, const Vec3& wrist = {}) {
   ArmGoal& g = out->arms[side];
   // Two overlays rarely share an arm; if they do, the later one wins where it is stronger.
   if (weight < g.weight) return;
   g = {weight, offset, pole, collar, wrist};
 }
 
-void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& style, OverlayFrame* out) {
+void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& style,
+                     OverlayFrame* out) {
   const double D = a.duration();
   const double v = a.speed * style.speed_scale;
   const double amp = std::clamp(a.amplitude * style.amplitude_scale, 0.5, 1.3);
@@ -539,7 +561,8 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
   switch (a.id) {
     case A::kWave: {
       const double f = a.reps > 0 ? a.reps / std::max(0.5, D - 0.9) : 1.8 * v;
-      const double swing = 0.10 * amp * std::sin(2 * kPi * f * (tau - 0.45)) * Smooth((tau - 0.3) / 0.3);
+      const double swing =
+          0.10 * amp * std::sin(2 * kPi * f * (tau - 0.45)) * Smooth((tau - 0.3) / 0.3);
       for (int s : sides) {
         AddArm(out, s, env, {0.12 + swing, 0.30, 0.08}, {1, -1, 0}, 0.06, {0, 0, 0.3 * swing});
         out->spine.z += (s == kRight ? -1 : 1) * 0.04 * env;
@@ -551,7 +574,9 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
       const double u = Envelope(tau, D, 0.5, 0.5);
       for (int s : sides) {
         const double e = elevation * u;
-        AddArm(out, s, env, {0.15 * std::sin(e), -0.50 * std::cos(e), 0.42 * std::sin(e) - 0.3 * std::sin(e) * std::sin(e) * 0.5},
+        AddArm(out, s, env,
+               {0.15 * std::sin(e), -0.50 * std::cos(e),
+                0.42 * std::sin(e) - 0.3 * std::sin(e) * std::sin(e) * 0.5},
                {0.3, 0, -1}, 0.15 * u * (e > 1.6 ? 1 : 0));
         if (a.side != Side::kBoth) out->spine.z += (s == kRight ? -1 : 1) * 0.05 * u;
       }
@@ -570,7 +595,8 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
           const double offset = sides.size() == 2 ? 0.5 * k : 0.0;
           double u = std::fmod(local / period + offset, 1.0);
           const int rep = static_cast<int>(local / period + offset);
-          if (rep < reps) extension = Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.45, 1.0}, {1, 0.0}}, u);
+          if (rep < reps)
+            extension = Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.45, 1.0}, {1, 0.0}}, u);
         }
         const Vec3 strike{-0.16, 0.05, 0.50 * std::min(1.04, amp)};
         AddArm(out, s, env, Lerp(guard, strike, extension), {1, -1, -0.3});
@@ -582,14 +608,17 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
     case A::kClap: {
       const int reps = std::max(1, a.reps);
       const double f = reps / std::max(0.5, D - 0.7);
-      const double close = std::pow(0.5 - 0.5 * std::cos(2 * kPi * f * (tau - 0.35)), 2.0) * Smooth((tau - 0.35) / 0.2);
+      const double close = std::pow(0.5 - 0.5 * std::cos(2 * kPi * f * (tau - 0.35)), 2.0) *
+                           Smooth((tau - 0.35) / 0.2);
       const Vec3 open{-0.10, -0.04, 0.30}, shut{-0.245, -0.05, 0.33};
       for (int s : {kLeft, kRight}) AddArm(out, s, env, Lerp(open, shut, close), {1, -1, -0.4});
       break;
     }
     case A::kReachForward: {
       const double u = Envelope(tau, D, 0.45, 0.45);
-      for (int s : sides) AddArm(out, s, env, Lerp({0.04, -0.49, 0.05}, {-0.06, 0.02, 0.50 * std::min(1.04, amp)}, u), {1, -1, -0.2});
+      for (int s : sides)
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.05}, {-0.06, 0.02, 0.50 * std::min(1.04, amp)}, u),
+               {1, -1, -0.2});
       out->spine.x += 0.10 * u * amp;
       break;
     }
@@ -598,8 +627,8 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
       const double theta = 2 * kPi * reps * Clamp01((tau - 0.35) / std::max(0.5, D - 0.7));
       for (int s : sides) {
         const double phase = a.side == Side::kBoth ? 0 : 0;
-        AddArm(out, s, env, {0.08, -0.48 * std::cos(theta + phase), 0.48 * std::sin(theta + phase)}, {1, 0, -1},
-               0.12 * Smooth(-std::cos(theta)));
+        AddArm(out, s, env, {0.08, -0.48 * std::cos(theta + phase), 0.48 * std::sin(theta + phase)},
+               {1, 0, -1}, 0.12 * Smooth(-std::cos(theta)));
       }
       break;
     }
@@ -620,7 +649,8 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
     }
     case A::kDrink: {
       const double u = Envelope(tau, D, 0.6, 0.6);
-      for (int s : sides) AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.24, 0.15}, u), {1, -1, 0});
+      for (int s : sides)
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.24, 0.15}, u), {1, -1, 0});
       out->head.x -= 0.25 * Smooth((u - 0.6) / 0.4);
       out->slow = std::max(out->slow, 0.25 * env);
       break;
@@ -636,31 +666,37 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
     }
     case A::kPoint: {
       const double u = Envelope(tau, D, 0.4, 0.4);
-      for (int s : sides) AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.02, 0.05, 0.50}, u), {1, -1, -0.2});
+      for (int s : sides)
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.02, 0.05, 0.50}, u), {1, -1, -0.2});
       break;
     }
     case A::kSalute: {
       const double u = Envelope(tau, D, 0.35, 0.35);
-      for (int s : sides) AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.21, 0.33, 0.12}, u), {1, 0, 0});
+      for (int s : sides)
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.21, 0.33, 0.12}, u), {1, 0, 0});
       break;
     }
     case A::kScratchHead: {
       const double u = Envelope(tau, D, 0.4, 0.4);
       const double rub = 0.03 * std::sin(2 * kPi * 3.0 * tau) * u;
-      for (int s : sides) AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.42, rub}, u), {1, 0.3, 0});
+      for (int s : sides)
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.42, rub}, u), {1, 0.3, 0});
       out->head.x += 0.1 * u;
       break;
     }
     case A::kShrug: {
       const double u = Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(tau / D));
       for (int s : {kLeft, kRight}) {
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {0.10, -0.38, 0.18}, u), {0.3, 0, -1}, 0.28 * u * amp);
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {0.10, -0.38, 0.18}, u), {0.3, 0, -1},
+               0.28 * u * amp);
       }
       break;
     }
     case A::kStretchArms: {
       const double u = Envelope(tau, D, 0.6, 0.6);
-      for (int s : {kLeft, kRight}) AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {0.02, 0.52, 0.02}, u), {0.3, 0, -1}, 0.2 * u);
+      for (int s : {kLeft, kRight})
+        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {0.02, 0.52, 0.02}, u), {0.3, 0, -1},
+               0.2 * u);
       out->spine.x -= 0.12 * u;
       break;
     }
@@ -690,7 +726,8 @@ void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& styl
       break;
     }
     case A::kLookAround: {
-      const double yaw = 0.9 * amp * std::sin(2 * kPi * 0.28 * v * tau + (a.turn_left ? 0 : kPi)) * env;
+      const double yaw =
+          0.9 * amp * std::sin(2 * kPi * 0.28 * v * tau + (a.turn_left ? 0 : kPi)) * env;
       out->head.y += yaw;
       out->head.x -= 0.08 * env;
       out->spine.y += 0.25 * yaw;
@@ -717,15 +754,25 @@ ArmPlacement DefaultArm(ArmStyle style, double param, double hang_out) {
   const Vec3 hang{hang_out, -0.495, 0.03};
   const Vec3 hang_pole{0.25, 0, -1};
   switch (style) {
-    case ArmStyle::kHang: return {hang, hang_pole, true};
-    case ArmStyle::kRun: return {{0.05, -0.25, 0.20}, {0.1, -0.3, -1}, false};
-    case ArmStyle::kSeated: return {Lerp(hang, {-0.02, -0.42, 0.27}, param), hang_pole, true};
-    case ArmStyle::kForward: return {Lerp(hang, {-0.06, -0.05, 0.46}, param), {0.6, -1, -0.3}, param < 0.5};
-    case ArmStyle::kBalance: return {Lerp(hang, {0.18, -0.42, 0.06}, param), hang_pole, true};
-    case ArmStyle::kJacks: return {Lerp(hang, {0.24, 0.43, 0.0}, param), {0.3, -1, -0.3}, false};
+    case ArmStyle::kHang:
+      return {hang, hang_pole, true};
+    case ArmStyle::kRun:
+      return {{0.05, -0.25, 0.20}, {0.1, -0.3, -1}, false};
+    case ArmStyle::kSeated:
+      return {Lerp(hang, {-0.02, -0.42, 0.27}, param), hang_pole, true};
+    case ArmStyle::kForward:
+      return {Lerp(hang, {-0.06, -0.05, 0.46}, param), {0.6, -1, -0.3}, param < 0.5};
+    case ArmStyle::kBalance:
+      return {Lerp(hang, {0.18, -0.42, 0.06}, param), hang_pole, true};
+    case ArmStyle::kJacks:
+      return {Lerp(hang, {0.24, 0.43, 0.0}, param), {0.3, -1, -0.3}, false};
     case ArmStyle::kJumpSwing: {
-      const Vec3 pose = Keys<Vec3>({{0, hang}, {0.3, {0.05, -0.44, -0.20}}, {0.45, {0.03, -0.12, 0.38}},
-                                    {0.72, {0.03, -0.20, 0.34}}, {0.86, {0.03, -0.35, 0.24}}, {1, hang}},
+      const Vec3 pose = Keys<Vec3>({{0, hang},
+                                    {0.3, {0.05, -0.44, -0.20}},
+                                    {0.45, {0.03, -0.12, 0.38}},
+                                    {0.72, {0.03, -0.20, 0.34}},
+                                    {0.86, {0.03, -0.35, 0.24}},
+                                    {1, hang}},
                                    param);
       return {pose, hang_pole, false};
     }
@@ -739,10 +786,11 @@ ArmPlacement DefaultArm(ArmStyle style, double param, double hang_out) {
 struct FootPose {
   Vec3 ankle;
   double yaw = 0;
-  double pitch = 0;      // toes up +
+  double pitch = 0;  // toes up +
   double knee_down = 0;
-  bool bears_weight = true;  // planted, scripted or about to touch down: the pelvis must keep it in reach
-  bool flight = false;   // ankle filled in once the pelvis height is known
+  bool bears_weight =
+      true;  // planted, scripted or about to touch down: the pelvis must keep it in reach
+  bool flight = false;  // ankle filled in once the pelvis height is known
   double flight_s = 0;
   Vec3 flight_from, flight_to;
   int64_t takeoff_frame = 0, landing_frame = 0;
@@ -800,31 +848,37 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
     base[static_cast<size_t>(f)] = frame;
     base_index[static_cast<size_t>(f)] = k;
     for (const ActionInstance& o : script.overlays) {
-      if (t >= o.start && t < o.end) EvaluateOverlay(o, t - o.start, style, &over[static_cast<size_t>(f)]);
+      if (t >= o.start && t < o.end)
+        EvaluateOverlay(o, t - o.start, style, &over[static_cast<size_t>(f)]);
     }
   }
 
   // Pass 2: the pelvis path on the ground (locomotion slows while the upper body is busy).
-  std::vector<Vec3> path(static_cast<size_t>(frames + 1)), velocity(static_cast<size_t>(frames + 1));
+  std::vector<Vec3> path(static_cast<size_t>(frames + 1)),
+      velocity(static_cast<size_t>(frames + 1));
   std::vector<double> facing(static_cast<size_t>(frames + 1));
   path[0] = {script.start_x, script.start_y, 0};
   facing[0] = script.start_facing;
   for (int64_t f = 0; f < frames; ++f) {
     const BaseFrame& b = base[static_cast<size_t>(f)];
     const double slow = std::clamp(1.0 - over[static_cast<size_t>(f)].slow, 0.55, 1.0);
-    const Vec3 v = slow * (b.speed_forward * Forward(facing[static_cast<size_t>(f)]) + b.speed_left * LeftOf(facing[static_cast<size_t>(f)]));
+    const Vec3 v = slow * (b.speed_forward * Forward(facing[static_cast<size_t>(f)]) +
+                           b.speed_left * LeftOf(facing[static_cast<size_t>(f)]));
     velocity[static_cast<size_t>(f)] = v;
     path[static_cast<size_t>(f + 1)] = path[static_cast<size_t>(f)] + dt * v;
     facing[static_cast<size_t>(f + 1)] = facing[static_cast<size_t>(f)] + dt * b.facing_rate;
   }
   velocity[static_cast<size_t>(frames)] = velocity[static_cast<size_t>(frames - 1)];
-  const auto frame_at = [&](double t) { return std::clamp<int64_t>(static_cast<int64_t>(std::llround(t * fps)), 0, frames - 1); };
+  const auto frame_at = [&](double t) {
+    return std::clamp<int64_t>(static_cast<int64_t>(std::llround(t * fps)), 0, frames - 1);
+  };
   const auto desired = [&](int side, int64_t f) {
     const auto fi = static_cast<size_t>(std::clamp<int64_t>(f, 0, frames - 1));
     return path[fi] + (SideSign(side) * base[fi].stance_width) * LeftOf(facing[fi]);
   };
   const auto desired_yaw = [&](int side, int64_t f) {
-    return facing[static_cast<size_t>(std::clamp<int64_t>(f, 0, frames - 1))] + SideSign(side) * style.toe_out;
+    return facing[static_cast<size_t>(std::clamp<int64_t>(f, 0, frames - 1))] +
+           SideSign(side) * style.toe_out;
   };
 
   // Pass 3: footsteps.
@@ -838,7 +892,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
   bool gait_active = false;
   int gait_first = kLeft;  // the foot that lifts first when a gait starts
   double last_landing = -1;
-  std::vector<double> gait_phase_at(static_cast<size_t>(frames)), gait_amount(static_cast<size_t>(frames));
+  std::vector<double> gait_phase_at(static_cast<size_t>(frames)),
+      gait_amount(static_cast<size_t>(frames));
   for (int64_t f = 0; f < frames; ++f) {
     const double t = static_cast<double>(f) * dt;
     const BaseFrame& b = base[static_cast<size_t>(f)];
@@ -847,7 +902,9 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
     if (b.gait) {
       if (!gait_active) {
         // Lift the foot that is further behind in the direction of travel first.
-        const Vec3 dir = Norm(velocity[static_cast<size_t>(f)]) > 1e-6 ? velocity[static_cast<size_t>(f)] : Forward(facing[static_cast<size_t>(f)]);
+        const Vec3 dir = Norm(velocity[static_cast<size_t>(f)]) > 1e-6
+                             ? velocity[static_cast<size_t>(f)]
+                             : Forward(facing[static_cast<size_t>(f)]);
         gait_first = Dot(state[kLeft].plant - state[kRight].plant, dir) <= 0 ? kLeft : kRight;
         gait_phase = gait_first == kLeft ? b.duty : b.duty - 0.5;
         if (gait_phase < 0) gait_phase += 1;
@@ -859,7 +916,9 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
     gait_active = b.gait;
     gait_phase_at[static_cast<size_t>(f)] = gait_phase;
     gait_amount[static_cast<size_t>(f)] =
-        b.gait ? std::clamp(Norm(velocity[static_cast<size_t>(f)]) / 1.1, b.lead == 0 ? 0.6 : 0.0, 1.0) : 0.0;
+        b.gait
+            ? std::clamp(Norm(velocity[static_cast<size_t>(f)]) / 1.1, b.lead == 0 ? 0.6 : 0.0, 1.0)
+            : 0.0;
 
     for (int s = 0; s < 2; ++s) {
       FootState& st = state[s];
@@ -868,7 +927,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
       // Leaving scripted or flight modes: the foot lands where the mode left it.
       if (st.scripted && req.mode != FootMode::kScripted) {
         st.scripted = false;
-        const FootPose& prev = feet[static_cast<size_t>(std::max<int64_t>(0, f - 1))][static_cast<size_t>(s)];
+        const FootPose& prev =
+            feet[static_cast<size_t>(std::max<int64_t>(0, f - 1))][static_cast<size_t>(s)];
         st.plant = {prev.ankle.x, prev.ankle.y, 0};
         st.yaw = prev.yaw;
         if (prev.ankle.z > 0.01) {  // still in the air: finish with a short step down
@@ -904,8 +964,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
             reference = desired(s, f);
             reference_yaw = desired_yaw(s, f);
           }
-          out.ankle = reference + req.offset.x * Forward(reference_yaw) + req.offset.y * LeftOf(reference_yaw) +
-                      Vec3{0, 0, req.offset.z};
+          out.ankle = reference + req.offset.x * Forward(reference_yaw) +
+                      req.offset.y * LeftOf(reference_yaw) + Vec3{0, 0, req.offset.z};
           out.yaw = reference_yaw;
           out.pitch = req.pitch;
           out.knee_down = req.knee_down;
@@ -931,28 +991,35 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
           out.yaw = AngleLerp(st.from_yaw, st.to_yaw, Smooth(out.flight_s));
           continue;
         }
-        case FootMode::kGait: case FootMode::kSupport: break;
+        case FootMode::kGait:
+        case FootMode::kSupport:
+          break;
       }
       // Gait lift-off: this foot's phase crosses the end of its stance.
       if (b.gait && !st.swinging) {
         const double phase = std::fmod(gait_phase + (s == kRight ? 0.5 : 0.0), 1.0);
-        // From standing only the chosen foot lifts. Afterwards a planted foot lifts anywhere in its swing
-        // window once it has carried weight for a minimum stance (late after a corrective step or a
-        // change of gait), so no foot is left behind a body that speeds up.
+        // From standing only the chosen foot lifts. Afterwards a planted foot lifts anywhere in its
+        // swing window once it has carried weight for a minimum stance (late after a corrective
+        // step or a change of gait), so no foot is left behind a body that speeds up.
         const bool in_window = phase >= b.duty;
         const double min_stance = 0.6 * b.duty * b.cycle;
         // Safety net: a foot about to be left half a metre behind lifts now if the other is down.
-        const bool left_behind = Norm(desired(s, f + 3) - st.plant) > 0.5 && !state[1 - s].swinging &&
-                                 !state[1 - s].flying && t - st.t1 > 0.1;
-        const bool lifts = fresh_gait ? s == gait_first : (in_window && t - st.t1 > min_stance) || left_behind;
+        const bool left_behind = Norm(desired(s, f + 3) - st.plant) > 0.5 &&
+                                 !state[1 - s].swinging && !state[1 - s].flying && t - st.t1 > 0.1;
+        const bool lifts =
+            fresh_gait ? s == gait_first : (in_window && t - st.t1 > min_stance) || left_behind;
         st.last_phase = phase;
         if (lifts) {
-          const double swing = std::max(left_behind && !in_window ? 0.3 : 0.15, (1 - phase) * b.cycle);
-          const int64_t land = f + std::max<int64_t>(1, static_cast<int64_t>(std::llround(swing * fps)));
-          // Land where the pelvis will be halfway through the coming stance (exact under acceleration),
-          // timed by the gait in force at landing (the next action's when the gait changes).
+          const double swing =
+              std::max(left_behind && !in_window ? 0.3 : 0.15, (1 - phase) * b.cycle);
+          const int64_t land =
+              f + std::max<int64_t>(1, static_cast<int64_t>(std::llround(swing * fps)));
+          // Land where the pelvis will be halfway through the coming stance (exact under
+          // acceleration), timed by the gait in force at landing (the next action's when the gait
+          // changes).
           const BaseFrame& at_landing = base[static_cast<size_t>(std::min(land, frames - 1))];
-          const double stance = at_landing.gait ? at_landing.duty * at_landing.cycle : b.duty * b.cycle;
+          const double stance =
+              at_landing.gait ? at_landing.duty * at_landing.cycle : b.duty * b.cycle;
           const int64_t stance_end = land + static_cast<int64_t>(std::llround(stance * fps));
           const Vec3 lead = (0.5 * b.lead) * (desired(s, stance_end) - desired(s, land));
           st.swinging = true;
@@ -980,7 +1047,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
         out.ankle = ankle;
         out.yaw = AngleLerp(st.from_yaw, st.to_yaw, w);
         // The toe comes up early in the swing and the heel leads the landing.
-        out.pitch = Keys<double>({{0, st.from_pitch}, {0.3, 0.0}, {0.85, st.to_pitch}, {1, st.to_pitch}}, u);
+        out.pitch = Keys<double>(
+            {{0, st.from_pitch}, {0.3, 0.0}, {0.85, st.to_pitch}, {1, st.to_pitch}}, u);
         out.bears_weight = u < 0.08 || u > 0.92;
         if (u >= 1.0) {
           st.swinging = false;
@@ -1014,9 +1082,10 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
 
     // Corrective steps between actions and while side-stepping or turning: the foot furthest from
     // where the body wants it steps, one foot at a time.
-    const bool both_support = b.feet[0].mode == FootMode::kSupport && b.feet[1].mode == FootMode::kSupport && !b.gait;
-    if (both_support && !state[0].swinging && !state[1].swinging && !state[0].scripted && !state[1].scripted &&
-        !state[0].flying && !state[1].flying && t - last_landing > 0.08) {
+    const bool both_support =
+        b.feet[0].mode == FootMode::kSupport && b.feet[1].mode == FootMode::kSupport && !b.gait;
+    if (both_support && !state[0].swinging && !state[1].swinging && !state[0].scripted &&
+        !state[1].scripted && !state[0].flying && !state[1].flying && t - last_landing > 0.08) {
       const double step_time = 0.42;
       // Look ahead only within this action: the next one plans its own footsteps.
       const int64_t action_end = frame_at(script.base[base_index[static_cast<size_t>(f)]].end) - 1;
@@ -1029,7 +1098,9 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
       const Vec3 v = velocity[static_cast<size_t>(f)];
       int pick = error[0] >= error[1] ? 0 : 1;
       if (std::abs(error[0] - error[1]) < 0.02 && Norm(v) > 1e-6) {
-        pick = Dot(v, LeftOf(facing[static_cast<size_t>(f)])) >= 0 ? kLeft : kRight;  // lead with the foot on the side of travel
+        pick = Dot(v, LeftOf(facing[static_cast<size_t>(f)])) >= 0
+                   ? kLeft
+                   : kRight;  // lead with the foot on the side of travel
       }
       if (error[pick] > b.settle_threshold) {
         FootState& st = state[pick];
@@ -1039,7 +1110,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
         st.from = st.plant;
         st.from_yaw = st.yaw;
         st.from_pitch = 0;
-        st.to = desired(pick, land) + b.settle_lead * velocity[static_cast<size_t>(std::min(land, frames - 1))];
+        st.to = desired(pick, land) +
+                b.settle_lead * velocity[static_cast<size_t>(std::min(land, frames - 1))];
         st.to_yaw = desired_yaw(pick, land);
         st.to_pitch = 0;
         st.clearance = 0.09;
@@ -1049,12 +1121,15 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
 
   // Pass 4: pelvis placement. Horizontal: path + action offsets + idle and gait sway. Height: the
   // action's nominal height, lowered wherever a planted foot would otherwise be out of reach.
-  const SmoothNoise sway_x(MixSeed(style.noise_seed, 1), 0.22), sway_y(MixSeed(style.noise_seed, 2), 0.17);
-  const SmoothNoise head_noise_x(MixSeed(style.noise_seed, 3), 0.2), head_noise_y(MixSeed(style.noise_seed, 4), 0.15);
+  const SmoothNoise sway_x(MixSeed(style.noise_seed, 1), 0.22),
+      sway_y(MixSeed(style.noise_seed, 2), 0.17);
+  const SmoothNoise head_noise_x(MixSeed(style.noise_seed, 3), 0.2),
+      head_noise_y(MixSeed(style.noise_seed, 4), 0.15);
   const SmoothNoise spine_noise(MixSeed(style.noise_seed, 5), 0.12);
   std::vector<Vec3> pelvis(static_cast<size_t>(frames));
   std::vector<Vec3> pelvis_angles(static_cast<size_t>(frames));
-  std::vector<double> envelope(static_cast<size_t>(frames), std::numeric_limits<double>::infinity());
+  std::vector<double> envelope(static_cast<size_t>(frames),
+                               std::numeric_limits<double>::infinity());
   for (int64_t f = 0; f < frames; ++f) {
     const auto fi = static_cast<size_t>(f);
     const double t = static_cast<double>(f) * dt;
@@ -1070,7 +1145,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
     for (int s = 0; s < 2; ++s) {
       const FootPose& foot = feet[fi][static_cast<size_t>(s)];
       if (foot.flight || !foot.bears_weight) continue;
-      const Vec3 hip_offset = orientation * skeleton.rest_offsets()[static_cast<size_t>(s == kLeft ? 1 : 2)];
+      const Vec3 hip_offset =
+          orientation * skeleton.rest_offsets()[static_cast<size_t>(s == kLeft ? 1 : 2)];
       const Vec3 hip_xy = pelvis[fi] + hip_offset;
       const double d = std::hypot(hip_xy.x - foot.ankle.x, hip_xy.y - foot.ankle.y);
       const double reach = kReachMargin * leg[s];
@@ -1099,9 +1175,12 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
       FootPose& foot = feet[static_cast<size_t>(f)][static_cast<size_t>(s)];
       if (!foot.flight) continue;
       const double u = foot.flight_s;
-      const double chord = Lerp(height[static_cast<size_t>(foot.takeoff_frame)], height[static_cast<size_t>(foot.landing_frame)], u);
+      const double chord = Lerp(height[static_cast<size_t>(foot.takeoff_frame)],
+                                height[static_cast<size_t>(foot.landing_frame)], u);
       foot.ankle = Lerp(foot.flight_from, foot.flight_to, Smooth((u - 0.15) / 0.7)) +
-                   Vec3{0, 0, std::max(0.0, height[static_cast<size_t>(f)] - chord) + foot.tuck * std::sin(kPi * u)};
+                   Vec3{0, 0,
+                        std::max(0.0, height[static_cast<size_t>(f)] - chord) +
+                            foot.tuck * std::sin(kPi * u)};
       foot.pitch = -0.3 * std::sin(kPi * u);
     }
   }
@@ -1123,13 +1202,17 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
     targets.facing = facing[fi];
     targets.pelvis_angles = pelvis_angles[fi];
     const double breathing = 0.012 * std::sin(2 * kPi * 0.25 * t);
-    Vec3 spine = b.spine + o.spine + Vec3{style.posture_lean + breathing + 0.015 * spine_noise(t), -1.1 * pelvis_angles[fi].y, 0};
+    Vec3 spine = b.spine + o.spine +
+                 Vec3{style.posture_lean + breathing + 0.015 * spine_noise(t),
+                      -1.1 * pelvis_angles[fi].y, 0};
     // Raised arms are balanced by a small lean away (jointly performed, not pasted).
     for (int s = 0; s < 2; ++s) {
       const ArmGoal& g = o.arms[s];
       if (g.weight > 0 && g.offset.y > 0.1) spine.z += (s == kRight ? -1 : 1) * 0.04 * g.weight;
     }
-    const Vec3 head = b.head + o.head + Vec3{0.03 * head_noise_x(t), 0.05 * head_noise_y(t) - 0.3 * (spine.y + pelvis_angles[fi].y), 0};
+    const Vec3 head = b.head + o.head +
+                      Vec3{0.03 * head_noise_x(t),
+                           0.05 * head_noise_y(t) - 0.3 * (spine.y + pelvis_angles[fi].y), 0};
     targets.spine = {0.3 * spine, 0.3 * spine, 0.4 * spine};
     targets.neck = 0.4 * head;
     targets.head = 0.6 * head;
@@ -1140,17 +1223,21 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
     const Vec3 world_down{0, 0, -1};
     for (int s = 0; s < 2; ++s) {
       const double mirror = SideSign(s);
-      const auto to_world = [&](const Vec3& v) { return chest.chest * Vec3{mirror * v.x, v.y, v.z}; };
+      const auto to_world = [&](const Vec3& v) {
+        return chest.chest * Vec3{mirror * v.x, v.y, v.z};
+      };
       // Default arm of the base action with its gait swing (reduced when the other arm is busy).
       ArmPlacement placement = DefaultArm(b.arm_style, b.arm_param, style.arm_hang_out);
       if (b.arm_fade < 1) {
-        const ArmPlacement previous = DefaultArm(b.previous_arm_style, b.previous_arm_param, style.arm_hang_out);
+        const ArmPlacement previous =
+            DefaultArm(b.previous_arm_style, b.previous_arm_param, style.arm_hang_out);
         placement.offset = ArcBlend(previous.offset, placement.offset, b.arm_fade);
         placement.pole = Lerp(previous.pole, placement.pole, b.arm_fade);
         placement.gravity = b.arm_fade < 0.5 ? previous.gravity : placement.gravity;
       }
       const double other_busy = o.arms[1 - s].weight;
-      const double swing = b.arm_swing * style.arm_swing * gait * (1 - 0.4 * other_busy) * (s == kLeft ? wave : -wave);
+      const double swing = b.arm_swing * style.arm_swing * gait * (1 - 0.4 * other_busy) *
+                           (s == kLeft ? wave : -wave);
       placement.offset.z += (b.arm_style == ArmStyle::kRun ? 0.15 : 0.10) * swing;
       placement.offset.y += 0.02 * std::abs(swing);
       Vec3 wrist_offset = to_world(placement.offset);
@@ -1166,7 +1253,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
         pole = Lerp(pole, to_world(goal.pole), goal.weight);
       }
       // Hands never come closer than 20 cm to their shoulder (the elbow would fold past its range).
-      if (Norm(wrist_offset) < 0.2) wrist_offset = (0.2 / std::max(1e-9, Norm(wrist_offset))) * wrist_offset;
+      if (Norm(wrist_offset) < 0.2)
+        wrist_offset = (0.2 / std::max(1e-9, Norm(wrist_offset))) * wrist_offset;
       HandTarget& hand = targets.hands[static_cast<size_t>(s)];
       hand.wrist = chest.shoulders[static_cast<size_t>(s)] + wrist_offset;
       hand.elbow_pole = pole;
@@ -1177,7 +1265,8 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
       target.ankle = foot.ankle;
       if (!foot.bears_weight || foot.flight) {
         // A swinging foot bends its knee rather than stretching: keep its target within reach.
-        const Vec3 hip = HipPosition(skeleton, targets.pelvis, PelvisOrientation(targets.facing, targets.pelvis_angles), s);
+        const Vec3 hip = HipPosition(skeleton, targets.pelvis,
+                                     PelvisOrientation(targets.facing, targets.pelvis_angles), s);
         const Vec3 reach = target.ankle - hip;
         const double limit = kReachMargin * leg[s];
         if (Norm(reach) > limit) target.ankle = hip + (limit / Norm(reach)) * reach;
@@ -1185,20 +1274,25 @@ Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
       target.toe_dir = ToeDirection(foot.yaw, foot.pitch);
       // Knees point over the toes (the hip, not the ankle, takes the twist of a turning body); a
       // kneeling knee points down.
-      target.knee_pole = Lerp(0.3 * Forward(facing[fi]) + 0.7 * Forward(foot.yaw), Vec3{0, 0, -1}, 0.5 * foot.knee_down);
+      target.knee_pole = Lerp(0.3 * Forward(facing[fi]) + 0.7 * Forward(foot.yaw), Vec3{0, 0, -1},
+                              0.5 * foot.knee_down);
     }
     const SolvedPose pose = SolvePose(skeleton, targets);
-    for (int j = 0; j < kNumJoints; ++j) motion.SetLocalRotation(f, j, pose.local[static_cast<size_t>(j)]);
+    for (int j = 0; j < kNumJoints; ++j)
+      motion.SetLocalRotation(f, j, pose.local[static_cast<size_t>(j)]);
     motion.SetTranslation(f, pose.translation);
-    for (double e : pose.leg_reach_error) result.max_reach_error = std::max(result.max_reach_error, e);
+    for (double e : pose.leg_reach_error)
+      result.max_reach_error = std::max(result.max_reach_error, e);
   }
 
   // Ground truth: one segment per annotated action instance.
   const auto add_segment = [&](const ActionInstance& a) {
     if (!a.annotated) return;
     Segment seg;
-    seg.start_frame = static_cast<int32_t>(std::clamp<int64_t>(std::llround(a.start * fps), 0, frames - 1));
-    seg.end_frame = static_cast<int32_t>(std::clamp<int64_t>(std::llround(a.end * fps), seg.start_frame + 1, frames));
+    seg.start_frame =
+        static_cast<int32_t>(std::clamp<int64_t>(std::llround(a.start * fps), 0, frames - 1));
+    seg.end_frame = static_cast<int32_t>(
+        std::clamp<int64_t>(std::llround(a.end * fps), seg.start_frame + 1, frames));
     seg.text = a.label;
     seg.parts = PartsOf(a.id, a.side);
     result.segments.push_back(seg);

@@ -26,7 +26,8 @@ std::vector<double> CosineSimilarity(const Embeddings& a, const Embeddings& b) {
     for (int64_t j = 0; j < b.n; ++j) {
       double s = 0;
       for (int64_t k = 0; k < a.d; ++k) s += a.row(i)[k] * b.row(j)[k];
-      out[static_cast<size_t>(i * b.n + j)] = s / (na[static_cast<size_t>(i)] * nb[static_cast<size_t>(j)]);
+      out[static_cast<size_t>(i * b.n + j)] =
+          s / (na[static_cast<size_t>(i)] * nb[static_cast<size_t>(j)]);
     }
   }
   return out;
@@ -40,10 +41,13 @@ std::vector<double> TrueMatchRanks(const std::vector<double>& similarity, int64_
     for (int64_t j = 0; j < n; ++j) {
       if (j == i) continue;
       const double s = similarity[static_cast<size_t>(i * n + j)];
-      if (s > own) ++higher;
-      else if (s == own) ++ties;
+      if (s > own)
+        ++higher;
+      else if (s == own)
+        ++ties;
     }
-    ranks[static_cast<size_t>(i)] = 1.0 + static_cast<double>(higher) + 0.5 * static_cast<double>(ties);
+    ranks[static_cast<size_t>(i)] =
+        1.0 + static_cast<double>(higher) + 0.5 * static_cast<double>(ties);
   }
   return ranks;
 }
@@ -63,12 +67,16 @@ RetrievalScores Summarise(const std::vector<double>& ranks) {
   return s;
 }
 
-RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch, uint64_t seed) {
-  if (queries.n != gallery.n) throw std::invalid_argument("retrieval: queries and gallery differ in count");
+RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch,
+                          uint64_t seed) {
+  if (queries.n != gallery.n)
+    throw std::invalid_argument("retrieval: queries and gallery differ in count");
   std::vector<int64_t> order(static_cast<size_t>(queries.n));
   std::iota(order.begin(), order.end(), 0);
-  if (batch <= 0) batch = queries.n;
-  else std::shuffle(order.begin(), order.end(), std::mt19937_64(seed));
+  if (batch <= 0)
+    batch = queries.n;
+  else
+    std::shuffle(order.begin(), order.end(), std::mt19937_64(seed));
   std::vector<double> all;
   for (int64_t start = 0; start + batch <= queries.n; start += batch) {
     Embeddings q{batch, queries.d, {}}, g{batch, gallery.d, {}};
@@ -94,15 +102,18 @@ double Norm3(const float* a, const float* b, bool horizontal_only = false) {
 // plane; (1, 0) when `heading` names no hips or they coincide. Rotating by -angle removes it.
 void HeadingOf(const float* frame, int joints, const HeadingJoints& heading, double* c, double* s) {
   *c = 1, *s = 0;
-  if (heading.left < 0 || heading.right < 0 || heading.left >= joints || heading.right >= joints) return;
-  const double ax = frame[heading.left * 3] - frame[heading.right * 3], ay = frame[heading.left * 3 + 1] - frame[heading.right * 3 + 1];
+  if (heading.left < 0 || heading.right < 0 || heading.left >= joints || heading.right >= joints)
+    return;
+  const double ax = frame[heading.left * 3] - frame[heading.right * 3],
+               ay = frame[heading.left * 3 + 1] - frame[heading.right * 3 + 1];
   const double norm = std::hypot(ax, ay);
   if (norm > 1e-9) *c = ax / norm, *s = ay / norm;
 }
 
 // Root-relative joints; with hips given, each frame is also turned about z so that its hips' axis
 // (left minus right, on the ground plane) points along +x: the heading is removed.
-std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints, const HeadingJoints& heading) {
+std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints,
+                         const HeadingJoints& heading) {
   std::vector<float> out(x.begin(), x.begin() + frames * joints * 3);
   for (int64_t t = 0; t < frames; ++t) {
     float* frame = out.data() + t * joints * 3;
@@ -120,22 +131,26 @@ std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints
 }
 
 int64_t Frames(const std::vector<float>& a, const std::vector<float>& b, int joints) {
-  const int64_t fa = static_cast<int64_t>(a.size()) / (joints * 3), fb = static_cast<int64_t>(b.size()) / (joints * 3);
+  const int64_t fa = static_cast<int64_t>(a.size()) / (joints * 3),
+                fb = static_cast<int64_t>(b.size()) / (joints * 3);
   const int64_t frames = std::min(fa, fb);
   if (frames < 1) throw std::invalid_argument("APE/AVE: empty motion");
   return frames;
 }
 
 // Per-coordinate variance over time (unbiased) of joint j: 3 values.
-std::array<double, 3> Variance(const std::vector<float>& x, int64_t frames, int joints, int j, bool horizontal_only) {
+std::array<double, 3> Variance(const std::vector<float>& x, int64_t frames, int joints, int j,
+                               bool horizontal_only) {
   std::array<double, 3> mean{}, var{};
   for (int64_t t = 0; t < frames; ++t) {
-    for (int c = 0; c < 3; ++c) mean[static_cast<size_t>(c)] += x[static_cast<size_t>((t * joints + j) * 3 + c)];
+    for (int c = 0; c < 3; ++c)
+      mean[static_cast<size_t>(c)] += x[static_cast<size_t>((t * joints + j) * 3 + c)];
   }
   for (auto& m : mean) m /= static_cast<double>(frames);
   for (int64_t t = 0; t < frames; ++t) {
     for (int c = 0; c < 3; ++c) {
-      const double d = x[static_cast<size_t>((t * joints + j) * 3 + c)] - mean[static_cast<size_t>(c)];
+      const double d =
+          x[static_cast<size_t>((t * joints + j) * 3 + c)] - mean[static_cast<size_t>(c)];
       var[static_cast<size_t>(c)] += d * d;
     }
   }
@@ -144,10 +159,14 @@ std::array<double, 3> Variance(const std::vector<float>& x, int64_t frames, int 
   return var;
 }
 
-double VarianceError(const std::vector<float>& a, const std::vector<float>& b, int64_t frames, int joints, int j, bool horizontal_only) {
-  const auto va = Variance(a, frames, joints, j, horizontal_only), vb = Variance(b, frames, joints, j, horizontal_only);
+double VarianceError(const std::vector<float>& a, const std::vector<float>& b, int64_t frames,
+                     int joints, int j, bool horizontal_only) {
+  const auto va = Variance(a, frames, joints, j, horizontal_only),
+             vb = Variance(b, frames, joints, j, horizontal_only);
   double s = 0;
-  for (int c = 0; c < 3; ++c) s += (va[static_cast<size_t>(c)] - vb[static_cast<size_t>(c)]) * (va[static_cast<size_t>(c)] - vb[static_cast<size_t>(c)]);
+  for (int c = 0; c < 3; ++c)
+    s += (va[static_cast<size_t>(c)] - vb[static_cast<size_t>(c)]) *
+         (va[static_cast<size_t>(c)] - vb[static_cast<size_t>(c)]);
   return std::sqrt(s);
 }
 
@@ -166,10 +185,12 @@ void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& he
   }
 }
 
-PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+PositionErrors AveragePositionalError(const std::vector<float>& generated,
+                                      const std::vector<float>& truth, int joints,
                                       const HeadingJoints& heading) {
   const int64_t frames = Frames(generated, truth, joints);
-  const auto lg = Local(generated, frames, joints, heading), lt = Local(truth, frames, joints, heading);
+  const auto lg = Local(generated, frames, joints, heading),
+             lt = Local(truth, frames, joints, heading);
   PositionErrors e;
   for (int64_t t = 0; t < frames; ++t) {
     const float* g = generated.data() + t * joints * 3;
@@ -178,18 +199,22 @@ PositionErrors AveragePositionalError(const std::vector<float>& generated, const
     e.trajectory += Norm3(g, r, true);
     for (int j = 0; j < joints; ++j) {
       e.mean_global += Norm3(g + 3 * j, r + 3 * j);
-      if (j > 0) e.mean_local += Norm3(lg.data() + (t * joints + j) * 3, lt.data() + (t * joints + j) * 3);
+      if (j > 0)
+        e.mean_local += Norm3(lg.data() + (t * joints + j) * 3, lt.data() + (t * joints + j) * 3);
     }
   }
   const double f = static_cast<double>(frames);
-  e.root /= f, e.trajectory /= f, e.mean_global /= f * joints, e.mean_local /= f * std::max(1, joints - 1);
+  e.root /= f, e.trajectory /= f, e.mean_global /= f * joints,
+      e.mean_local /= f * std::max(1, joints - 1);
   return e;
 }
 
-PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+PositionErrors AverageVarianceError(const std::vector<float>& generated,
+                                    const std::vector<float>& truth, int joints,
                                     const HeadingJoints& heading) {
   const int64_t frames = Frames(generated, truth, joints);
-  const auto lg = Local(generated, frames, joints, heading), lt = Local(truth, frames, joints, heading);
+  const auto lg = Local(generated, frames, joints, heading),
+             lt = Local(truth, frames, joints, heading);
   PositionErrors e;
   e.root = VarianceError(generated, truth, frames, joints, 0, false);
   e.trajectory = VarianceError(generated, truth, frames, joints, 0, true);
@@ -202,11 +227,14 @@ PositionErrors AverageVarianceError(const std::vector<float>& generated, const s
   return e;
 }
 
-void SymmetricEigen(std::vector<double> a, int64_t n, std::vector<double>* values, std::vector<double>* vectors) {
+void SymmetricEigen(std::vector<double> a, int64_t n, std::vector<double>* values,
+                    std::vector<double>* vectors) {
   std::vector<double>& v = *vectors;
   v.assign(static_cast<size_t>(n * n), 0.0);
   for (int64_t i = 0; i < n; ++i) v[static_cast<size_t>(i * n + i)] = 1;
-  const auto at = [n](std::vector<double>& m, int64_t i, int64_t j) -> double& { return m[static_cast<size_t>(i * n + j)]; };
+  const auto at = [n](std::vector<double>& m, int64_t i, int64_t j) -> double& {
+    return m[static_cast<size_t>(i * n + j)];
+  };
   for (int sweep = 0; sweep < 100; ++sweep) {
     double off = 0;
     for (int64_t i = 0; i < n; ++i) {
@@ -218,7 +246,8 @@ void SymmetricEigen(std::vector<double> a, int64_t n, std::vector<double>* value
         const double apq = at(a, p, q);
         if (std::abs(apq) < 1e-300) continue;
         const double theta = (at(a, q, q) - at(a, p, p)) / (2 * apq);
-        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1));
+        const double t =
+            (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1));
         const double c = 1 / std::sqrt(t * t + 1), s = t * c;
         for (int64_t k = 0; k < n; ++k) {  // columns p, q
           const double akp = at(a, k, p), akq = at(a, k, q);
@@ -255,7 +284,9 @@ void MeanAndCovariance(const Embeddings& x, std::vector<double>* mean, std::vect
   for (int64_t i = 0; i < x.n; ++i) {
     for (int64_t a = 0; a < x.d; ++a) {
       const double da = x.row(i)[a] - (*mean)[static_cast<size_t>(a)];
-      for (int64_t b = 0; b < x.d; ++b) (*cov)[static_cast<size_t>(a * x.d + b)] += da * (x.row(i)[b] - (*mean)[static_cast<size_t>(b)]);
+      for (int64_t b = 0; b < x.d; ++b)
+        (*cov)[static_cast<size_t>(a * x.d + b)] +=
+            da * (x.row(i)[b] - (*mean)[static_cast<size_t>(b)]);
     }
   }
   for (auto& c : *cov) c /= static_cast<double>(x.n - 1);
@@ -271,10 +302,12 @@ double FrechetDistance(const Embeddings& a, const Embeddings& b) {
   MeanAndCovariance(b, &mb, &cb);
   double mean_term = 0, trace = 0;
   for (int64_t k = 0; k < d; ++k) {
-    mean_term += (ma[static_cast<size_t>(k)] - mb[static_cast<size_t>(k)]) * (ma[static_cast<size_t>(k)] - mb[static_cast<size_t>(k)]);
+    mean_term += (ma[static_cast<size_t>(k)] - mb[static_cast<size_t>(k)]) *
+                 (ma[static_cast<size_t>(k)] - mb[static_cast<size_t>(k)]);
     trace += ca[static_cast<size_t>(k * d + k)] + cb[static_cast<size_t>(k * d + k)];
   }
-  // Tr((Ca Cb)^1/2) = Tr((Ca^1/2 Cb Ca^1/2)^1/2), the inner matrix symmetric positive semi-definite.
+  // Tr((Ca Cb)^1/2) = Tr((Ca^1/2 Cb Ca^1/2)^1/2), the inner matrix symmetric positive
+  // semi-definite.
   std::vector<double> values, vectors;
   SymmetricEigen(ca, d, &values, &vectors);
   std::vector<double> root(static_cast<size_t>(d * d), 0.0);
@@ -282,7 +315,9 @@ double FrechetDistance(const Embeddings& a, const Embeddings& b) {
     for (int64_t j = 0; j < d; ++j) {
       double s = 0;
       for (int64_t k = 0; k < d; ++k) {
-        s += vectors[static_cast<size_t>(i * d + k)] * std::sqrt(std::max(0.0, values[static_cast<size_t>(k)])) * vectors[static_cast<size_t>(j * d + k)];
+        s += vectors[static_cast<size_t>(i * d + k)] *
+             std::sqrt(std::max(0.0, values[static_cast<size_t>(k)])) *
+             vectors[static_cast<size_t>(j * d + k)];
       }
       root[static_cast<size_t>(i * d + j)] = s;
     }
@@ -291,20 +326,23 @@ double FrechetDistance(const Embeddings& a, const Embeddings& b) {
   for (int64_t i = 0; i < d; ++i) {
     for (int64_t j = 0; j < d; ++j) {
       double s = 0;
-      for (int64_t k = 0; k < d; ++k) s += root[static_cast<size_t>(i * d + k)] * cb[static_cast<size_t>(k * d + j)];
+      for (int64_t k = 0; k < d; ++k)
+        s += root[static_cast<size_t>(i * d + k)] * cb[static_cast<size_t>(k * d + j)];
       tmp[static_cast<size_t>(i * d + j)] = s;
     }
   }
   for (int64_t i = 0; i < d; ++i) {
     for (int64_t j = 0; j < d; ++j) {
       double s = 0;
-      for (int64_t k = 0; k < d; ++k) s += tmp[static_cast<size_t>(i * d + k)] * root[static_cast<size_t>(k * d + j)];
+      for (int64_t k = 0; k < d; ++k)
+        s += tmp[static_cast<size_t>(i * d + k)] * root[static_cast<size_t>(k * d + j)];
       inner[static_cast<size_t>(i * d + j)] = s;
     }
   }
   for (int64_t i = 0; i < d; ++i) {  // symmetrise against rounding
     for (int64_t j = i + 1; j < d; ++j) {
-      const double m = 0.5 * (inner[static_cast<size_t>(i * d + j)] + inner[static_cast<size_t>(j * d + i)]);
+      const double m =
+          0.5 * (inner[static_cast<size_t>(i * d + j)] + inner[static_cast<size_t>(j * d + i)]);
       inner[static_cast<size_t>(i * d + j)] = inner[static_cast<size_t>(j * d + i)] = m;
     }
   }
@@ -324,7 +362,8 @@ double Diversity(const Embeddings& x, int64_t pairs, uint64_t seed) {
     int64_t j = pick(rng);
     while (j == i) j = pick(rng);
     double s = 0;
-    for (int64_t k = 0; k < x.d; ++k) s += (x.row(i)[k] - x.row(j)[k]) * (x.row(i)[k] - x.row(j)[k]);
+    for (int64_t k = 0; k < x.d; ++k)
+      s += (x.row(i)[k] - x.row(j)[k]) * (x.row(i)[k] - x.row(j)[k]);
     total += std::sqrt(s);
   }
   return total / static_cast<double>(pairs);
@@ -337,7 +376,8 @@ double Multimodality(const Embeddings& x, const std::vector<std::vector<int64_t>
     for (size_t a = 0; a < g.size(); ++a) {
       for (size_t b = a + 1; b < g.size(); ++b) {
         double s = 0;
-        for (int64_t k = 0; k < x.d; ++k) s += (x.row(g[a])[k] - x.row(g[b])[k]) * (x.row(g[a])[k] - x.row(g[b])[k]);
+        for (int64_t k = 0; k < x.d; ++k)
+          s += (x.row(g[a])[k] - x.row(g[b])[k]) * (x.row(g[a])[k] - x.row(g[b])[k]);
         total += std::sqrt(s);
         ++count;
       }

@@ -18,7 +18,6 @@ const std::array<FeatureGroup, 5>& MotionFixFeatureGroups() {
   return groups;
 }
 
-
 FeatureMatrix EncodeMotionFix207WithJoints(const Motion& motion, const float* joints) {
   const int64_t frames = motion.num_frames();
   FeatureMatrix out(frames, kMotionFixFeatureDim);
@@ -47,7 +46,8 @@ FeatureMatrix EncodeMotionFix207WithJoints(const Motion& motion, const float* jo
     const float* frame_joints = joints + frame * kNumJoints * 3;
     const Vec3 pelvis{frame_joints[0], frame_joints[1], frame_joints[2]};
     for (int joint = 0; joint < kNumJoints; ++joint) {
-      const Vec3 p{frame_joints[joint * 3], frame_joints[joint * 3 + 1], frame_joints[joint * 3 + 2]};
+      const Vec3 p{frame_joints[joint * 3], frame_joints[joint * 3 + 1],
+                   frame_joints[joint * 3 + 2]};
       const Vec3 local = heading_inv * (p - pelvis);
       row[141 + joint * 3 + 0] = static_cast<float>(local.x);
       row[141 + joint * 3 + 1] = static_cast<float>(local.y);

@@ -1,23 +1,23 @@
 #include "motionpipe/features/normalization.h"
 
-#include <nlohmann/json.hpp>
-
 #include <cmath>
+#include <nlohmann/json.hpp>
 
 #include "motionpipe/base/file.h"
 #include "motionpipe/features/motionfix207.h"
 
 namespace motionpipe {
 
-Result<FeatureStats> ComputeStats(const std::vector<const FeatureMatrix*>& matrices, NormScale scale) {
+Result<FeatureStats> ComputeStats(const std::vector<const FeatureMatrix*>& matrices,
+                                  NormScale scale) {
   if (matrices.empty()) return InvalidArgument("ComputeStats: no feature matrices");
   const int64_t cols = matrices.front()->cols;
   std::vector<double> sum(static_cast<size_t>(cols), 0.0);
   int64_t count = 0;
   for (const FeatureMatrix* m : matrices) {
     if (m->cols != cols) {
-      return InvalidArgument("ComputeStats: feature dimension " + std::to_string(m->cols) + " differs from " +
-                             std::to_string(cols));
+      return InvalidArgument("ComputeStats: feature dimension " + std::to_string(m->cols) +
+                             " differs from " + std::to_string(cols));
     }
     for (int64_t r = 0; r < m->rows; ++r) {
       const float* row = m->row(r);
@@ -29,7 +29,8 @@ Result<FeatureStats> ComputeStats(const std::vector<const FeatureMatrix*>& matri
   // Two passes in double: the mean first, then squared deviations (numerically stable enough for
   // feature magnitudes and millions of frames).
   std::vector<double> mean(static_cast<size_t>(cols));
-  for (int64_t c = 0; c < cols; ++c) mean[static_cast<size_t>(c)] = sum[static_cast<size_t>(c)] / static_cast<double>(count);
+  for (int64_t c = 0; c < cols; ++c)
+    mean[static_cast<size_t>(c)] = sum[static_cast<size_t>(c)] / static_cast<double>(count);
   std::vector<double> sq(static_cast<size_t>(cols), 0.0);
   for (const FeatureMatrix* m : matrices) {
     for (int64_t r = 0; r < m->rows; ++r) {
@@ -45,16 +46,18 @@ Result<FeatureStats> ComputeStats(const std::vector<const FeatureMatrix*>& matri
   stats.count = count;
   for (int64_t c = 0; c < cols; ++c) {
     stats.mean.push_back(static_cast<float>(mean[static_cast<size_t>(c)]));
-    stats.std.push_back(static_cast<float>(std::sqrt(sq[static_cast<size_t>(c)] / static_cast<double>(count - 1))));
+    stats.std.push_back(
+        static_cast<float>(std::sqrt(sq[static_cast<size_t>(c)] / static_cast<double>(count - 1))));
   }
   return stats;
 }
 
 namespace {
 Status CheckDims(const FeatureMatrix& features, const FeatureStats& stats) {
-  if (static_cast<size_t>(features.cols) != stats.mean.size() || stats.mean.size() != stats.std.size()) {
-    return FailedPrecondition("features have " + std::to_string(features.cols) + " columns, statistics " +
-                              std::to_string(stats.mean.size()));
+  if (static_cast<size_t>(features.cols) != stats.mean.size() ||
+      stats.mean.size() != stats.std.size()) {
+    return FailedPrecondition("features have " + std::to_string(features.cols) +
+                              " columns, statistics " + std::to_string(stats.mean.size()));
   }
   return Status::Ok();
 }
@@ -64,7 +67,8 @@ Status Normalize(FeatureMatrix* features, const FeatureStats& stats) {
   MP_RETURN_IF_ERROR(CheckDims(*features, stats));
   const double scale = static_cast<double>(static_cast<int>(stats.scale));
   std::vector<float> inv(stats.std.size());
-  for (size_t c = 0; c < inv.size(); ++c) inv[c] = static_cast<float>(1.0 / (scale * (stats.std[c] + kStatsEpsilon)));
+  for (size_t c = 0; c < inv.size(); ++c)
+    inv[c] = static_cast<float>(1.0 / (scale * (stats.std[c] + kStatsEpsilon)));
   for (int64_t r = 0; r < features->rows; ++r) {
     float* row = features->row(r);
     for (size_t c = 0; c < inv.size(); ++c) row[c] = (row[c] - stats.mean[c]) * inv[c];
@@ -76,7 +80,8 @@ Status Denormalize(FeatureMatrix* features, const FeatureStats& stats) {
   MP_RETURN_IF_ERROR(CheckDims(*features, stats));
   const double scale = static_cast<double>(static_cast<int>(stats.scale));
   std::vector<float> mul(stats.std.size());
-  for (size_t c = 0; c < mul.size(); ++c) mul[c] = static_cast<float>(scale * (stats.std[c] + kStatsEpsilon));
+  for (size_t c = 0; c < mul.size(); ++c)
+    mul[c] = static_cast<float>(scale * (stats.std[c] + kStatsEpsilon));
   for (int64_t r = 0; r < features->rows; ++r) {
     float* row = features->row(r);
     for (size_t c = 0; c < mul.size(); ++c) row[c] = row[c] * mul[c] + stats.mean[c];
@@ -101,8 +106,10 @@ Status SaveStats(const std::string& path, const FeatureStats& stats) {
 }
 
 namespace {
-Result<std::vector<float>> FloatList(const nlohmann::json& node, const std::string& origin, const std::string& field) {
-  if (!node.is_array()) return DataLoss(origin + ": field '" + field + "' is not a list of numbers");
+Result<std::vector<float>> FloatList(const nlohmann::json& node, const std::string& origin,
+                                     const std::string& field) {
+  if (!node.is_array())
+    return DataLoss(origin + ": field '" + field + "' is not a list of numbers");
   std::vector<float> out;
   for (const auto& value : node) {
     if (!value.is_number()) return DataLoss(origin + ": field '" + field + "' holds a non-number");
@@ -123,7 +130,8 @@ Result<FeatureStats> LoadStats(const std::string& path, const std::string& key) 
   if (!doc.is_object()) return DataLoss(path + ": expected a JSON object");
   FeatureStats stats;
   if (doc.contains("format")) {
-    if (doc["format"] != "motionpipe.stats/1") return DataLoss(path + ": unknown stats format " + doc["format"].dump());
+    if (doc["format"] != "motionpipe.stats/1")
+      return DataLoss(path + ": unknown stats format " + doc["format"].dump());
     MP_ASSIGN_OR_RETURN(stats.mean, FloatList(doc["mean"], path, "mean"));
     MP_ASSIGN_OR_RETURN(stats.std, FloatList(doc["std"], path, "std"));
     const int scale = doc.value("scale", 1);
@@ -134,25 +142,30 @@ Result<FeatureStats> LoadStats(const std::string& path, const std::string& key) 
     // The MotionFix reference layout: one {mean, std} object per feature group.
     stats.scale = NormScale::kTwoSigma;
     for (const FeatureGroup& group : MotionFixFeatureGroups()) {
-      if (!doc.contains(group.name)) return DataLoss(path + ": missing feature group '" + group.name + "'");
-      MP_ASSIGN_OR_RETURN(auto mean, FloatList(doc[group.name].value("mean", nlohmann::json()), path,
-                                               std::string(group.name) + ".mean"));
+      if (!doc.contains(group.name))
+        return DataLoss(path + ": missing feature group '" + group.name + "'");
+      MP_ASSIGN_OR_RETURN(auto mean, FloatList(doc[group.name].value("mean", nlohmann::json()),
+                                               path, std::string(group.name) + ".mean"));
       MP_ASSIGN_OR_RETURN(auto std, FloatList(doc[group.name].value("std", nlohmann::json()), path,
                                               std::string(group.name) + ".std"));
-      if (mean.size() != static_cast<size_t>(group.end - group.begin) || std.size() != mean.size()) {
-        return DataLoss(path + ": group '" + group.name + "' should have " + std::to_string(group.end - group.begin) +
-                        " entries");
+      if (mean.size() != static_cast<size_t>(group.end - group.begin) ||
+          std.size() != mean.size()) {
+        return DataLoss(path + ": group '" + group.name + "' should have " +
+                        std::to_string(group.end - group.begin) + " entries");
       }
       stats.mean.insert(stats.mean.end(), mean.begin(), mean.end());
       stats.std.insert(stats.std.end(), std.begin(), std.end());
     }
   } else {
     // The SINC/TMR reference layout: "<key>_mean" and "<key>_std" entries with "values".
-    if (key.empty()) return InvalidArgument(path + ": this statistics file needs a key (e.g. sinc_rfeats_babel-amass)");
+    if (key.empty())
+      return InvalidArgument(path +
+                             ": this statistics file needs a key (e.g. sinc_rfeats_babel-amass)");
     for (const char* suffix : {"_mean", "_std"}) {
       const std::string name = key + suffix;
       if (!doc.contains(name)) return DataLoss(path + ": no entry '" + name + "'");
-      MP_ASSIGN_OR_RETURN(auto values, FloatList(doc[name].value("values", nlohmann::json()), path, name + ".values"));
+      MP_ASSIGN_OR_RETURN(auto values, FloatList(doc[name].value("values", nlohmann::json()), path,
+                                                 name + ".values"));
       (std::string(suffix) == "_mean" ? stats.mean : stats.std) = std::move(values);
     }
   }
@@ -161,7 +174,8 @@ Result<FeatureStats> LoadStats(const std::string& path, const std::string& key) 
   }
   for (size_t c = 0; c < stats.std.size(); ++c) {
     if (!std::isfinite(stats.mean[c]) || !std::isfinite(stats.std[c]) || stats.std[c] < 0) {
-      return DataLoss(path + ": entry " + std::to_string(c) + " is not finite or has a negative std");
+      return DataLoss(path + ": entry " + std::to_string(c) +
+                      " is not finite or has a negative std");
     }
   }
   return stats;

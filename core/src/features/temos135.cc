@@ -7,7 +7,6 @@
 
 namespace motionpipe {
 
-
 FeatureMatrix EncodeTemos135(const Motion& motion, double canonical_heading) {
   const int64_t frames = motion.num_frames();
   FeatureMatrix out(frames, kTemosFeatureDim);
@@ -24,18 +23,20 @@ FeatureMatrix EncodeTemos135(const Motion& motion, double canonical_heading) {
       row[2] = static_cast<float>(trans.y - prev.y);
     }
     WriteRot6d(canon * motion.LocalRotation(frame, 0), row + 3);
-    for (int joint = 1; joint < kNumJoints; ++joint) WriteRot6d(motion.LocalRotation(frame, joint), row + 3 + joint * 6);
+    for (int joint = 1; joint < kNumJoints; ++joint)
+      WriteRot6d(motion.LocalRotation(frame, joint), row + 3 + joint * 6);
     prev = trans;
   }
   return out;
 }
 
-void EncodeTemos135FastJoints(const float* const* joint_poses, const float* trans, int64_t frames, float* out,
-                              double canonical_heading) {
+void EncodeTemos135FastJoints(const float* const* joint_poses, const float* trans, int64_t frames,
+                              float* out, double canonical_heading) {
   if (frames <= 0) return;
   const int64_t n = frames;
-  // Each distinct source motion (one, or two for a composition) is transposed whole into joint-major
-  // planes [(3 j + a) T + f] (8 x 8 register blocks); each joint then reads its own source's planes.
+  // Each distinct source motion (one, or two for a composition) is transposed whole into
+  // joint-major planes [(3 j + a) T + f] (8 x 8 register blocks); each joint then reads its own
+  // source's planes.
   const float* sources[kNumJoints];
   int num_sources = 0;
   int source_of[kNumJoints];
@@ -47,9 +48,11 @@ void EncodeTemos135FastJoints(const float* const* joint_poses, const float* tran
   }
   thread_local std::vector<float> scratch;
   scratch.resize(static_cast<size_t>(n * (3 * kNumJoints * num_sources + 6 * kNumJoints)));
-  float* six = scratch.data();                   // [(6 j + k) T + f]
-  float* axis = six + 6 * kNumJoints * n;        // per source: [(3 j + a) T + f]
-  for (int s = 0; s < num_sources; ++s) simd::Transpose(sources[s], 3 * kNumJoints, n, 3 * kNumJoints, axis + s * 3 * kNumJoints * n, n);
+  float* six = scratch.data();             // [(6 j + k) T + f]
+  float* axis = six + 6 * kNumJoints * n;  // per source: [(3 j + a) T + f]
+  for (int s = 0; s < num_sources; ++s)
+    simd::Transpose(sources[s], 3 * kNumJoints, n, 3 * kNumJoints, axis + s * 3 * kNumJoints * n,
+                    n);
   for (int j = 0; j < kNumJoints; ++j) {
     const float* a = axis + source_of[j] * 3 * kNumJoints * n + 3 * j * n;
     simd::AxisAngleToMatrices(a, a + n, a + 2 * n, n, six + 6 * j * n, n, 2);
@@ -84,7 +87,8 @@ void EncodeTemos135FastJoints(const float* const* joint_poses, const float* tran
   }
 }
 
-void EncodeTemos135Fast(const float* poses, const float* trans, int64_t frames, float* out, double canonical_heading) {
+void EncodeTemos135Fast(const float* poses, const float* trans, int64_t frames, float* out,
+                        double canonical_heading) {
   const float* joints[kNumJoints];
   for (auto& p : joints) p = poses;
   EncodeTemos135FastJoints(joints, trans, frames, out, canonical_heading);
@@ -107,13 +111,17 @@ Motion DecodeTemos135(const FeatureMatrix& features, const MotionAnchor& anchor,
       y += row[2];
     }
     const Vec3 turned = uncanon * Vec3{x, y, 0};
-    motion.SetTranslation(frame, {anchor.translation.x + turned.x, anchor.translation.y + turned.y, row[0]});
+    motion.SetTranslation(
+        frame, {anchor.translation.x + turned.x, anchor.translation.y + turned.y, row[0]});
     motion.SetLocalRotation(frame, 0, uncanon * ReadRot6d(row + 3));
-    for (int joint = 1; joint < kNumJoints; ++joint) motion.SetLocalRotation(frame, joint, ReadRot6d(row + 3 + joint * 6));
+    for (int joint = 1; joint < kNumJoints; ++joint)
+      motion.SetLocalRotation(frame, joint, ReadRot6d(row + 3 + joint * 6));
   }
   return motion;
 }
 
-MotionAnchor CanonicalTemosAnchor(double canonical_heading) { return {canonical_heading, {0, 0, 0}}; }
+MotionAnchor CanonicalTemosAnchor(double canonical_heading) {
+  return {canonical_heading, {0, 0, 0}};
+}
 
 }  // namespace motionpipe

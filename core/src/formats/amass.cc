@@ -7,9 +7,11 @@ namespace motionpipe {
 
 Result<Clip> AmassClipFromNpz(const Npz& npz, const std::string& origin) {
   MP_ASSIGN_OR_RETURN(const NpyArray* poses_a, npz.Get("poses", origin));
-  if (poses_a->shape.size() != 2 || poses_a->shape[1] < kNumJoints * 3 || poses_a->shape[1] % 3 != 0) {
-    return DataLoss(origin + ": 'poses' has shape " + poses_a->ShapeString() +
-                    ", expected [T, 156] (SMPL-H), [T, 165] (SMPL-X) or another [T, 3K] with K >= 22");
+  if (poses_a->shape.size() != 2 || poses_a->shape[1] < kNumJoints * 3 ||
+      poses_a->shape[1] % 3 != 0) {
+    return DataLoss(
+        origin + ": 'poses' has shape " + poses_a->ShapeString() +
+        ", expected [T, 156] (SMPL-H), [T, 165] (SMPL-X) or another [T, 3K] with K >= 22");
   }
   const int64_t frames = poses_a->shape[0];
   const int64_t cols = poses_a->shape[1];
@@ -27,7 +29,8 @@ Result<Clip> AmassClipFromNpz(const Npz& npz, const std::string& origin) {
   clip.motion.trans = std::move(trans);
   clip.motion.poses.resize(static_cast<size_t>(frames) * kNumJoints * 3);
   for (int64_t frame = 0; frame < frames; ++frame) {
-    std::copy_n(poses.begin() + frame * cols, kNumJoints * 3, clip.motion.poses.begin() + frame * kNumJoints * 3);
+    std::copy_n(poses.begin() + frame * cols, kNumJoints * 3,
+                clip.motion.poses.begin() + frame * kNumJoints * 3);
   }
   MP_RETURN_IF_ERROR(ValidateClip(clip, origin));
   return clip;
@@ -46,7 +49,8 @@ Npz AmassNpzFromMotion(const Motion& motion) {
   constexpr int64_t kSmplhColumns = 156;
   std::vector<float> poses(static_cast<size_t>(frames * kSmplhColumns), 0.0f);
   for (int64_t frame = 0; frame < frames; ++frame) {
-    std::copy_n(motion.poses.begin() + frame * kNumJoints * 3, kNumJoints * 3, poses.begin() + frame * kSmplhColumns);
+    std::copy_n(motion.poses.begin() + frame * kNumJoints * 3, kNumJoints * 3,
+                poses.begin() + frame * kSmplhColumns);
   }
   Npz npz;
   npz.Add("poses", NpyArray::Float32({frames, kSmplhColumns}, poses));

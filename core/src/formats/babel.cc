@@ -1,10 +1,9 @@
 #include "motionpipe/formats/babel.h"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <set>
 
 #include "motionpipe/base/file.h"
@@ -26,7 +25,8 @@ Result<BabelLabel> ParseLabel(const nlohmann::json& node, const std::string& whe
   MP_RETURN_IF_ERROR(text_field("proc_label", &label.proc_label));
   MP_RETURN_IF_ERROR(text_field("raw_label", &label.raw_label));
   if (label.proc_label.empty()) label.proc_label = label.raw_label;
-  if (label.proc_label.empty()) return DataLoss(where + ": label has neither proc_label nor raw_label");
+  if (label.proc_label.empty())
+    return DataLoss(where + ": label has neither proc_label nor raw_label");
   if (node.contains("act_cat") && node["act_cat"].is_array()) {
     for (const auto& cat : node["act_cat"]) {
       if (cat.is_string()) label.act_cat.push_back(cat.get<std::string>());
@@ -35,15 +35,18 @@ Result<BabelLabel> ParseLabel(const nlohmann::json& node, const std::string& whe
   if (need_times) {
     if (!node.contains("start_t") || !node["start_t"].is_number() || !node.contains("end_t") ||
         !node["end_t"].is_number()) {
-      return DataLoss(where + ": frame label '" + label.proc_label + "' lacks numeric start_t/end_t");
+      return DataLoss(where + ": frame label '" + label.proc_label +
+                      "' lacks numeric start_t/end_t");
     }
     label.start_t = node["start_t"].get<double>();
     label.end_t = node["end_t"].get<double>();
-    if (!std::isfinite(label.start_t) || !std::isfinite(label.end_t) || std::abs(label.start_t) > 86400 ||
-        std::abs(label.end_t) > 86400) {
-      return DataLoss(where + ": label '" + label.proc_label + "' has an implausible start_t/end_t");
+    if (!std::isfinite(label.start_t) || !std::isfinite(label.end_t) ||
+        std::abs(label.start_t) > 86400 || std::abs(label.end_t) > 86400) {
+      return DataLoss(where + ": label '" + label.proc_label +
+                      "' has an implausible start_t/end_t");
     }
-    if (label.end_t < label.start_t) return DataLoss(where + ": label '" + label.proc_label + "' has end_t before start_t");
+    if (label.end_t < label.start_t)
+      return DataLoss(where + ": label '" + label.proc_label + "' has end_t before start_t");
   } else {
     label.start_t = 0;
     label.end_t = duration;
@@ -53,7 +56,8 @@ Result<BabelLabel> ParseLabel(const nlohmann::json& node, const std::string& whe
 
 }  // namespace
 
-Result<std::vector<BabelSequence>> ParseBabel(const std::string& json_text, const std::string& origin) {
+Result<std::vector<BabelSequence>> ParseBabel(const std::string& json_text,
+                                              const std::string& origin) {
   nlohmann::json doc;
   try {
     doc = nlohmann::json::parse(json_text);
@@ -70,10 +74,13 @@ Result<std::vector<BabelSequence>> ParseBabel(const std::string& json_text, cons
     if (node.contains("babel_sid") && node["babel_sid"].is_number_integer()) {
       seq.sid = std::to_string(node["babel_sid"].get<int64_t>());
     }
-    if (node.contains("feat_p") && node["feat_p"].is_string()) seq.feat_p = node["feat_p"].get<std::string>();
-    if (!node.contains("dur") || !node["dur"].is_number()) return DataLoss(where + ": missing numeric 'dur'");
+    if (node.contains("feat_p") && node["feat_p"].is_string())
+      seq.feat_p = node["feat_p"].get<std::string>();
+    if (!node.contains("dur") || !node["dur"].is_number())
+      return DataLoss(where + ": missing numeric 'dur'");
     seq.duration = node["dur"].get<double>();
-    // A day is far beyond any capture session; larger values are corrupt and would overflow frame counts.
+    // A day is far beyond any capture session; larger values are corrupt and would overflow frame
+    // counts.
     if (!std::isfinite(seq.duration) || seq.duration < 0 || seq.duration > 86400) {
       return DataLoss(where + ": 'dur' must be between 0 and 86400 seconds");
     }
@@ -91,7 +98,8 @@ Result<std::vector<BabelSequence>> ParseBabel(const std::string& json_text, cons
       return DataLoss(where + ": annotation has no 'labels' list");
     }
     for (const auto& label_node : (*ann)["labels"]) {
-      MP_ASSIGN_OR_RETURN(BabelLabel label, ParseLabel(label_node, where, seq.frame_level, seq.duration));
+      MP_ASSIGN_OR_RETURN(BabelLabel label,
+                          ParseLabel(label_node, where, seq.frame_level, seq.duration));
       seq.labels.push_back(std::move(label));
     }
     sequences.push_back(std::move(seq));
@@ -107,12 +115,15 @@ Result<std::vector<BabelSequence>> ReadBabel(const std::string& path) {
 bool IsExcludedBabelLabel(const std::string& label) {
   std::string squashed;
   for (char c : label) {
-    if (std::isalnum(static_cast<unsigned char>(c))) squashed.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
+    if (std::isalnum(static_cast<unsigned char>(c)))
+      squashed.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
   }
-  return squashed == "tpose" || squashed == "apose" || squashed == "transition" || squashed == "transitions";
+  return squashed == "tpose" || squashed == "apose" || squashed == "transition" ||
+         squashed == "transitions";
 }
 
-std::vector<ActionSpan> SweepActionSpans(const BabelSequence& sequence, const BabelSpanOptions& options) {
+std::vector<ActionSpan> SweepActionSpans(const BabelSequence& sequence,
+                                         const BabelSpanOptions& options) {
   struct Event {
     int frame;
     bool start;
@@ -123,7 +134,8 @@ std::vector<ActionSpan> SweepActionSpans(const BabelSequence& sequence, const Ba
   for (size_t k = 0; k < sequence.labels.size(); ++k) {
     const BabelLabel& label = sequence.labels[k];
     if (IsExcludedBabelLabel(label.proc_label)) continue;
-    const int start = std::clamp(static_cast<int>(std::lround(label.start_t * options.fps)), 0, total);
+    const int start =
+        std::clamp(static_cast<int>(std::lround(label.start_t * options.fps)), 0, total);
     const int end = std::clamp(static_cast<int>(std::lround(label.end_t * options.fps)), 0, total);
     if (end <= start) continue;
     events.push_back({start, true, k});

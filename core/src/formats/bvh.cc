@@ -51,10 +51,12 @@ bool ParseDouble(std::string_view token, double* out) {
 
 bool ParseChannel(std::string_view token, BvhChannel* channel) {
   std::string lower;
-  for (char c : token) lower.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
+  for (char c : token)
+    lower.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
   static const std::pair<const char*, BvhChannel> kNames[] = {
-      {"xposition", BvhChannel::kXpos}, {"yposition", BvhChannel::kYpos}, {"zposition", BvhChannel::kZpos},
-      {"xrotation", BvhChannel::kXrot}, {"yrotation", BvhChannel::kYrot}, {"zrotation", BvhChannel::kZrot}};
+      {"xposition", BvhChannel::kXpos}, {"yposition", BvhChannel::kYpos},
+      {"zposition", BvhChannel::kZpos}, {"xrotation", BvhChannel::kXrot},
+      {"yrotation", BvhChannel::kYrot}, {"zrotation", BvhChannel::kZrot}};
   for (const auto& [name, value] : kNames) {
     if (lower == name) {
       *channel = value;
@@ -85,52 +87,67 @@ Result<BvhFile> ParseBvh(std::string_view text, const std::string& origin) {
   Tokens tokens(text);
   std::string_view token;
   BvhFile bvh;
-  const auto fail = [&](const std::string& what) { return DataLoss(origin + ":" + std::to_string(tokens.line()) + ": " + what); };
+  const auto fail = [&](const std::string& what) {
+    return DataLoss(origin + ":" + std::to_string(tokens.line()) + ": " + what);
+  };
   const auto expect_number = [&](double* out, const char* what) -> Status {
     if (!tokens.Next(&token)) return fail(std::string("file ends before ") + what);
-    if (!ParseDouble(token, out)) return fail(std::string("expected a number for ") + what + ", found '" + std::string(token) + "'");
+    if (!ParseDouble(token, out))
+      return fail(std::string("expected a number for ") + what + ", found '" + std::string(token) +
+                  "'");
     return Status::Ok();
   };
-  if (!tokens.Next(&token) || token != "HIERARCHY") return fail("expected 'HIERARCHY' at the start");
+  if (!tokens.Next(&token) || token != "HIERARCHY")
+    return fail("expected 'HIERARCHY' at the start");
   std::vector<int> stack;  // open joints; -2 marks an End Site block
   int channel_count = 0;
   bool seen_root = false;
   while (true) {
-    if (!tokens.Next(&token)) return fail("file ends inside the hierarchy (missing MOTION section)");
+    if (!tokens.Next(&token))
+      return fail("file ends inside the hierarchy (missing MOTION section)");
     if (token == "ROOT" || token == "JOINT") {
-      if (token == "ROOT" && (seen_root || !stack.empty())) return fail("second ROOT (only one skeleton per file is supported)");
-      if (token == "JOINT" && (stack.empty() || stack.back() < 0)) return fail("JOINT outside a parent joint");
+      if (token == "ROOT" && (seen_root || !stack.empty()))
+        return fail("second ROOT (only one skeleton per file is supported)");
+      if (token == "JOINT" && (stack.empty() || stack.back() < 0))
+        return fail("JOINT outside a parent joint");
       seen_root = true;
       BvhJoint joint;
       if (!tokens.Next(&token)) return fail("joint without a name");
       joint.name = std::string(token);
       joint.parent = stack.empty() ? -1 : stack.back();
-      if (!tokens.Next(&token) || token != "{") return fail("expected '{' after joint '" + joint.name + "'");
-      if (!tokens.Next(&token) || token != "OFFSET") return fail("expected OFFSET in joint '" + joint.name + "'");
+      if (!tokens.Next(&token) || token != "{")
+        return fail("expected '{' after joint '" + joint.name + "'");
+      if (!tokens.Next(&token) || token != "OFFSET")
+        return fail("expected OFFSET in joint '" + joint.name + "'");
       MP_RETURN_IF_ERROR(expect_number(&joint.offset.x, "OFFSET"));
       MP_RETURN_IF_ERROR(expect_number(&joint.offset.y, "OFFSET"));
       MP_RETURN_IF_ERROR(expect_number(&joint.offset.z, "OFFSET"));
-      if (!tokens.Next(&token) || token != "CHANNELS") return fail("expected CHANNELS in joint '" + joint.name + "'");
+      if (!tokens.Next(&token) || token != "CHANNELS")
+        return fail("expected CHANNELS in joint '" + joint.name + "'");
       double count = 0;
       MP_RETURN_IF_ERROR(expect_number(&count, "the channel count"));
-      if (count < 0 || count > 6 || count != std::floor(count)) return fail("channel count must be 0..6 in joint '" + joint.name + "'");
+      if (count < 0 || count > 6 || count != std::floor(count))
+        return fail("channel count must be 0..6 in joint '" + joint.name + "'");
       joint.first_channel = channel_count;
       for (int c = 0; c < static_cast<int>(count); ++c) {
         BvhChannel channel{};
         if (!tokens.Next(&token) || !ParseChannel(token, &channel)) {
-          return fail("joint '" + joint.name + "' declares " + std::to_string(static_cast<int>(count)) +
-                      " channels but channel " + std::to_string(c + 1) + " is not a channel name");
+          return fail("joint '" + joint.name + "' declares " +
+                      std::to_string(static_cast<int>(count)) + " channels but channel " +
+                      std::to_string(c + 1) + " is not a channel name");
         }
         joint.channels.push_back(channel);
         if (channel >= BvhChannel::kXrot) {
-          joint.rotation_order.push_back(static_cast<char>('X' + (static_cast<int>(channel) - static_cast<int>(BvhChannel::kXrot))));
+          joint.rotation_order.push_back(static_cast<char>(
+              'X' + (static_cast<int>(channel) - static_cast<int>(BvhChannel::kXrot))));
         }
       }
       if (!joint.rotation_order.empty() && !EulerOrderValid(joint.rotation_order)) {
         return fail("joint '" + joint.name + "' rotation channels must name X, Y and Z once each");
       }
       channel_count += static_cast<int>(count);
-      if (static_cast<int>(bvh.joints.size()) >= kMaxBvhJoints) return fail("more than 4096 joints");
+      if (static_cast<int>(bvh.joints.size()) >= kMaxBvhJoints)
+        return fail("more than 4096 joints");
       bvh.joints.push_back(std::move(joint));
       stack.push_back(static_cast<int>(bvh.joints.size()) - 1);
     } else if (token == "End") {
@@ -168,22 +185,25 @@ Result<BvhFile> ParseBvh(std::string_view text, const std::string& origin) {
   const int64_t expected = bvh.frames * channel_count;
   // Values are never more than the text can hold: guard the reservation against bogus counts.
   if (static_cast<uint64_t>(expected) > text.size()) {
-    return fail("file declares " + std::to_string(bvh.frames) + " frames of " + std::to_string(channel_count) +
+    return fail("file declares " + std::to_string(bvh.frames) + " frames of " +
+                std::to_string(channel_count) +
                 " channels but is too short to hold them (truncated)");
   }
   bvh.values.reserve(static_cast<size_t>(expected));
   for (int64_t k = 0; k < expected; ++k) {
     if (!tokens.Next(&token)) {
-      return fail("truncated motion: frame " + std::to_string(k / std::max(channel_count, 1) + 1) + " of " +
-                  std::to_string(bvh.frames) + " is incomplete (" + std::to_string(channel_count) + " channels per frame)");
+      return fail("truncated motion: frame " + std::to_string(k / std::max(channel_count, 1) + 1) +
+                  " of " + std::to_string(bvh.frames) + " is incomplete (" +
+                  std::to_string(channel_count) + " channels per frame)");
     }
     double value = 0;
-    if (!ParseDouble(token, &value)) return fail("non-numeric motion value '" + std::string(token) + "'");
+    if (!ParseDouble(token, &value))
+      return fail("non-numeric motion value '" + std::string(token) + "'");
     bvh.values.push_back(static_cast<float>(value));
   }
   if (tokens.Next(&token)) {
-    return fail("more motion values than " + std::to_string(bvh.frames) + " frames x " + std::to_string(channel_count) +
-                " channels (wrong channel count or frame count)");
+    return fail("more motion values than " + std::to_string(bvh.frames) + " frames x " +
+                std::to_string(channel_count) + " channels (wrong channel count or frame count)");
   }
   return bvh;
 }
@@ -193,7 +213,8 @@ Result<BvhFile> ReadBvh(const std::string& path) {
   return ParseBvh(text, path);
 }
 
-void BvhForwardKinematics(const BvhFile& bvh, int64_t frame, std::vector<Mat3>* global, std::vector<Vec3>* positions) {
+void BvhForwardKinematics(const BvhFile& bvh, int64_t frame, std::vector<Mat3>* global,
+                          std::vector<Vec3>* positions) {
   const size_t n = bvh.joints.size();
   global->assign(n, Mat3::Identity());
   positions->assign(n, Vec3{});
@@ -207,13 +228,22 @@ void BvhForwardKinematics(const BvhFile& bvh, int64_t frame, std::vector<Mat3>* 
       const double v = row[joint.first_channel + static_cast<int>(c)];
       switch (joint.channels[c]) {
         // Position channels give the joint's translation from its parent and replace the offset.
-        case BvhChannel::kXpos: translation.x = v; break;
-        case BvhChannel::kYpos: translation.y = v; break;
-        case BvhChannel::kZpos: translation.z = v; break;
-        default: angles[static_cast<size_t>(rot++)] = v * kDegToRad; break;
+        case BvhChannel::kXpos:
+          translation.x = v;
+          break;
+        case BvhChannel::kYpos:
+          translation.y = v;
+          break;
+        case BvhChannel::kZpos:
+          translation.z = v;
+          break;
+        default:
+          angles[static_cast<size_t>(rot++)] = v * kDegToRad;
+          break;
       }
     }
-    const Mat3 local = joint.rotation_order.empty() ? Mat3::Identity() : EulerToMatrix(joint.rotation_order, angles);
+    const Mat3 local = joint.rotation_order.empty() ? Mat3::Identity()
+                                                    : EulerToMatrix(joint.rotation_order, angles);
     if (joint.parent < 0) {
       (*global)[k] = local;
       (*positions)[k] = translation;
@@ -229,21 +259,27 @@ const std::vector<JointMap>& BuiltinJointMaps() {
   static const std::vector<JointMap> maps = [] {
     std::vector<JointMap> out;
     // Order follows data/skeleton/smpl22.json joint_names.
-    out.push_back({"cmu",
-                   {"Hips", "LeftHip", "RightHip", "lowerback", "LeftKnee", "RightKnee", "Chest", "LeftAnkle",
-                    "RightAnkle", "Chest2", "LeftToe", "RightToe", "Neck", "LeftCollar", "RightCollar", "Head",
-                    "LeftShoulder", "RightShoulder", "LeftElbow", "RightElbow", "LeftWrist", "RightWrist"},
-                   0.056444});
+    out.push_back(
+        {"cmu",
+         {"Hips",      "LeftHip",    "RightHip",    "lowerback", "LeftKnee",     "RightKnee",
+          "Chest",     "LeftAnkle",  "RightAnkle",  "Chest2",    "LeftToe",      "RightToe",
+          "Neck",      "LeftCollar", "RightCollar", "Head",      "LeftShoulder", "RightShoulder",
+          "LeftElbow", "RightElbow", "LeftWrist",   "RightWrist"},
+         0.056444});
     JointMap smpl{"smpl22", {}, 0.0};
-    for (int j = 0; j < kNumJoints; ++j) smpl.source[static_cast<size_t>(j)] = Skeleton::Smpl22().joint_names()[static_cast<size_t>(j)];
+    for (int j = 0; j < kNumJoints; ++j)
+      smpl.source[static_cast<size_t>(j)] =
+          Skeleton::Smpl22().joint_names()[static_cast<size_t>(j)];
     out.push_back(smpl);
     out.push_back({"mixamo",
-                   {"mixamorig:Hips", "mixamorig:LeftUpLeg", "mixamorig:RightUpLeg", "mixamorig:Spine",
-                    "mixamorig:LeftLeg", "mixamorig:RightLeg", "mixamorig:Spine1", "mixamorig:LeftFoot",
-                    "mixamorig:RightFoot", "mixamorig:Spine2", "mixamorig:LeftToeBase", "mixamorig:RightToeBase",
-                    "mixamorig:Neck", "mixamorig:LeftShoulder", "mixamorig:RightShoulder", "mixamorig:Head",
-                    "mixamorig:LeftArm", "mixamorig:RightArm", "mixamorig:LeftForeArm", "mixamorig:RightForeArm",
-                    "mixamorig:LeftHand", "mixamorig:RightHand"},
+                   {"mixamorig:Hips",        "mixamorig:LeftUpLeg",    "mixamorig:RightUpLeg",
+                    "mixamorig:Spine",       "mixamorig:LeftLeg",      "mixamorig:RightLeg",
+                    "mixamorig:Spine1",      "mixamorig:LeftFoot",     "mixamorig:RightFoot",
+                    "mixamorig:Spine2",      "mixamorig:LeftToeBase",  "mixamorig:RightToeBase",
+                    "mixamorig:Neck",        "mixamorig:LeftShoulder", "mixamorig:RightShoulder",
+                    "mixamorig:Head",        "mixamorig:LeftArm",      "mixamorig:RightArm",
+                    "mixamorig:LeftForeArm", "mixamorig:RightForeArm", "mixamorig:LeftHand",
+                    "mixamorig:RightHand"},
                    0.0});
     return out;
   }();
@@ -270,7 +306,8 @@ Result<JointMap> ParseJointMap(const std::string& text, const std::string& origi
     size_t colon = line.find(": ");
     if (colon == std::string::npos) colon = line.find(':');
     if (colon == std::string::npos) {
-      return DataLoss(origin + ":" + std::to_string(line_number) + ": expected 'smpl_joint: source_joint'");
+      return DataLoss(origin + ":" + std::to_string(line_number) +
+                      ": expected 'smpl_joint: source_joint'");
     }
     const std::string key = trim(line.substr(0, colon));
     const std::string value = trim(line.substr(colon + 1));
@@ -278,20 +315,25 @@ Result<JointMap> ParseJointMap(const std::string& text, const std::string& origi
       char* end = nullptr;
       map.unit_scale = std::strtod(value.c_str(), &end);
       if (value.empty() || *end != '\0' || !(map.unit_scale > 0)) {
-        return DataLoss(origin + ":" + std::to_string(line_number) + ": unit_scale must be a positive number");
+        return DataLoss(origin + ":" + std::to_string(line_number) +
+                        ": unit_scale must be a positive number");
       }
       continue;
     }
     const int joint = smpl.JointIndex(key);
     if (joint < 0) {
-      return DataLoss(origin + ":" + std::to_string(line_number) + ": '" + key + "' is not an SMPL-22 joint name");
+      return DataLoss(origin + ":" + std::to_string(line_number) + ": '" + key +
+                      "' is not an SMPL-22 joint name");
     }
-    if (value.empty()) return DataLoss(origin + ":" + std::to_string(line_number) + ": no source joint for '" + key + "'");
+    if (value.empty())
+      return DataLoss(origin + ":" + std::to_string(line_number) + ": no source joint for '" + key +
+                      "'");
     map.source[static_cast<size_t>(joint)] = value;
   }
   std::string missing;
   for (int j = 0; j < kNumJoints; ++j) {
-    if (map.source[static_cast<size_t>(j)].empty()) missing += (missing.empty() ? "" : ", ") + smpl.joint_names()[static_cast<size_t>(j)];
+    if (map.source[static_cast<size_t>(j)].empty())
+      missing += (missing.empty() ? "" : ", ") + smpl.joint_names()[static_cast<size_t>(j)];
   }
   if (!missing.empty()) return DataLoss(origin + ": the map does not list SMPL joints: " + missing);
   return map;
@@ -306,7 +348,8 @@ Result<JointMap> ChooseJointMap(const BvhFile& bvh, const std::string& origin) {
     size_t count = 0;
     for (int j = 0; j < kNumJoints; ++j) {
       if (bvh.JointIndex(map.source[static_cast<size_t>(j)]) < 0) {
-        missing += (missing.empty() ? "" : ", ") + Skeleton::Smpl22().joint_names()[static_cast<size_t>(j)] + " (" +
+        missing += (missing.empty() ? "" : ", ") +
+                   Skeleton::Smpl22().joint_names()[static_cast<size_t>(j)] + " (" +
                    map.source[static_cast<size_t>(j)] + ")";
         ++count;
       }
@@ -318,20 +361,23 @@ Result<JointMap> ChooseJointMap(const BvhFile& bvh, const std::string& origin) {
       closest_missing = missing;
     }
   }
-  return InvalidArgument(origin + ": cannot map this skeleton onto SMPL-22; the closest built-in map ('" + closest->name +
-                         "') lacks the SMPL joints " + closest_missing + ". Pass --map FILE with 'smpl_joint: your_joint' lines");
+  return InvalidArgument(origin +
+                         ": cannot map this skeleton onto SMPL-22; the closest built-in map ('" +
+                         closest->name + "') lacks the SMPL joints " + closest_missing +
+                         ". Pass --map FILE with 'smpl_joint: your_joint' lines");
 }
 
 namespace {
 
 // The SMPL child that defines each joint's bone direction (-1: leaf).
-constexpr std::array<int, kNumJoints> kPrimaryChild = {3, 4, 5, 6, 7, 8, 9, 10, 11, 12, -1, -1,
-                                                       15, 16, 17, -1, 18, 19, 20, 21, -1, -1};
+constexpr std::array<int, kNumJoints> kPrimaryChild = {3,  4,  5,  6,  7,  8,  9,  10, 11, 12, -1,
+                                                       -1, 15, 16, 17, -1, 18, 19, 20, 21, -1, -1};
 
 // A hint perpendicular enough to `direction` to fix the twist about it: forward, else up.
 Vec3 TwistHint(const Vec3& direction) {
   const Vec3 forward{0, 0, 1};
-  return std::abs(Dot(forward, (1.0 / Norm(direction)) * direction)) < 0.9 ? forward : Vec3{0, 1, 0};
+  return std::abs(Dot(forward, (1.0 / Norm(direction)) * direction)) < 0.9 ? forward
+                                                                           : Vec3{0, 1, 0};
 }
 
 // Conventional direction of leaf bones in SMPL's rest frame (head up, feet forward, hands outward).
@@ -345,15 +391,16 @@ Vec3 LeafDirection(const Skeleton& skeleton, int joint) {
 
 }  // namespace
 
-// Method: (1) rest alignment. Each SMPL joint s gets a constant A_s with G_smpl(s) = G_src(m(s)) A_s,
-// chosen so that in the source's rest pose the SMPL bone s -> child(s) points along the source bone
-// m(s) -> m(child(s)), with the twist fixed by the body's forward/up axes (the source's body frame is
-// read off its rest pose: left = hips, up = spine). (2) Per frame, a swing correction turns each SMPL
-// bone onto the source bone between the mapped joints' actual positions (the source may have joints
-// between them, e.g. CMU's lowerneck), keeping the twist. (3) The root moves with the source root,
-// scaled by the ratio of leg lengths, and y-up becomes z-up. (4) Optionally the feet are put on z = 0.
-Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhImportOptions& options,
-                       const Skeleton& skeleton) {
+// Method: (1) rest alignment. Each SMPL joint s gets a constant A_s with G_smpl(s) = G_src(m(s))
+// A_s, chosen so that in the source's rest pose the SMPL bone s -> child(s) points along the source
+// bone m(s) -> m(child(s)), with the twist fixed by the body's forward/up axes (the source's body
+// frame is read off its rest pose: left = hips, up = spine). (2) Per frame, a swing correction
+// turns each SMPL bone onto the source bone between the mapped joints' actual positions (the source
+// may have joints between them, e.g. CMU's lowerneck), keeping the twist. (3) The root moves with
+// the source root, scaled by the ratio of leg lengths, and y-up becomes z-up. (4) Optionally the
+// feet are put on z = 0.
+Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
+                       const BvhImportOptions& options, const Skeleton& skeleton) {
   if (bvh.frames < 1) return DataLoss(origin + ": the BVH has no frames");
   JointMap map;
   if (!options.map_path.empty()) {
@@ -366,17 +413,23 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
   std::string missing;
   for (int j = 0; j < kNumJoints; ++j) {
     source_of[static_cast<size_t>(j)] = bvh.JointIndex(map.source[static_cast<size_t>(j)]);
-    if (source_of[static_cast<size_t>(j)] < 0) missing += (missing.empty() ? "" : ", ") + map.source[static_cast<size_t>(j)];
+    if (source_of[static_cast<size_t>(j)] < 0)
+      missing += (missing.empty() ? "" : ", ") + map.source[static_cast<size_t>(j)];
   }
-  if (!missing.empty()) return InvalidArgument(origin + ": joints named in map '" + map.name + "' are absent: " + missing);
+  if (!missing.empty())
+    return InvalidArgument(origin + ": joints named in map '" + map.name +
+                           "' are absent: " + missing);
   // Mapped joints must keep SMPL's ancestry, or rotations cannot be related.
   for (int j = 1; j < kNumJoints; ++j) {
     int ancestor = bvh.joints[static_cast<size_t>(source_of[static_cast<size_t>(j)])].parent;
     const int wanted = source_of[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])];
-    while (ancestor >= 0 && ancestor != wanted) ancestor = bvh.joints[static_cast<size_t>(ancestor)].parent;
+    while (ancestor >= 0 && ancestor != wanted)
+      ancestor = bvh.joints[static_cast<size_t>(ancestor)].parent;
     if (ancestor != wanted) {
-      return InvalidArgument(origin + ": source joint '" + map.source[static_cast<size_t>(j)] + "' is not a descendant of '" +
-                             map.source[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])] + "'");
+      return InvalidArgument(
+          origin + ": source joint '" + map.source[static_cast<size_t>(j)] +
+          "' is not a descendant of '" +
+          map.source[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])] + "'");
     }
   }
 
@@ -384,13 +437,19 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
   std::vector<Vec3> rest(bvh.joints.size());
   for (size_t k = 0; k < bvh.joints.size(); ++k) {
     const BvhJoint& joint = bvh.joints[k];
-    rest[k] = joint.parent < 0 ? joint.offset : rest[static_cast<size_t>(joint.parent)] + joint.offset;
+    rest[k] =
+        joint.parent < 0 ? joint.offset : rest[static_cast<size_t>(joint.parent)] + joint.offset;
   }
-  const auto rest_of = [&](int smpl_joint) { return rest[static_cast<size_t>(source_of[static_cast<size_t>(smpl_joint)])]; };
+  const auto rest_of = [&](int smpl_joint) {
+    return rest[static_cast<size_t>(source_of[static_cast<size_t>(smpl_joint)])];
+  };
   const Vec3 source_left = rest_of(1) - rest_of(2);
   const Vec3 source_up = rest_of(9) - rest_of(0);
-  if (Norm(source_left) < 1e-9 || Norm(source_up) < 1e-9 || Norm(Cross(source_left, source_up)) < 1e-9) {
-    return InvalidArgument(origin + ": cannot read the body's orientation from the rest pose (hips or spine degenerate)");
+  if (Norm(source_left) < 1e-9 || Norm(source_up) < 1e-9 ||
+      Norm(Cross(source_left, source_up)) < 1e-9) {
+    return InvalidArgument(
+        origin +
+        ": cannot read the body's orientation from the rest pose (hips or spine degenerate)");
   }
   const Mat3 body = RotationFromTwoDirections({0, 1, 0}, {1, 0, 0}, source_up, source_left);
 
@@ -407,29 +466,35 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
       source_dir = Vec3{};
       if (leaf.has_end_site) source_dir = leaf.end_site;
       for (size_t k = 0; k < bvh.joints.size() && Norm(source_dir) < 1e-9; ++k) {
-        if (bvh.joints[k].parent == source_of[static_cast<size_t>(j)]) source_dir = bvh.joints[k].offset;
+        if (bvh.joints[k].parent == source_of[static_cast<size_t>(j)])
+          source_dir = bvh.joints[k].offset;
       }
     }
     if (Norm(source_dir) < 1e-9 || Norm(smpl_dir) < 1e-9) {
-      align[static_cast<size_t>(j)] = body;  // zero-length source bone: only the body frame is known
+      align[static_cast<size_t>(j)] =
+          body;  // zero-length source bone: only the body frame is known
       continue;
     }
     const Vec3 hint = TwistHint(smpl_dir);
     Vec3 source_hint = body * hint;
-    if (Norm(Cross(source_hint, source_dir)) < 1e-6 * Norm(source_dir)) source_hint = body * Vec3{1, 0, 0};
-    align[static_cast<size_t>(j)] = RotationFromTwoDirections(smpl_dir, hint, source_dir, source_hint);
+    if (Norm(Cross(source_hint, source_dir)) < 1e-6 * Norm(source_dir))
+      source_hint = body * Vec3{1, 0, 0};
+    align[static_cast<size_t>(j)] =
+        RotationFromTwoDirections(smpl_dir, hint, source_dir, source_hint);
   }
 
   // Root motion: by default scaled by the ratio of leg lengths (stride and pelvis height follow the
   // SMPL body, so feet neither slide nor sink); optionally in true metres via the unit scale.
   const double source_leg = Norm(rest_of(4) - rest_of(1)) + Norm(rest_of(7) - rest_of(4));
   const double smpl_leg = skeleton.bone_lengths()[4] + skeleton.bone_lengths()[7];
-  if (source_leg < 1e-9) return InvalidArgument(origin + ": the left leg has zero length in the rest pose");
+  if (source_leg < 1e-9)
+    return InvalidArgument(origin + ": the left leg has zero length in the rest pose");
   double root_scale = smpl_leg / source_leg;
   if (!options.scale_root_to_leg) {
     root_scale = options.unit_scale > 0 ? options.unit_scale : map.unit_scale;
     if (root_scale <= 0) {
-      return InvalidArgument(origin + ": the metres-per-unit scale of this rig is unknown; pass a unit scale");
+      return InvalidArgument(
+          origin + ": the metres-per-unit scale of this rig is unknown; pass a unit scale");
     }
   }
 
@@ -451,15 +516,19 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
       Mat3 g = source_global[src] * align[static_cast<size_t>(j)];
       const int child = kPrimaryChild[static_cast<size_t>(j)];
       if (child >= 0) {
-        const Vec3 target = source_pos[static_cast<size_t>(source_of[static_cast<size_t>(child)])] - source_pos[src];
-        if (Norm(target) > 1e-9) g = RotationBetween(g * skeleton.rest_offsets()[static_cast<size_t>(child)], target) * g;
+        const Vec3 target = source_pos[static_cast<size_t>(source_of[static_cast<size_t>(child)])] -
+                            source_pos[src];
+        if (Norm(target) > 1e-9)
+          g = RotationBetween(g * skeleton.rest_offsets()[static_cast<size_t>(child)], target) * g;
       }
       global[static_cast<size_t>(j)] = g;
     }
     for (int j = 0; j < kNumJoints; ++j) {
-      const Mat3 local = j == 0 ? up * global[0]
-                                : Transpose(global[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])]) *
-                                      global[static_cast<size_t>(j)];
+      const Mat3 local =
+          j == 0
+              ? up * global[0]
+              : Transpose(global[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])]) *
+                    global[static_cast<size_t>(j)];
       motion.SetLocalRotation(frame, j, local);
     }
     motion.SetTranslation(frame, up * (root_scale * source_pos[static_cast<size_t>(source_of[0])]));
@@ -471,8 +540,8 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
     std::vector<float> lowest;
     for (int64_t frame = 0; frame < motion.num_frames(); ++frame) {
       float low = 1e30f;
-      for (int j : {skeleton.left_foot_joints()[0], skeleton.left_foot_joints()[1], skeleton.right_foot_joints()[0],
-                    skeleton.right_foot_joints()[1]}) {
+      for (int j : {skeleton.left_foot_joints()[0], skeleton.left_foot_joints()[1],
+                    skeleton.right_foot_joints()[0], skeleton.right_foot_joints()[1]}) {
         low = std::min(low, joints[static_cast<size_t>((frame * kNumJoints + j) * 3 + 2)]);
       }
       lowest.push_back(low);
@@ -480,7 +549,8 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhI
     // The 5th percentile of the per-frame lowest foot: robust to jumps and to a few bad frames.
     std::sort(lowest.begin(), lowest.end());
     const float floor = lowest[lowest.size() / 20];
-    for (int64_t frame = 0; frame < motion.num_frames(); ++frame) motion.trans[static_cast<size_t>(frame * 3 + 2)] -= floor;
+    for (int64_t frame = 0; frame < motion.num_frames(); ++frame)
+      motion.trans[static_cast<size_t>(frame * 3 + 2)] -= floor;
   }
   MP_RETURN_IF_ERROR(ValidateClip(clip, origin));
   return clip;
@@ -491,26 +561,34 @@ Result<Clip> ImportBvhFile(const std::string& path, const BvhImportOptions& opti
   return ImportBvh(bvh, path, options);
 }
 
-std::string ExportBvh(const Motion& motion, const Skeleton& skeleton, const BvhExportOptions& options) {
+std::string ExportBvh(const Motion& motion, const Skeleton& skeleton,
+                      const BvhExportOptions& options) {
   const double scale = options.units_per_metre;
   std::string out = "HIERARCHY\n";
   char buffer[256];
   // Children lists to write the hierarchy depth-first.
   std::vector<std::vector<int>> children(kNumJoints);
-  for (int j = 1; j < kNumJoints; ++j) children[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])].push_back(j);
+  for (int j = 1; j < kNumJoints; ++j)
+    children[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])].push_back(j);
   std::vector<int> order;  // joints in the order their channels appear
   const auto write_joint = [&](const auto& self, int joint, int depth) -> void {
     const std::string indent(static_cast<size_t>(depth), '\t');
-    const Vec3 offset = joint == 0 ? Vec3{} : scale * skeleton.rest_offsets()[static_cast<size_t>(joint)];
-    out += indent + (joint == 0 ? "ROOT " : "JOINT ") + skeleton.joint_names()[static_cast<size_t>(joint)] + "\n" + indent + "{\n";
-    std::snprintf(buffer, sizeof(buffer), "%s\tOFFSET %.6f %.6f %.6f\n", indent.c_str(), offset.x, offset.y, offset.z);
+    const Vec3 offset =
+        joint == 0 ? Vec3{} : scale * skeleton.rest_offsets()[static_cast<size_t>(joint)];
+    out += indent + (joint == 0 ? "ROOT " : "JOINT ") +
+           skeleton.joint_names()[static_cast<size_t>(joint)] + "\n" + indent + "{\n";
+    std::snprintf(buffer, sizeof(buffer), "%s\tOFFSET %.6f %.6f %.6f\n", indent.c_str(), offset.x,
+                  offset.y, offset.z);
     out += buffer;
-    out += indent + (joint == 0 ? "\tCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
-                                : "\tCHANNELS 3 Zrotation Yrotation Xrotation\n");
+    out +=
+        indent + (joint == 0
+                      ? "\tCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
+                      : "\tCHANNELS 3 Zrotation Yrotation Xrotation\n");
     order.push_back(joint);
     if (children[static_cast<size_t>(joint)].empty()) {
       const Vec3 tip = (0.1 * scale) * LeafDirection(skeleton, joint);  // a 10 cm end marker
-      std::snprintf(buffer, sizeof(buffer), "%s\tEnd Site\n%s\t{\n%s\t\tOFFSET %.6f %.6f %.6f\n%s\t}\n", indent.c_str(),
+      std::snprintf(buffer, sizeof(buffer),
+                    "%s\tEnd Site\n%s\t{\n%s\t\tOFFSET %.6f %.6f %.6f\n%s\t}\n", indent.c_str(),
                     indent.c_str(), indent.c_str(), tip.x, tip.y, tip.z, indent.c_str());
       out += buffer;
     }
@@ -531,8 +609,8 @@ std::string ExportBvh(const Motion& motion, const Skeleton& skeleton, const BvhE
       Mat3 local = motion.LocalRotation(frame, joint);
       if (joint == 0) local = down * local;
       const auto angles = MatrixToEuler("ZYX", local);
-      std::snprintf(buffer, sizeof(buffer), " %.6f %.6f %.6f", angles[0] * kRadToDeg, angles[1] * kRadToDeg,
-                    angles[2] * kRadToDeg);
+      std::snprintf(buffer, sizeof(buffer), " %.6f %.6f %.6f", angles[0] * kRadToDeg,
+                    angles[1] * kRadToDeg, angles[2] * kRadToDeg);
       out += buffer;
     }
     out += "\n";
@@ -540,7 +618,8 @@ std::string ExportBvh(const Motion& motion, const Skeleton& skeleton, const BvhE
   return out;
 }
 
-Status ExportBvhFile(const std::string& path, const Motion& motion, const BvhExportOptions& options) {
+Status ExportBvhFile(const std::string& path, const Motion& motion,
+                     const BvhExportOptions& options) {
   MP_RETURN_IF_ERROR(ValidateMotion(motion, path));
   return WriteFileAtomic(path, ExportBvh(motion, Skeleton::Smpl22(), options));
 }

@@ -23,8 +23,9 @@ Status ValidateClip(const Clip& clip, const std::string& origin) {
   }
   for (const Segment& seg : clip.segments) {
     if (seg.start_frame < 0 || seg.end_frame <= seg.start_frame || seg.end_frame > frames) {
-      return DataLoss(where + ": segment '" + seg.text + "' [" + std::to_string(seg.start_frame) + ", " +
-                      std::to_string(seg.end_frame) + ") lies outside the clip's " + std::to_string(frames) + " frames");
+      return DataLoss(where + ": segment '" + seg.text + "' [" + std::to_string(seg.start_frame) +
+                      ", " + std::to_string(seg.end_frame) + ") lies outside the clip's " +
+                      std::to_string(frames) + " frames");
     }
   }
   return Status::Ok();
@@ -37,7 +38,9 @@ Npz ClipsToNpz(const std::vector<Clip>& clips) {
   std::vector<float> poses, trans, joints;
   std::vector<int32_t> seg_start, seg_end;
   std::vector<uint8_t> seg_parts;
-  const bool all_joints = !clips.empty() && std::all_of(clips.begin(), clips.end(), [](const Clip& c) { return !c.joints.empty(); });
+  const bool all_joints =
+      !clips.empty() &&
+      std::all_of(clips.begin(), clips.end(), [](const Clip& c) { return !c.joints.empty(); });
   for (const Clip& clip : clips) {
     ids.push_back(clip.id);
     sources.push_back(clip.source);
@@ -76,7 +79,8 @@ Npz ClipsToNpz(const std::vector<Clip>& clips) {
   npz.Add("seg_end", NpyArray::Int32({segs}, seg_end));
   npz.Add("seg_text", NpyArray::Strings({segs}, seg_text));
   npz.Add("seg_parts", NpyArray::Bool({segs, kNumBodyParts}, seg_parts));
-  if (std::any_of(seg_action.begin(), seg_action.end(), [](const std::string& a) { return !a.empty(); })) {
+  if (std::any_of(seg_action.begin(), seg_action.end(),
+                  [](const std::string& a) { return !a.empty(); })) {
     npz.Add("seg_action", NpyArray::Strings({segs}, seg_action));
   }
   return npz;
@@ -84,13 +88,16 @@ Npz ClipsToNpz(const std::vector<Clip>& clips) {
 
 namespace {
 // Checks that `offsets` has n+1 entries, starts at 0, never decreases and ends at `total`.
-Status CheckOffsets(const std::vector<int64_t>& offsets, int64_t n, int64_t total, const std::string& name,
-                    const std::string& origin) {
-  if (static_cast<int64_t>(offsets.size()) != n + 1 || offsets.front() != 0 || offsets.back() != total) {
-    return DataLoss(origin + ": '" + name + "' must have N+1 entries from 0 to " + std::to_string(total));
+Status CheckOffsets(const std::vector<int64_t>& offsets, int64_t n, int64_t total,
+                    const std::string& name, const std::string& origin) {
+  if (static_cast<int64_t>(offsets.size()) != n + 1 || offsets.front() != 0 ||
+      offsets.back() != total) {
+    return DataLoss(origin + ": '" + name + "' must have N+1 entries from 0 to " +
+                    std::to_string(total));
   }
   for (size_t k = 1; k < offsets.size(); ++k) {
-    if (offsets[k] < offsets[k - 1]) return DataLoss(origin + ": '" + name + "' decreases at entry " + std::to_string(k));
+    if (offsets[k] < offsets[k - 1])
+      return DataLoss(origin + ": '" + name + "' decreases at entry " + std::to_string(k));
   }
   return Status::Ok();
 }
@@ -100,7 +107,8 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
   MP_ASSIGN_OR_RETURN(const NpyArray* format, GetShaped(npz, "format", {}, origin));
   MP_ASSIGN_OR_RETURN(auto format_text, format->ToStrings(origin + ": array 'format'"));
   if (format_text.front() != kClipsFormat) {
-    return DataLoss(origin + ": format is '" + format_text.front() + "', expected '" + kClipsFormat + "'");
+    return DataLoss(origin + ": format is '" + format_text.front() + "', expected '" +
+                    kClipsFormat + "'");
   }
   MP_ASSIGN_OR_RETURN(const NpyArray* ids_a, GetShaped(npz, "ids", {-1}, origin));
   const int64_t n = ids_a->shape[0];
@@ -111,7 +119,8 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
   MP_ASSIGN_OR_RETURN(auto fps, fps_a->ToFloat64(origin + ": 'fps'"));
   MP_ASSIGN_OR_RETURN(const NpyArray* off_a, GetShaped(npz, "offsets", {n + 1}, origin));
   MP_ASSIGN_OR_RETURN(auto offsets, off_a->ToInt64(origin + ": 'offsets'"));
-  MP_ASSIGN_OR_RETURN(const NpyArray* poses_a, GetShaped(npz, "poses", {-1, kNumJoints, 3}, origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* poses_a,
+                      GetShaped(npz, "poses", {-1, kNumJoints, 3}, origin));
   const int64_t frames = poses_a->shape[0];
   MP_RETURN_IF_ERROR(CheckOffsets(offsets, n, frames, "offsets", origin));
   MP_ASSIGN_OR_RETURN(auto poses, poses_a->ToFloat32(origin + ": 'poses'"));
@@ -119,14 +128,16 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
   MP_ASSIGN_OR_RETURN(auto trans, trans_a->ToFloat32(origin + ": 'trans'"));
   std::vector<float> joints;
   if (npz.Find("joints")) {
-    MP_ASSIGN_OR_RETURN(const NpyArray* joints_a, GetShaped(npz, "joints", {frames, kNumJoints, 3}, origin));
+    MP_ASSIGN_OR_RETURN(const NpyArray* joints_a,
+                        GetShaped(npz, "joints", {frames, kNumJoints, 3}, origin));
     MP_ASSIGN_OR_RETURN(joints, joints_a->ToFloat32(origin + ": 'joints'"));
   }
   MP_ASSIGN_OR_RETURN(const NpyArray* texts_a, GetShaped(npz, "texts", {-1}, origin));
   MP_ASSIGN_OR_RETURN(auto texts, texts_a->ToStrings(origin + ": 'texts'"));
   MP_ASSIGN_OR_RETURN(const NpyArray* toff_a, GetShaped(npz, "text_offsets", {n + 1}, origin));
   MP_ASSIGN_OR_RETURN(auto text_offsets, toff_a->ToInt64(origin + ": 'text_offsets'"));
-  MP_RETURN_IF_ERROR(CheckOffsets(text_offsets, n, static_cast<int64_t>(texts.size()), "text_offsets", origin));
+  MP_RETURN_IF_ERROR(
+      CheckOffsets(text_offsets, n, static_cast<int64_t>(texts.size()), "text_offsets", origin));
   MP_ASSIGN_OR_RETURN(const NpyArray* soff_a, GetShaped(npz, "seg_offsets", {n + 1}, origin));
   MP_ASSIGN_OR_RETURN(auto seg_offsets, soff_a->ToInt64(origin + ": 'seg_offsets'"));
   MP_ASSIGN_OR_RETURN(const NpyArray* sstart_a, GetShaped(npz, "seg_start", {-1}, origin));
@@ -137,7 +148,8 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
   MP_ASSIGN_OR_RETURN(auto seg_end, send_a->ToInt64(origin + ": 'seg_end'"));
   MP_ASSIGN_OR_RETURN(const NpyArray* stext_a, GetShaped(npz, "seg_text", {segs}, origin));
   MP_ASSIGN_OR_RETURN(auto seg_text, stext_a->ToStrings(origin + ": 'seg_text'"));
-  MP_ASSIGN_OR_RETURN(const NpyArray* sparts_a, GetShaped(npz, "seg_parts", {segs, kNumBodyParts}, origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* sparts_a,
+                      GetShaped(npz, "seg_parts", {segs, kNumBodyParts}, origin));
   MP_ASSIGN_OR_RETURN(auto seg_parts, sparts_a->ToInt64(origin + ": 'seg_parts'"));
   std::vector<std::string> seg_action;
   if (npz.Find("seg_action")) {
@@ -153,9 +165,12 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
     clip.source = sources[idx];
     clip.motion.fps = fps[idx];
     const int64_t begin = offsets[idx], end = offsets[idx + 1];
-    clip.motion.poses.assign(poses.begin() + begin * kNumJoints * 3, poses.begin() + end * kNumJoints * 3);
+    clip.motion.poses.assign(poses.begin() + begin * kNumJoints * 3,
+                             poses.begin() + end * kNumJoints * 3);
     clip.motion.trans.assign(trans.begin() + begin * 3, trans.begin() + end * 3);
-    if (!joints.empty()) clip.joints.assign(joints.begin() + begin * kNumJoints * 3, joints.begin() + end * kNumJoints * 3);
+    if (!joints.empty())
+      clip.joints.assign(joints.begin() + begin * kNumJoints * 3,
+                         joints.begin() + end * kNumJoints * 3);
     clip.texts.assign(texts.begin() + text_offsets[idx], texts.begin() + text_offsets[idx + 1]);
     for (int64_t s = seg_offsets[idx]; s < seg_offsets[idx + 1]; ++s) {
       const auto sidx = static_cast<size_t>(s);
@@ -165,7 +180,8 @@ Result<std::vector<Clip>> ClipsFromNpz(const Npz& npz, const std::string& origin
       seg.text = seg_text[sidx];
       if (!seg_action.empty()) seg.action = seg_action[sidx];
       for (int part = 0; part < kNumBodyParts; ++part) {
-        if (seg_parts[sidx * kNumBodyParts + static_cast<size_t>(part)]) seg.parts |= static_cast<PartSet>(1u << part);
+        if (seg_parts[sidx * kNumBodyParts + static_cast<size_t>(part)])
+          seg.parts |= static_cast<PartSet>(1u << part);
       }
       clip.segments.push_back(std::move(seg));
     }
@@ -202,13 +218,16 @@ Result<std::vector<Clip>> LoadMotionFile(const std::string& path, double fps) {
       MP_ASSIGN_OR_RETURN(Clip clip, AmassClipFromNpz(npz, path));
       clips.push_back(std::move(clip));
     } else {
-      return DataLoss(path + ": neither a motionpipe clip file (no 'format') nor an AMASS npz (no 'poses'/'trans')");
+      return DataLoss(
+          path +
+          ": neither a motionpipe clip file (no 'format') nor an AMASS npz (no 'poses'/'trans')");
     }
   }
   if (fps > 0) {
     for (Clip& clip : clips) {
       if (std::abs(clip.motion.fps - fps) < 1e-9) continue;
-      // Output frame f shows source frame floor(f * step): source range [s, e) becomes [ceil(s/step), ceil(e/step)).
+      // Output frame f shows source frame floor(f * step): source range [s, e) becomes
+      // [ceil(s/step), ceil(e/step)).
       const double step = clip.motion.fps / fps;
       MP_RETURN_IF_ERROR(CheckResample(clip.motion, fps, path + ": clip " + clip.id));
       clip.motion = Resample(clip.motion, fps);
@@ -216,8 +235,10 @@ Result<std::vector<Clip>> LoadMotionFile(const std::string& path, double fps) {
       const auto frames = static_cast<int32_t>(clip.motion.num_frames());
       std::vector<Segment> kept;
       for (Segment seg : clip.segments) {
-        seg.start_frame = std::min(frames, static_cast<int32_t>(std::ceil(seg.start_frame / step - 1e-9)));
-        seg.end_frame = std::min(frames, static_cast<int32_t>(std::ceil(seg.end_frame / step - 1e-9)));
+        seg.start_frame =
+            std::min(frames, static_cast<int32_t>(std::ceil(seg.start_frame / step - 1e-9)));
+        seg.end_frame =
+            std::min(frames, static_cast<int32_t>(std::ceil(seg.end_frame / step - 1e-9)));
         if (seg.end_frame > seg.start_frame) kept.push_back(std::move(seg));
       }
       clip.segments = std::move(kept);

@@ -20,7 +20,8 @@ Result<JointSequence> ReadHumanML3DJoints(const std::string& path, double fps) {
   seq.joints.resize(yup.size());
   for (size_t k = 0; k < yup.size(); k += 3) {
     if (!std::isfinite(yup[k]) || !std::isfinite(yup[k + 1]) || !std::isfinite(yup[k + 2])) {
-      return DataLoss(path + ": non-finite joint position at frame " + std::to_string(k / (kNumJoints * 3)));
+      return DataLoss(path + ": non-finite joint position at frame " +
+                      std::to_string(k / (kNumJoints * 3)));
     }
     seq.joints[k] = yup[k];
     seq.joints[k + 1] = -yup[k + 2];

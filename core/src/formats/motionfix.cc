@@ -12,19 +12,22 @@ struct SideArrays {
   std::vector<float> poses, trans, joints;
 };
 
-void AppendSide(SideArrays* side, const Motion& motion, const std::vector<float>& joints, bool with_joints) {
+void AppendSide(SideArrays* side, const Motion& motion, const std::vector<float>& joints,
+                bool with_joints) {
   side->poses.insert(side->poses.end(), motion.poses.begin(), motion.poses.end());
   side->trans.insert(side->trans.end(), motion.trans.begin(), motion.trans.end());
   if (with_joints) side->joints.insert(side->joints.end(), joints.begin(), joints.end());
   side->offsets.push_back(side->offsets.back() + motion.num_frames());
 }
 
-void AddSide(Npz* npz, const std::string& prefix, const SideArrays& side, int64_t n, bool with_joints) {
+void AddSide(Npz* npz, const std::string& prefix, const SideArrays& side, int64_t n,
+             bool with_joints) {
   const int64_t frames = side.offsets.back();
   npz->Add(prefix + "_offsets", NpyArray::Int64({n + 1}, side.offsets));
   npz->Add(prefix + "_poses", NpyArray::Float32({frames, kNumJoints, 3}, side.poses));
   npz->Add(prefix + "_trans", NpyArray::Float32({frames, 3}, side.trans));
-  if (with_joints) npz->Add(prefix + "_joints", NpyArray::Float32({frames, kNumJoints, 3}, side.joints));
+  if (with_joints)
+    npz->Add(prefix + "_joints", NpyArray::Float32({frames, kNumJoints, 3}, side.joints));
 }
 
 struct LoadedSide {
@@ -32,35 +35,44 @@ struct LoadedSide {
   std::vector<float> poses, trans, joints;
 };
 
-Result<LoadedSide> LoadSide(const Npz& npz, const std::string& prefix, int64_t n, const std::string& origin) {
+Result<LoadedSide> LoadSide(const Npz& npz, const std::string& prefix, int64_t n,
+                            const std::string& origin) {
   LoadedSide side;
   MP_ASSIGN_OR_RETURN(const NpyArray* off, GetShaped(npz, prefix + "_offsets", {n + 1}, origin));
   MP_ASSIGN_OR_RETURN(side.offsets, off->ToInt64(origin));
-  MP_ASSIGN_OR_RETURN(const NpyArray* poses, GetShaped(npz, prefix + "_poses", {-1, kNumJoints, 3}, origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* poses,
+                      GetShaped(npz, prefix + "_poses", {-1, kNumJoints, 3}, origin));
   const int64_t frames = poses->shape[0];
   if (side.offsets.front() != 0 || side.offsets.back() != frames) {
-    return DataLoss(origin + ": '" + prefix + "_offsets' must run from 0 to " + std::to_string(frames));
+    return DataLoss(origin + ": '" + prefix + "_offsets' must run from 0 to " +
+                    std::to_string(frames));
   }
   for (size_t k = 1; k < side.offsets.size(); ++k) {
-    if (side.offsets[k] < side.offsets[k - 1]) return DataLoss(origin + ": '" + prefix + "_offsets' decreases");
+    if (side.offsets[k] < side.offsets[k - 1])
+      return DataLoss(origin + ": '" + prefix + "_offsets' decreases");
   }
   MP_ASSIGN_OR_RETURN(side.poses, poses->ToFloat32(origin));
-  MP_ASSIGN_OR_RETURN(const NpyArray* trans, GetShaped(npz, prefix + "_trans", {frames, 3}, origin));
+  MP_ASSIGN_OR_RETURN(const NpyArray* trans,
+                      GetShaped(npz, prefix + "_trans", {frames, 3}, origin));
   MP_ASSIGN_OR_RETURN(side.trans, trans->ToFloat32(origin));
   if (npz.Find(prefix + "_joints")) {
-    MP_ASSIGN_OR_RETURN(const NpyArray* joints, GetShaped(npz, prefix + "_joints", {frames, kNumJoints, 3}, origin));
+    MP_ASSIGN_OR_RETURN(const NpyArray* joints,
+                        GetShaped(npz, prefix + "_joints", {frames, kNumJoints, 3}, origin));
     MP_ASSIGN_OR_RETURN(side.joints, joints->ToFloat32(origin));
   }
   return side;
 }
 
-void Extract(const LoadedSide& side, size_t index, double fps, Motion* motion, std::vector<float>* joints) {
+void Extract(const LoadedSide& side, size_t index, double fps, Motion* motion,
+             std::vector<float>* joints) {
   const int64_t begin = side.offsets[index], end = side.offsets[index + 1];
   motion->fps = fps;
-  motion->poses.assign(side.poses.begin() + begin * kNumJoints * 3, side.poses.begin() + end * kNumJoints * 3);
+  motion->poses.assign(side.poses.begin() + begin * kNumJoints * 3,
+                       side.poses.begin() + end * kNumJoints * 3);
   motion->trans.assign(side.trans.begin() + begin * 3, side.trans.begin() + end * 3);
   if (!side.joints.empty()) {
-    joints->assign(side.joints.begin() + begin * kNumJoints * 3, side.joints.begin() + end * kNumJoints * 3);
+    joints->assign(side.joints.begin() + begin * kNumJoints * 3,
+                   side.joints.begin() + end * kNumJoints * 3);
   }
 }
 
@@ -68,9 +80,10 @@ void Extract(const LoadedSide& side, size_t index, double fps, Motion* motion, s
 
 Npz TripletsToNpz(const std::vector<Triplet>& triplets) {
   const auto n = static_cast<int64_t>(triplets.size());
-  const bool with_joints = !triplets.empty() && std::all_of(triplets.begin(), triplets.end(), [](const Triplet& t) {
-    return !t.source_joints.empty() && !t.target_joints.empty();
-  });
+  const bool with_joints =
+      !triplets.empty() && std::all_of(triplets.begin(), triplets.end(), [](const Triplet& t) {
+        return !t.source_joints.empty() && !t.target_joints.empty();
+      });
   std::vector<std::string> ids, texts, splits, kinds;
   std::vector<double> fps;
   std::vector<int32_t> edit_start, edit_end;
@@ -106,7 +119,8 @@ Result<std::vector<Triplet>> TripletsFromNpz(const Npz& npz, const std::string& 
   MP_ASSIGN_OR_RETURN(const NpyArray* format, GetShaped(npz, "format", {}, origin));
   MP_ASSIGN_OR_RETURN(auto format_text, format->ToStrings(origin));
   if (format_text.front() != kTripletsFormat) {
-    return DataLoss(origin + ": format is '" + format_text.front() + "', expected '" + kTripletsFormat + "'");
+    return DataLoss(origin + ": format is '" + format_text.front() + "', expected '" +
+                    kTripletsFormat + "'");
   }
   MP_ASSIGN_OR_RETURN(const NpyArray* ids_a, GetShaped(npz, "ids", {-1}, origin));
   const int64_t n = ids_a->shape[0];

@@ -17,9 +17,10 @@ struct DTypeInfo {
 };
 
 constexpr DTypeInfo kDTypes[] = {
-    {DType::kBool, 'b', 1},    {DType::kInt8, 'i', 1},    {DType::kUInt8, 'u', 1},  {DType::kInt16, 'i', 2},
-    {DType::kUInt16, 'u', 2},  {DType::kInt32, 'i', 4},   {DType::kUInt32, 'u', 4}, {DType::kInt64, 'i', 8},
-    {DType::kUInt64, 'u', 8},  {DType::kFloat32, 'f', 4}, {DType::kFloat64, 'f', 8}, {DType::kUnicode, 'U', 0},
+    {DType::kBool, 'b', 1},    {DType::kInt8, 'i', 1},    {DType::kUInt8, 'u', 1},
+    {DType::kInt16, 'i', 2},   {DType::kUInt16, 'u', 2},  {DType::kInt32, 'i', 4},
+    {DType::kUInt32, 'u', 4},  {DType::kInt64, 'i', 8},   {DType::kUInt64, 'u', 8},
+    {DType::kFloat32, 'f', 4}, {DType::kFloat64, 'f', 8}, {DType::kUnicode, 'U', 0},
 };
 
 const DTypeInfo& Info(DType dtype) {
@@ -85,7 +86,8 @@ class HeaderParser {
           int64_t value = 0;
           size_t digits = 0;
           while (pos_ < text_.size() && text_[pos_] >= '0' && text_[pos_] <= '9') {
-            if (value > (std::numeric_limits<int64_t>::max() - 9) / 10) return Fail("shape entry too large");
+            if (value > (std::numeric_limits<int64_t>::max() - 9) / 10)
+              return Fail("shape entry too large");
             value = value * 10 + (text_[pos_] - '0');
             ++pos_;
             ++digits;
@@ -109,7 +111,8 @@ class HeaderParser {
       if (Eat('}')) break;
       return Fail("expected ',' or '}'");
     }
-    if (!have_descr || !have_order || !have_shape) return Fail("descr, fortran_order or shape missing");
+    if (!have_descr || !have_order || !have_shape)
+      return Fail("descr, fortran_order or shape missing");
     return Status::Ok();
   }
 
@@ -121,7 +124,9 @@ class HeaderParser {
     return true;
   }
   void SkipSpace() {
-    while (pos_ < text_.size() && (text_[pos_] == ' ' || text_[pos_] == '\n' || text_[pos_] == '\t')) ++pos_;
+    while (pos_ < text_.size() &&
+           (text_[pos_] == ' ' || text_[pos_] == '\n' || text_[pos_] == '\t'))
+      ++pos_;
   }
   bool ParseString(std::string* out) {
     const char quote = Peek();
@@ -211,7 +216,8 @@ NpyArray FromValues(DType dtype, std::vector<int64_t> shape, const std::vector<T
 template <typename Out>
 Result<std::vector<Out>> ConvertNumeric(const NpyArray& array, const std::string& origin) {
   if (array.dtype == DType::kUnicode) {
-    return InvalidArgument(origin + ": holds strings (" + DTypeName(array.dtype, array.item_size) + "), expected numbers");
+    return InvalidArgument(origin + ": holds strings (" + DTypeName(array.dtype, array.item_size) +
+                           "), expected numbers");
   }
   const int64_t n = array.num_elements();
   std::vector<Out> out(static_cast<size_t>(n));
@@ -219,26 +225,29 @@ Result<std::vector<Out>> ConvertNumeric(const NpyArray& array, const std::string
   for (int64_t k = 0; k < n; ++k) {
     const char* p = src + k * array.item_size;
     switch (array.dtype) {
-      case DType::kBool: out[static_cast<size_t>(k)] = static_cast<Out>(*p != 0); break;
-#define MP_CONVERT(tag, type)                             \
-  case tag: {                                             \
-    type v;                                               \
-    std::memcpy(&v, p, sizeof(type));                     \
-    out[static_cast<size_t>(k)] = static_cast<Out>(v);    \
-    break;                                                \
+      case DType::kBool:
+        out[static_cast<size_t>(k)] = static_cast<Out>(*p != 0);
+        break;
+#define MP_CONVERT(tag, type)                          \
+  case tag: {                                          \
+    type v;                                            \
+    std::memcpy(&v, p, sizeof(type));                  \
+    out[static_cast<size_t>(k)] = static_cast<Out>(v); \
+    break;                                             \
   }
-      MP_CONVERT(DType::kInt8, int8_t)
-      MP_CONVERT(DType::kUInt8, uint8_t)
-      MP_CONVERT(DType::kInt16, int16_t)
-      MP_CONVERT(DType::kUInt16, uint16_t)
-      MP_CONVERT(DType::kInt32, int32_t)
-      MP_CONVERT(DType::kUInt32, uint32_t)
-      MP_CONVERT(DType::kInt64, int64_t)
-      MP_CONVERT(DType::kUInt64, uint64_t)
-      MP_CONVERT(DType::kFloat32, float)
-      MP_CONVERT(DType::kFloat64, double)
+        MP_CONVERT(DType::kInt8, int8_t)
+        MP_CONVERT(DType::kUInt8, uint8_t)
+        MP_CONVERT(DType::kInt16, int16_t)
+        MP_CONVERT(DType::kUInt16, uint16_t)
+        MP_CONVERT(DType::kInt32, int32_t)
+        MP_CONVERT(DType::kUInt32, uint32_t)
+        MP_CONVERT(DType::kInt64, int64_t)
+        MP_CONVERT(DType::kUInt64, uint64_t)
+        MP_CONVERT(DType::kFloat32, float)
+        MP_CONVERT(DType::kFloat64, double)
 #undef MP_CONVERT
-      case DType::kUnicode: break;
+      case DType::kUnicode:
+        break;
     }
   }
   return out;
@@ -248,18 +257,30 @@ Result<std::vector<Out>> ConvertNumeric(const NpyArray& array, const std::string
 
 std::string DTypeName(DType dtype, int64_t item_size) {
   switch (dtype) {
-    case DType::kBool: return "bool";
-    case DType::kInt8: return "int8";
-    case DType::kUInt8: return "uint8";
-    case DType::kInt16: return "int16";
-    case DType::kUInt16: return "uint16";
-    case DType::kInt32: return "int32";
-    case DType::kUInt32: return "uint32";
-    case DType::kInt64: return "int64";
-    case DType::kUInt64: return "uint64";
-    case DType::kFloat32: return "float32";
-    case DType::kFloat64: return "float64";
-    case DType::kUnicode: return "<U" + std::to_string(item_size / 4);
+    case DType::kBool:
+      return "bool";
+    case DType::kInt8:
+      return "int8";
+    case DType::kUInt8:
+      return "uint8";
+    case DType::kInt16:
+      return "int16";
+    case DType::kUInt16:
+      return "uint16";
+    case DType::kInt32:
+      return "int32";
+    case DType::kUInt32:
+      return "uint32";
+    case DType::kInt64:
+      return "int64";
+    case DType::kUInt64:
+      return "uint64";
+    case DType::kFloat32:
+      return "float32";
+    case DType::kFloat64:
+      return "float64";
+    case DType::kUnicode:
+      return "<U" + std::to_string(item_size / 4);
   }
   return "?";
 }
@@ -338,7 +359,8 @@ Result<std::vector<int64_t>> NpyArray::ToInt64(const std::string& origin) const 
 
 Result<std::vector<std::string>> NpyArray::ToStrings(const std::string& origin) const {
   if (dtype != DType::kUnicode) {
-    return InvalidArgument(origin + ": holds " + DTypeName(dtype, item_size) + ", expected strings");
+    return InvalidArgument(origin + ": holds " + DTypeName(dtype, item_size) +
+                           ", expected strings");
   }
   const int64_t n = num_elements();
   const int64_t width = item_size / 4;
@@ -348,7 +370,8 @@ Result<std::vector<std::string>> NpyArray::ToStrings(const std::string& origin) 
     std::string text;
     for (int64_t c = 0; c < width; ++c) {
       const auto* p = reinterpret_cast<const unsigned char*>(bytes.data() + (k * width + c) * 4);
-      const uint32_t cp = uint32_t{p[0]} | (uint32_t{p[1]} << 8) | (uint32_t{p[2]} << 16) | (uint32_t{p[3]} << 24);
+      const uint32_t cp =
+          uint32_t{p[0]} | (uint32_t{p[1]} << 8) | (uint32_t{p[2]} << 16) | (uint32_t{p[3]} << 24);
       if (cp == 0) break;
       if (cp > 0x10FFFF) return DataLoss(origin + ": invalid unicode code point");
       AppendUtf8(cp, &text);
@@ -371,12 +394,15 @@ Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin) 
   const auto major = static_cast<unsigned char>(bytes[6]);
   size_t header_len = 0, header_start = 0;
   if (major == 1) {
-    header_len = static_cast<unsigned char>(bytes[8]) | (static_cast<size_t>(static_cast<unsigned char>(bytes[9])) << 8);
+    header_len = static_cast<unsigned char>(bytes[8]) |
+                 (static_cast<size_t>(static_cast<unsigned char>(bytes[9])) << 8);
     header_start = 10;
   } else if (major == 2 || major == 3) {
     if (bytes.size() < 12) return DataLoss(origin + ": truncated .npy header");
     header_len = 0;
-    for (int k = 3; k >= 0; --k) header_len = (header_len << 8) | static_cast<unsigned char>(bytes[8 + static_cast<size_t>(k)]);
+    for (int k = 3; k >= 0; --k)
+      header_len =
+          (header_len << 8) | static_cast<unsigned char>(bytes[8 + static_cast<size_t>(k)]);
     header_start = 12;
   } else {
     return DataLoss(origin + ": unsupported .npy version " + std::to_string(major));
@@ -384,7 +410,8 @@ Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin) 
   if (header_len > bytes.size() - header_start) return DataLoss(origin + ": truncated .npy header");
   std::string descr;
   NpyView array;
-  Status parsed = HeaderParser(bytes.substr(header_start, header_len)).Parse(&descr, &array.fortran, &array.shape);
+  Status parsed = HeaderParser(bytes.substr(header_start, header_len))
+                      .Parse(&descr, &array.fortran, &array.shape);
   if (!parsed.ok()) return parsed.WithContext(origin);
 
   if (descr.size() < 2) return DataLoss(origin + ": bad dtype '" + descr + "'");
@@ -397,7 +424,8 @@ Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin) 
   const char kind = rest[0];
   int64_t size = 0;
   for (size_t k = 1; k < rest.size(); ++k) {
-    if (rest[k] < '0' || rest[k] > '9' || size > 1'000'000) return DataLoss(origin + ": bad dtype '" + descr + "'");
+    if (rest[k] < '0' || rest[k] > '9' || size > 1'000'000)
+      return DataLoss(origin + ": bad dtype '" + descr + "'");
     size = size * 10 + (rest[k] - '0');
   }
   if (kind == 'O') return DataLoss(origin + ": object arrays (Python pickles) are not supported");
@@ -426,14 +454,17 @@ Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin) 
   };
   int64_t count = 1;
   for (int64_t d : array.shape) {
-    if (MulOverflows(count, d, &count)) return DataLoss(origin + ": shape " + shape_text() + " overflows");
+    if (MulOverflows(count, d, &count))
+      return DataLoss(origin + ": shape " + shape_text() + " overflows");
   }
   int64_t total = 0;
-  if (MulOverflows(count, array.item_size, &total)) return DataLoss(origin + ": array size overflows");
+  if (MulOverflows(count, array.item_size, &total))
+    return DataLoss(origin + ": array size overflows");
   const size_t data_start = header_start + header_len;
   if (static_cast<uint64_t>(total) > bytes.size() - data_start) {
-    return DataLoss(origin + ": truncated data: shape " + shape_text() + " of " + DTypeName(array.dtype, array.item_size) +
-                    " needs " + std::to_string(total) + " bytes, found " + std::to_string(bytes.size() - data_start));
+    return DataLoss(origin + ": truncated data: shape " + shape_text() + " of " +
+                    DTypeName(array.dtype, array.item_size) + " needs " + std::to_string(total) +
+                    " bytes, found " + std::to_string(bytes.size() - data_start));
   }
   array.big_endian = order == '>';
   array.data_offset = data_start;
@@ -444,7 +475,8 @@ Result<NpyView> ParseNpyView(std::string_view bytes, const std::string& origin) 
 
 namespace {
 
-Result<NpyArray> ParseNpyImpl(std::string_view bytes, const std::string& origin, std::string* owned) {
+Result<NpyArray> ParseNpyImpl(std::string_view bytes, const std::string& origin,
+                              std::string* owned) {
   MP_ASSIGN_OR_RETURN(const NpyView view, ParseNpyView(bytes, origin));
   NpyArray array;
   array.dtype = view.dtype;
@@ -466,7 +498,8 @@ Result<NpyArray> ParseNpyImpl(std::string_view bytes, const std::string& origin,
   // Big-endian numbers (and unicode) to little-endian.
   const int swap_unit = array.dtype == DType::kUnicode ? 4 : static_cast<int>(array.item_size);
   if (order == '>' && swap_unit > 1) {
-    for (size_t k = 0; k + static_cast<size_t>(swap_unit) <= array.bytes.size(); k += static_cast<size_t>(swap_unit)) {
+    for (size_t k = 0; k + static_cast<size_t>(swap_unit) <= array.bytes.size();
+         k += static_cast<size_t>(swap_unit)) {
       std::reverse(array.bytes.begin() + static_cast<std::ptrdiff_t>(k),
                    array.bytes.begin() + static_cast<std::ptrdiff_t>(k) + swap_unit);
     }
@@ -481,7 +514,8 @@ Result<NpyArray> ParseNpyImpl(std::string_view bytes, const std::string& origin,
     for (int64_t linear = 0; linear < count; ++linear) {
       int64_t f_index = 0;
       for (size_t d = 0; d < ndim; ++d) f_index += index[d] * f_stride[d];
-      std::memcpy(c_order.data() + linear * array.item_size, array.bytes.data() + f_index * array.item_size,
+      std::memcpy(c_order.data() + linear * array.item_size,
+                  array.bytes.data() + f_index * array.item_size,
                   static_cast<size_t>(array.item_size));
       for (size_t d = ndim; d-- > 0;) {
         if (++index[d] < array.shape[d]) break;
@@ -495,7 +529,9 @@ Result<NpyArray> ParseNpyImpl(std::string_view bytes, const std::string& origin,
 
 }  // namespace
 
-Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) { return ParseNpyImpl(bytes, origin, nullptr); }
+Result<NpyArray> ParseNpy(std::string_view bytes, const std::string& origin) {
+  return ParseNpyImpl(bytes, origin, nullptr);
+}
 
 Result<NpyArray> ParseNpy(std::string&& bytes, const std::string& origin) {
   const std::string_view view(bytes);
@@ -503,7 +539,8 @@ Result<NpyArray> ParseNpy(std::string&& bytes, const std::string& origin) {
 }
 
 std::string SerializeNpy(const NpyArray& array) {
-  std::string dict = "{'descr': '" + Descr(array) + "', 'fortran_order': False, 'shape': " + array.ShapeString() + ", }";
+  std::string dict = "{'descr': '" + Descr(array) +
+                     "', 'fortran_order': False, 'shape': " + array.ShapeString() + ", }";
   // Pad with spaces so that magic + length + header + '\n' is a multiple of 64 (numpy's alignment).
   const bool v2 = dict.size() + 11 > 65535;
   const size_t prefix = v2 ? 12 : 10;
@@ -531,6 +568,8 @@ Result<NpyArray> ReadNpy(const std::string& path) {
   return ParseNpy(bytes, path);
 }
 
-Status WriteNpy(const std::string& path, const NpyArray& array) { return WriteFileAtomic(path, SerializeNpy(array)); }
+Status WriteNpy(const std::string& path, const NpyArray& array) {
+  return WriteFileAtomic(path, SerializeNpy(array));
+}
 
 }  // namespace motionpipe

@@ -28,7 +28,8 @@ Result<const NpyArray*> Npz::Get(const std::string& name, const std::string& ori
   if (const NpyArray* found = Find(name)) return found;
   std::string present;
   for (const auto& entry : arrays_) present += (present.empty() ? "" : ", ") + entry.first;
-  return NotFound(origin + ": missing array '" + name + "' (present: " + (present.empty() ? "none" : present) + ")");
+  return NotFound(origin + ": missing array '" + name +
+                  "' (present: " + (present.empty() ? "none" : present) + ")");
 }
 
 std::optional<NpyArray> Npz::Take(const std::string& name) {
@@ -38,19 +39,23 @@ std::optional<NpyArray> Npz::Take(const std::string& name) {
   return std::nullopt;
 }
 
-Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin, const std::vector<std::string>& arrays) {
+Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin,
+                     const std::vector<std::string>& arrays) {
   MemberFilter want;
   if (!arrays.empty()) {
     want = [&arrays](const std::string& member) {
-      return std::any_of(arrays.begin(), arrays.end(), [&](const std::string& a) { return member == a + ".npy" || member == a; });
+      return std::any_of(arrays.begin(), arrays.end(),
+                         [&](const std::string& a) { return member == a + ".npy" || member == a; });
     };
   }
   MP_ASSIGN_OR_RETURN(auto members, ReadZip(bytes, origin, want));
   Npz npz;
   for (auto& member : members) {
     std::string name = member.name;
-    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0) name.resize(name.size() - 4);
-    MP_ASSIGN_OR_RETURN(NpyArray array, ParseNpy(std::move(member.data), origin + ": array '" + name + "'"));
+    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0)
+      name.resize(name.size() - 4);
+    MP_ASSIGN_OR_RETURN(NpyArray array,
+                        ParseNpy(std::move(member.data), origin + ": array '" + name + "'"));
     npz.Add(name, std::move(array));
   }
   return npz;
@@ -58,7 +63,8 @@ Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin, const st
 
 std::string SerializeNpz(const Npz& npz, bool compress) {
   ZipWriter writer;
-  for (const auto& [name, array] : npz.arrays()) writer.Add(name + ".npy", SerializeNpy(array), compress);
+  for (const auto& [name, array] : npz.arrays())
+    writer.Add(name + ".npy", SerializeNpy(array), compress);
   return writer.Finish();
 }
 
@@ -71,16 +77,19 @@ Status WriteNpz(const std::string& path, const Npz& npz, bool compress) {
   return WriteFileAtomic(path, SerializeNpz(npz, compress));
 }
 
-Result<const NpyArray*> GetShaped(const Npz& npz, const std::string& name, const std::vector<int64_t>& dims,
-                                  const std::string& origin) {
+Result<const NpyArray*> GetShaped(const Npz& npz, const std::string& name,
+                                  const std::vector<int64_t>& dims, const std::string& origin) {
   MP_ASSIGN_OR_RETURN(const NpyArray* array, npz.Get(name, origin));
   bool matches = array->shape.size() == dims.size();
-  for (size_t d = 0; matches && d < dims.size(); ++d) matches = dims[d] < 0 || dims[d] == array->shape[d];
+  for (size_t d = 0; matches && d < dims.size(); ++d)
+    matches = dims[d] < 0 || dims[d] == array->shape[d];
   if (!matches) {
     std::string want = "(";
-    for (size_t d = 0; d < dims.size(); ++d) want += (d ? ", " : "") + (dims[d] < 0 ? std::string("N") : std::to_string(dims[d]));
+    for (size_t d = 0; d < dims.size(); ++d)
+      want += (d ? ", " : "") + (dims[d] < 0 ? std::string("N") : std::to_string(dims[d]));
     want += dims.size() == 1 ? ",)" : ")";
-    return DataLoss(origin + ": array '" + name + "' has shape " + array->ShapeString() + ", expected " + want);
+    return DataLoss(origin + ": array '" + name + "' has shape " + array->ShapeString() +
+                    ", expected " + want);
   }
   return array;
 }

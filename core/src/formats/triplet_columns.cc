@@ -26,11 +26,15 @@ class Archive {
     std::vector<ZipEntry> chosen;
     for (auto& entry : entries) {
       std::string name = entry.name;
-      if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0) name.resize(name.size() - 4);
-      if (std::find(wanted.begin(), wanted.end(), name) != wanted.end()) chosen.push_back(std::move(entry));
+      if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0)
+        name.resize(name.size() - 4);
+      if (std::find(wanted.begin(), wanted.end(), name) != wanted.end())
+        chosen.push_back(std::move(entry));
     }
-    // Deflated members are inflated, stored ones checked in place; in parallel, large members first.
-    std::sort(chosen.begin(), chosen.end(), [](const ZipEntry& a, const ZipEntry& b) { return a.size > b.size; });
+    // Deflated members are inflated, stored ones checked in place; in parallel, large members
+    // first.
+    std::sort(chosen.begin(), chosen.end(),
+              [](const ZipEntry& a, const ZipEntry& b) { return a.size > b.size; });
     std::vector<std::shared_ptr<std::string>> owned(chosen.size());
     std::vector<Status> errors(chosen.size());
     const auto count = static_cast<int64_t>(chosen.size());
@@ -48,7 +52,8 @@ class Archive {
     for (const Status& error : errors) MP_RETURN_IF_ERROR(error);
     for (size_t k = 0; k < chosen.size(); ++k) {
       std::string name = chosen[k].name;
-      if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0) name.resize(name.size() - 4);
+      if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0)
+        name.resize(name.size() - 4);
       Member member;
       if (owned[k]) {
         member.bytes = *owned[k];
@@ -78,31 +83,37 @@ class Archive {
     if (it == members_.end()) return NotFound(path_ + ": no array '" + name + "'");
     const NpyView& v = it->second.view;
     bool matches = v.shape.size() == dims.size();
-    for (size_t d = 0; matches && d < dims.size(); ++d) matches = dims[d] < 0 || dims[d] == v.shape[d];
+    for (size_t d = 0; matches && d < dims.size(); ++d)
+      matches = dims[d] < 0 || dims[d] == v.shape[d];
     if (!matches) {
       NpyArray shape_of;
       shape_of.shape = v.shape;
       std::string want = "(";
-      for (size_t d = 0; d < dims.size(); ++d) want += (d ? ", " : "") + (dims[d] < 0 ? std::string("N") : std::to_string(dims[d]));
+      for (size_t d = 0; d < dims.size(); ++d)
+        want += (d ? ", " : "") + (dims[d] < 0 ? std::string("N") : std::to_string(dims[d]));
       want += dims.size() == 1 ? ",)" : ")";
-      return DataLoss(path_ + ": array '" + name + "' has shape " + shape_of.ShapeString() + ", expected " + want);
+      return DataLoss(path_ + ": array '" + name + "' has shape " + shape_of.ShapeString() +
+                      ", expected " + want);
     }
     return &v;
   }
 
   // Elements from `begin` on as float32: in place when the array is native float32 and aligned,
   // otherwise converted once; `storage` keeps the bytes alive.
-  Result<const float*> Floats(const std::string& name, int64_t begin, std::vector<std::shared_ptr<const void>>* storage) const {
+  Result<const float*> Floats(const std::string& name, int64_t begin,
+                              std::vector<std::shared_ptr<const void>>* storage) const {
     const auto it = members_.find(name);
     if (it == members_.end()) return NotFound(path_ + ": no array '" + name + "'");
     const Member& m = it->second;
     const NpyView& v = m.view;
-    if (v.dtype == DType::kFloat32 && v.Native() && reinterpret_cast<uintptr_t>(v.data.data()) % alignof(float) == 0) {
+    if (v.dtype == DType::kFloat32 && v.Native() &&
+        reinterpret_cast<uintptr_t>(v.data.data()) % alignof(float) == 0) {
       storage->push_back(m.keep);
       return reinterpret_cast<const float*>(v.data.data()) + begin;
     }
     MP_ASSIGN_OR_RETURN(const NpyArray array, ParseNpy(m.bytes, path_ + ": array '" + name + "'"));
-    MP_ASSIGN_OR_RETURN(std::vector<float> converted, array.ToFloat32(path_ + ": array '" + name + "'"));
+    MP_ASSIGN_OR_RETURN(std::vector<float> converted,
+                        array.ToFloat32(path_ + ": array '" + name + "'"));
     auto owned = std::make_shared<const std::vector<float>>(std::move(converted));
     storage->push_back(owned);
     return owned->data() + begin;
@@ -112,7 +123,7 @@ class Archive {
 
  private:
   struct Member {
-    std::string_view bytes;         // the whole .npy
+    std::string_view bytes;  // the whole .npy
     NpyView view;
     std::shared_ptr<const void> keep;  // the mapping or the inflated buffer
   };
@@ -126,29 +137,35 @@ std::vector<T> Rows(const std::vector<T>& values, int64_t begin, int64_t end) {
   return std::vector<T>(values.begin() + begin, values.begin() + end);
 }
 
-Status LoadSide(const Archive& archive, const std::string& prefix, int64_t n, const TripletColumnOptions& options,
-                TripletColumns::Side* side) {
+Status LoadSide(const Archive& archive, const std::string& prefix, int64_t n,
+                const TripletColumnOptions& options, TripletColumns::Side* side) {
   const std::string& origin = archive.path();
   MP_RETURN_IF_ERROR(archive.Shaped(prefix + "_offsets", {n + 1}).status());
   MP_ASSIGN_OR_RETURN(const NpyArray off, archive.Array(prefix + "_offsets"));
-  MP_ASSIGN_OR_RETURN(std::vector<int64_t> offsets, off.ToInt64(origin + ": '" + prefix + "_offsets'"));
+  MP_ASSIGN_OR_RETURN(std::vector<int64_t> offsets,
+                      off.ToInt64(origin + ": '" + prefix + "_offsets'"));
   if (offsets.front() != 0) return DataLoss(origin + ": '" + prefix + "_offsets' must start at 0");
   for (size_t k = 1; k < offsets.size(); ++k) {
-    if (offsets[k] < offsets[k - 1]) return DataLoss(origin + ": '" + prefix + "_offsets' decreases at row " + std::to_string(k - 1));
+    if (offsets[k] < offsets[k - 1])
+      return DataLoss(origin + ": '" + prefix + "_offsets' decreases at row " +
+                      std::to_string(k - 1));
   }
   const int64_t f0 = offsets[static_cast<size_t>(options.row_begin)];
   side->offsets.clear();
-  for (int64_t k = options.row_begin; k <= options.row_end; ++k) side->offsets.push_back(offsets[static_cast<size_t>(k)] - f0);
+  for (int64_t k = options.row_begin; k <= options.row_end; ++k)
+    side->offsets.push_back(offsets[static_cast<size_t>(k)] - f0);
   if (!options.motions) return Status::Ok();
 
   MP_ASSIGN_OR_RETURN(const NpyView* poses, archive.Shaped(prefix + "_poses", {-1, -1, 3}));
   const int64_t frames = poses->shape[0];
   if (offsets.back() != frames) {
-    return DataLoss(origin + ": '" + prefix + "_offsets' ends at " + std::to_string(offsets.back()) + " but '" + prefix +
-                    "_poses' has " + std::to_string(frames) + " frames");
+    return DataLoss(origin + ": '" + prefix + "_offsets' ends at " +
+                    std::to_string(offsets.back()) + " but '" + prefix + "_poses' has " +
+                    std::to_string(frames) + " frames");
   }
   side->joints = static_cast<int>(poses->shape[1]);
-  MP_ASSIGN_OR_RETURN(side->poses, archive.Floats(prefix + "_poses", f0 * side->joints * 3, &side->storage));
+  MP_ASSIGN_OR_RETURN(side->poses,
+                      archive.Floats(prefix + "_poses", f0 * side->joints * 3, &side->storage));
   MP_RETURN_IF_ERROR(archive.Shaped(prefix + "_trans", {frames, 3}).status());
   MP_ASSIGN_OR_RETURN(side->trans, archive.Floats(prefix + "_trans", f0 * 3, &side->storage));
   side->position_joints = 0;
@@ -156,7 +173,9 @@ Status LoadSide(const Archive& archive, const std::string& prefix, int64_t n, co
   if (options.positions && archive.Has(prefix + "_joints")) {
     MP_ASSIGN_OR_RETURN(const NpyView* joints, archive.Shaped(prefix + "_joints", {frames, -1, 3}));
     side->position_joints = static_cast<int>(joints->shape[1]);
-    MP_ASSIGN_OR_RETURN(side->positions, archive.Floats(prefix + "_joints", f0 * side->position_joints * 3, &side->storage));
+    MP_ASSIGN_OR_RETURN(
+        side->positions,
+        archive.Floats(prefix + "_joints", f0 * side->position_joints * 3, &side->storage));
   }
   return Status::Ok();
 }
@@ -166,16 +185,19 @@ Status CheckFormat(const Archive& archive) {
   MP_ASSIGN_OR_RETURN(const NpyArray format, archive.Array("format"));
   MP_ASSIGN_OR_RETURN(auto text, format.ToStrings(archive.path()));
   if (text.front() != kTripletsFormat) {
-    return DataLoss(archive.path() + ": format is '" + text.front() + "', expected '" + kTripletsFormat + "'");
+    return DataLoss(archive.path() + ": format is '" + text.front() + "', expected '" +
+                    kTripletsFormat + "'");
   }
   return Status::Ok();
 }
 
 }  // namespace
 
-Result<TripletColumns> ReadTripletColumns(const std::string& path, const TripletColumnOptions& options_in) {
-  std::vector<std::string> wanted = {"format", "ids", "texts", "splits", "fps", "edit_start", "edit_end", "edit_kind",
-                                     "source_offsets", "target_offsets"};
+Result<TripletColumns> ReadTripletColumns(const std::string& path,
+                                          const TripletColumnOptions& options_in) {
+  std::vector<std::string> wanted = {
+      "format",     "ids",      "texts",     "splits",         "fps",
+      "edit_start", "edit_end", "edit_kind", "source_offsets", "target_offsets"};
   if (options_in.motions) {
     for (const char* side : {"source", "target"}) {
       wanted.push_back(std::string(side) + "_poses");
@@ -190,8 +212,9 @@ Result<TripletColumns> ReadTripletColumns(const std::string& path, const Triplet
   TripletColumnOptions options = options_in;
   if (options.row_end < 0) options.row_end = n;
   if (options.row_begin < 0 || options.row_begin > options.row_end || options.row_end > n) {
-    return InvalidArgument(path + ": rows [" + std::to_string(options.row_begin) + ", " + std::to_string(options.row_end) +
-                           ") outside the file's " + std::to_string(n) + " triplets");
+    return InvalidArgument(path + ": rows [" + std::to_string(options.row_begin) + ", " +
+                           std::to_string(options.row_end) + ") outside the file's " +
+                           std::to_string(n) + " triplets");
   }
   const int64_t b = options.row_begin, e = options.row_end;
   TripletColumns columns;

@@ -21,12 +21,15 @@ constexpr uint32_t k32Max = 0xFFFFFFFFu;
 constexpr uint64_t kMaxDeflateRatio = 1032;
 
 uint16_t Get16(std::string_view s, size_t at) {
-  return static_cast<uint16_t>(static_cast<unsigned char>(s[at]) | (static_cast<unsigned char>(s[at + 1]) << 8));
+  return static_cast<uint16_t>(static_cast<unsigned char>(s[at]) |
+                               (static_cast<unsigned char>(s[at + 1]) << 8));
 }
 uint32_t Get32(std::string_view s, size_t at) {
   return uint32_t{Get16(s, at)} | (uint32_t{Get16(s, at + 2)} << 16);
 }
-uint64_t Get64(std::string_view s, size_t at) { return uint64_t{Get32(s, at)} | (uint64_t{Get32(s, at + 4)} << 32); }
+uint64_t Get64(std::string_view s, size_t at) {
+  return uint64_t{Get32(s, at)} | (uint64_t{Get32(s, at + 4)} << 32);
+}
 
 void Put16(std::string* out, uint16_t v) {
   out->push_back(static_cast<char>(v & 0xFF));
@@ -46,13 +49,15 @@ uint32_t Crc32(std::string_view data) {
   size_t offset = 0;
   while (offset < data.size()) {
     const size_t chunk = std::min<size_t>(data.size() - offset, 1u << 30);
-    crc = crc32(crc, reinterpret_cast<const Bytef*>(data.data() + offset), static_cast<uInt>(chunk));
+    crc =
+        crc32(crc, reinterpret_cast<const Bytef*>(data.data() + offset), static_cast<uInt>(chunk));
     offset += chunk;
   }
   return static_cast<uint32_t>(crc);
 }
 
-Status Inflate(std::string_view compressed, uint64_t size, std::string* out, const std::string& where) {
+Status Inflate(std::string_view compressed, uint64_t size, std::string* out,
+               const std::string& where) {
   out->assign(size, '\0');
   z_stream stream{};
   if (inflateInit2(&stream, -MAX_WBITS) != Z_OK) return Internal(where + ": zlib init failed");
@@ -68,7 +73,8 @@ Status Inflate(std::string_view compressed, uint64_t size, std::string* out, con
     rc = inflate(&stream, Z_NO_FLUSH);
     in_left -= in_chunk - stream.avail_in;
     out_left -= out_chunk - stream.avail_out;
-    if (rc == Z_OK && stream.avail_in == in_chunk && stream.avail_out == out_chunk) rc = Z_BUF_ERROR;
+    if (rc == Z_OK && stream.avail_in == in_chunk && stream.avail_out == out_chunk)
+      rc = Z_BUF_ERROR;
   }
   inflateEnd(&stream);
   if (rc != Z_STREAM_END) return DataLoss(where + ": deflate stream is corrupt or truncated");
@@ -104,7 +110,9 @@ std::string Deflate(std::string_view data) {
 
 Result<std::vector<ZipEntry>> ListZip(std::string_view archive, const std::string& origin) {
   const size_t n = archive.size();
-  if (n < 22) return DataLoss(origin + ": too short to be a zip/npz archive (" + std::to_string(n) + " bytes)");
+  if (n < 22)
+    return DataLoss(origin + ": too short to be a zip/npz archive (" + std::to_string(n) +
+                    " bytes)");
   // The end-of-central-directory record sits in the last 22 + 65535 bytes.
   size_t end = std::string_view::npos;
   const size_t lowest = n > 22 + 65535 ? n - 22 - 65535 : 0;
@@ -114,7 +122,8 @@ Result<std::vector<ZipEntry>> ListZip(std::string_view archive, const std::strin
       break;
     }
   }
-  if (end == std::string_view::npos) return DataLoss(origin + ": no zip end-of-directory record (truncated or not an npz)");
+  if (end == std::string_view::npos)
+    return DataLoss(origin + ": no zip end-of-directory record (truncated or not an npz)");
   uint64_t entries = Get16(archive, end + 10);
   uint64_t dir_size = Get32(archive, end + 12);
   uint64_t dir_offset = Get32(archive, end + 16);
@@ -127,8 +136,10 @@ Result<std::vector<ZipEntry>> ListZip(std::string_view archive, const std::strin
     dir_size = Get64(archive, record + 40);
     dir_offset = Get64(archive, record + 48);
   }
-  if (dir_offset > n || dir_size > n - dir_offset) return DataLoss(origin + ": zip directory lies outside the file (truncated?)");
-  if (entries > dir_size / 46) return DataLoss(origin + ": zip directory claims more entries than it holds");
+  if (dir_offset > n || dir_size > n - dir_offset)
+    return DataLoss(origin + ": zip directory lies outside the file (truncated?)");
+  if (entries > dir_size / 46)
+    return DataLoss(origin + ": zip directory claims more entries than it holds");
 
   std::vector<ZipEntry> located;
   size_t at = static_cast<size_t>(dir_offset);
@@ -176,17 +187,20 @@ Result<std::vector<ZipEntry>> ListZip(std::string_view archive, const std::strin
     if (local > n || n - local < 30 || Get32(archive, local) != kLocalSig) {
       return DataLoss(where + ": local header missing (truncated?)");
     }
-    const uint64_t data_start = local + 30 + Get16(archive, local + 26) + Get16(archive, local + 28);
+    const uint64_t data_start =
+        local + 30 + Get16(archive, local + 26) + Get16(archive, local + 28);
     if (data_start > n || csize > n - data_start) return DataLoss(where + ": data truncated");
     if (method == 0) {
       if (usize != csize) return DataLoss(where + ": stored member sizes disagree");
     } else if (method == 8) {
-      if (usize > csize * kMaxDeflateRatio + 1024) return DataLoss(where + ": implausible uncompressed size");
+      if (usize > csize * kMaxDeflateRatio + 1024)
+        return DataLoss(where + ": implausible uncompressed size");
     } else {
       return DataLoss(where + ": unsupported compression method " + std::to_string(method));
     }
-    located.push_back({std::move(name), method, crc, usize,
-                       archive.substr(static_cast<size_t>(data_start), static_cast<size_t>(csize))});
+    located.push_back(
+        {std::move(name), method, crc, usize,
+         archive.substr(static_cast<size_t>(data_start), static_cast<size_t>(csize))});
   }
   return located;
 }
@@ -204,11 +218,13 @@ Result<std::string> ExtractZipEntry(const ZipEntry& entry, const std::string& or
 }
 
 Status CheckZipCrc(const ZipEntry& entry, std::string_view data, const std::string& origin) {
-  if (Crc32(data) != entry.crc) return DataLoss(origin + ": member '" + entry.name + "': CRC mismatch (corrupt data)");
+  if (Crc32(data) != entry.crc)
+    return DataLoss(origin + ": member '" + entry.name + "': CRC mismatch (corrupt data)");
   return Status::Ok();
 }
 
-Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin, const MemberFilter& want) {
+Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin,
+                                       const MemberFilter& want) {
   MP_ASSIGN_OR_RETURN(std::vector<ZipEntry> all, ListZip(archive, origin));
   std::vector<ZipEntry> located;
   for (auto& entry : all) {
@@ -263,7 +279,8 @@ std::string ZipWriter::Finish() {
     // Stored members start on a 64-byte boundary (padding in an extra field, id 0xD935 as zipalign
     // does), so that readers can use their arrays in place from a memory map.
     const size_t header = 30 + entry.name.size() + (zip64 ? 20 : 0);
-    const uint16_t pad = entry.method == 0 ? static_cast<uint16_t>((64 - (entry.offset + header + 4) % 64) % 64) : 0;
+    const uint16_t pad =
+        entry.method == 0 ? static_cast<uint16_t>((64 - (entry.offset + header + 4) % 64) % 64) : 0;
     const uint16_t align_len = entry.method == 0 ? static_cast<uint16_t>(4 + pad) : 0;
     Put32(&out, kLocalSig);
     Put16(&out, zip64 ? 45 : 20);
@@ -308,9 +325,9 @@ std::string ZipWriter::Finish() {
     Put32(&out, big_sizes ? k32Max : static_cast<uint32_t>(entry.size));
     Put16(&out, static_cast<uint16_t>(entry.name.size()));
     Put16(&out, extra_len ? static_cast<uint16_t>(extra_len + 4) : 0);
-    Put16(&out, 0);  // comment
-    Put16(&out, 0);  // disk
-    Put16(&out, 0);  // internal attributes
+    Put16(&out, 0);            // comment
+    Put16(&out, 0);            // disk
+    Put16(&out, 0);            // internal attributes
     Put32(&out, 0x81A40000u);  // external attributes: regular file, 0644
     Put32(&out, big_offset ? k32Max : static_cast<uint32_t>(entry.offset));
     out += entry.name;

@@ -5,10 +5,10 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "llm.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/random.h"
 #include "velocity.h"
-#include "llm.h"
 
 namespace motionpipe::labels {
 
@@ -46,8 +46,10 @@ class LexiconLabeler : public Labeler {
 
 class GptAnswerLabeler : public Labeler {
  public:
-  GptAnswerLabeler(GptAnswers answers, std::unique_ptr<Labeler> fallback) : fallback_(std::move(fallback)) {
-    for (size_t k = 0; k < answers.texts.size(); ++k) table_[Clean(answers.texts[k])] = answers.parts[k];
+  GptAnswerLabeler(GptAnswers answers, std::unique_ptr<Labeler> fallback)
+      : fallback_(std::move(fallback)) {
+    for (size_t k = 0; k < answers.texts.size(); ++k)
+      table_[Clean(answers.texts[k])] = answers.parts[k];
   }
   std::string Name() const override { return "gpt-answers"; }
   Result<std::vector<PartSet>> Label(const std::vector<LabelInput>& inputs) override {
@@ -66,7 +68,8 @@ class GptAnswerLabeler : public Labeler {
     if (!missing.empty()) {
       if (!fallback_) {
         return NotFound("gpt-answers: no GPT answer for '" + missing.front().text + "' (and " +
-                        std::to_string(missing.size() - 1) + " more); set fallback: lexicon to label them offline");
+                        std::to_string(missing.size() - 1) +
+                        " more); set fallback: lexicon to label them offline");
       }
       MP_ASSIGN_OR_RETURN(const std::vector<PartSet> more, fallback_->Label(missing));
       for (size_t k = 0; k < where.size(); ++k) out[where[k]] = more[k];
@@ -110,15 +113,18 @@ PartSet PartsFromGptAnswer(const std::string& answer) {
       {"buttocks", PartBit(BodyPart::kGlobal)},
       {"waist", PartBit(BodyPart::kGlobal)},
       {"global orientation", PartBit(BodyPart::kGlobal)},
-      {"shoulders", static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm))},
+      {"shoulders",
+       static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm))},
       {"left shoulder", PartBit(BodyPart::kLeftArm)},
       {"right shoulder", PartBit(BodyPart::kRightArm)},
   };
   std::string text = answer;
   // Drop the "Answer:" prefix; items are separated by lines, commas or semicolons.
   std::string lower;
-  for (char c : text) lower.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
-  if (const size_t colon = lower.find("answer:"); colon != std::string::npos) lower = lower.substr(colon + 7);
+  for (char c : text)
+    lower.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
+  if (const size_t colon = lower.find("answer:"); colon != std::string::npos)
+    lower = lower.substr(colon + 7);
   for (char& c : lower) {
     if (c == '\n' || c == ',' || c == ';' || c == '\r') c = '\n';
   }
@@ -143,27 +149,37 @@ Result<GptAnswers> LoadGptAnswers(const std::string& path, int answer) {
       return DataLoss(path + ": '" + item.key() + "': expected a list of answer strings");
     }
     const size_t pick = std::min(static_cast<size_t>(std::max(answer, 0)), answers.size() - 1);
-    if (!answers[pick].is_string()) return DataLoss(path + ": '" + item.key() + "': answer " + std::to_string(pick) + " is not a string");
+    if (!answers[pick].is_string())
+      return DataLoss(path + ": '" + item.key() + "': answer " + std::to_string(pick) +
+                      " is not a string");
     out.texts.push_back(item.key());
     out.parts.push_back(PartsFromGptAnswer(answers[pick].get<std::string>()));
   }
   return out;
 }
 
-bool IsHeldOut(const std::string& text, int folds) { return Fnv1a(text) % static_cast<uint64_t>(folds) == 0; }
+bool IsHeldOut(const std::string& text, int folds) {
+  return Fnv1a(text) % static_cast<uint64_t>(folds) == 0;
+}
 
-Result<std::unique_ptr<Labeler>> MakeBuiltinLabeler(const std::string& name, const nlohmann::json& config) {
+Result<std::unique_ptr<Labeler>> MakeBuiltinLabeler(const std::string& name,
+                                                    const nlohmann::json& config) {
   const nlohmann::json cfg = config.is_object() ? config : nlohmann::json::object();
   if (name == "lexicon") return std::unique_ptr<Labeler>(new LexiconLabeler());
-  if (name == "random") return std::unique_ptr<Labeler>(new RandomLabeler(cfg.value("seed", uint64_t{1})));
+  if (name == "random")
+    return std::unique_ptr<Labeler>(new RandomLabeler(cfg.value("seed", uint64_t{1})));
   if (name == "gpt-answers") {
-    const std::string file = cfg.value("file", std::string("data/text/babel_action_labels_gpt3.json"));
+    const std::string file =
+        cfg.value("file", std::string("data/text/babel_action_labels_gpt3.json"));
     MP_ASSIGN_OR_RETURN(GptAnswers answers, LoadGptAnswers(file, cfg.value("answer", 2)));
     std::unique_ptr<Labeler> fallback;
     const std::string fallback_name = cfg.value("fallback", std::string());
     if (!fallback_name.empty()) {
-      if (fallback_name == "gpt-answers") return InvalidArgument("gpt-answers: fallback cannot be gpt-answers");
-      MP_ASSIGN_OR_RETURN(fallback, MakeBuiltinLabeler(fallback_name, cfg.value("fallback_config", nlohmann::json::object())));
+      if (fallback_name == "gpt-answers")
+        return InvalidArgument("gpt-answers: fallback cannot be gpt-answers");
+      MP_ASSIGN_OR_RETURN(
+          fallback, MakeBuiltinLabeler(fallback_name,
+                                       cfg.value("fallback_config", nlohmann::json::object())));
     }
     return std::unique_ptr<Labeler>(new GptAnswerLabeler(std::move(answers), std::move(fallback)));
   }
@@ -172,9 +188,12 @@ Result<std::unique_ptr<Labeler>> MakeBuiltinLabeler(const std::string& name, con
   return NotFound("no built-in labeler '" + name + "'");
 }
 
-std::vector<std::string> BuiltinLabelerNames() { return {"gpt-answers", "lexicon", "velocity", "llm", "random"}; }
+std::vector<std::string> BuiltinLabelerNames() {
+  return {"gpt-answers", "lexicon", "velocity", "llm", "random"};
+}
 
-LabelerAccuracy ScoreLabels(const std::vector<LabelledText>& truth, const std::vector<PartSet>& predicted) {
+LabelerAccuracy ScoreLabels(const std::vector<LabelledText>& truth,
+                            const std::vector<PartSet>& predicted) {
   LabelerAccuracy acc;
   std::array<int64_t, kNumBodyParts> right{};
   for (size_t k = 0; k < truth.size() && k < predicted.size(); ++k) {

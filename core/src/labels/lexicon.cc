@@ -15,44 +15,84 @@ namespace motionpipe::labels {
 
 namespace {
 
-constexpr PartSet G = PartBit(BodyPart::kGlobal), T = PartBit(BodyPart::kTorso), LA = PartBit(BodyPart::kLeftArm),
-                  RA = PartBit(BodyPart::kRightArm), LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg);
+constexpr PartSet G = PartBit(BodyPart::kGlobal), T = PartBit(BodyPart::kTorso),
+                  LA = PartBit(BodyPart::kLeftArm), RA = PartBit(BodyPart::kRightArm),
+                  LL = PartBit(BodyPart::kLeftLeg), RL = PartBit(BodyPart::kRightLeg);
 constexpr PartSet kArms = LA | RA, kLegs = LL | RL;
 
 enum class Limb { kNone, kArm, kLeg };
 
 struct Noun {
   Limb limb = Limb::kNone;
-  PartSet parts = 0;   // for non-limb nouns (torso, global) or extra parts
+  PartSet parts = 0;  // for non-limb nouns (torso, global) or extra parts
   bool plural = false;
 };
 
 const std::unordered_map<std::string, Noun>& Nouns() {
   static const std::unordered_map<std::string, Noun> nouns = {
       // arms (GPT maps hands, wrists, shoulders to the arm)
-      {"arm", {Limb::kArm, 0, false}}, {"arms", {Limb::kArm, 0, true}}, {"hand", {Limb::kArm, 0, false}},
-      {"hands", {Limb::kArm, 0, true}}, {"elbow", {Limb::kArm, 0, false}}, {"elbows", {Limb::kArm, 0, true}},
-      {"wrist", {Limb::kArm, 0, false}}, {"wrists", {Limb::kArm, 0, true}}, {"finger", {Limb::kArm, 0, false}},
-      {"fingers", {Limb::kArm, 0, false}}, {"fist", {Limb::kArm, 0, false}}, {"fists", {Limb::kArm, 0, true}},
-      {"palm", {Limb::kArm, 0, false}}, {"palms", {Limb::kArm, 0, true}}, {"forearm", {Limb::kArm, 0, false}},
-      {"forearms", {Limb::kArm, 0, true}}, {"shoulder", {Limb::kArm, 0, false}}, {"shoulders", {Limb::kArm, T, true}},
-      {"thumb", {Limb::kArm, 0, false}}, {"biceps", {Limb::kArm, 0, false}},
+      {"arm", {Limb::kArm, 0, false}},
+      {"arms", {Limb::kArm, 0, true}},
+      {"hand", {Limb::kArm, 0, false}},
+      {"hands", {Limb::kArm, 0, true}},
+      {"elbow", {Limb::kArm, 0, false}},
+      {"elbows", {Limb::kArm, 0, true}},
+      {"wrist", {Limb::kArm, 0, false}},
+      {"wrists", {Limb::kArm, 0, true}},
+      {"finger", {Limb::kArm, 0, false}},
+      {"fingers", {Limb::kArm, 0, false}},
+      {"fist", {Limb::kArm, 0, false}},
+      {"fists", {Limb::kArm, 0, true}},
+      {"palm", {Limb::kArm, 0, false}},
+      {"palms", {Limb::kArm, 0, true}},
+      {"forearm", {Limb::kArm, 0, false}},
+      {"forearms", {Limb::kArm, 0, true}},
+      {"shoulder", {Limb::kArm, 0, false}},
+      {"shoulders", {Limb::kArm, T, true}},
+      {"thumb", {Limb::kArm, 0, false}},
+      {"biceps", {Limb::kArm, 0, false}},
       // legs
-      {"leg", {Limb::kLeg, 0, false}}, {"legs", {Limb::kLeg, 0, true}}, {"foot", {Limb::kLeg, 0, false}},
-      {"feet", {Limb::kLeg, 0, true}}, {"knee", {Limb::kLeg, 0, false}}, {"knees", {Limb::kLeg, 0, true}},
-      {"ankle", {Limb::kLeg, 0, false}}, {"ankles", {Limb::kLeg, 0, true}}, {"toe", {Limb::kLeg, 0, false}},
-      {"toes", {Limb::kLeg, 0, true}}, {"heel", {Limb::kLeg, 0, false}}, {"heels", {Limb::kLeg, 0, true}},
-      {"thigh", {Limb::kLeg, 0, false}}, {"thighs", {Limb::kLeg, 0, true}}, {"shin", {Limb::kLeg, 0, false}},
+      {"leg", {Limb::kLeg, 0, false}},
+      {"legs", {Limb::kLeg, 0, true}},
+      {"foot", {Limb::kLeg, 0, false}},
+      {"feet", {Limb::kLeg, 0, true}},
+      {"knee", {Limb::kLeg, 0, false}},
+      {"knees", {Limb::kLeg, 0, true}},
+      {"ankle", {Limb::kLeg, 0, false}},
+      {"ankles", {Limb::kLeg, 0, true}},
+      {"toe", {Limb::kLeg, 0, false}},
+      {"toes", {Limb::kLeg, 0, true}},
+      {"heel", {Limb::kLeg, 0, false}},
+      {"heels", {Limb::kLeg, 0, true}},
+      {"thigh", {Limb::kLeg, 0, false}},
+      {"thighs", {Limb::kLeg, 0, true}},
+      {"shin", {Limb::kLeg, 0, false}},
       // torso (neck and head belong to it)
-      {"head", {Limb::kNone, T, false}}, {"neck", {Limb::kNone, T, false}}, {"chest", {Limb::kNone, T, false}},
-      {"torso", {Limb::kNone, T, false}}, {"spine", {Limb::kNone, T, false}}, {"trunk", {Limb::kNone, T, false}},
-      {"face", {Limb::kNone, T, false}}, {"chin", {Limb::kNone, T, false}}, {"mouth", {Limb::kNone, T, false}},
-      {"nose", {Limb::kNone, T, false}}, {"ear", {Limb::kNone, T, false}}, {"ears", {Limb::kNone, T, false}},
-      {"eyes", {Limb::kNone, T, false}}, {"forehead", {Limb::kNone, T, false}}, {"stomach", {Limb::kNone, T, false}},
-      {"belly", {Limb::kNone, T, false}}, {"abdomen", {Limb::kNone, T, false}}, {"lips", {Limb::kNone, T, false}},
+      {"head", {Limb::kNone, T, false}},
+      {"neck", {Limb::kNone, T, false}},
+      {"chest", {Limb::kNone, T, false}},
+      {"torso", {Limb::kNone, T, false}},
+      {"spine", {Limb::kNone, T, false}},
+      {"trunk", {Limb::kNone, T, false}},
+      {"face", {Limb::kNone, T, false}},
+      {"chin", {Limb::kNone, T, false}},
+      {"mouth", {Limb::kNone, T, false}},
+      {"nose", {Limb::kNone, T, false}},
+      {"ear", {Limb::kNone, T, false}},
+      {"ears", {Limb::kNone, T, false}},
+      {"eyes", {Limb::kNone, T, false}},
+      {"forehead", {Limb::kNone, T, false}},
+      {"stomach", {Limb::kNone, T, false}},
+      {"belly", {Limb::kNone, T, false}},
+      {"abdomen", {Limb::kNone, T, false}},
+      {"lips", {Limb::kNone, T, false}},
       // global orientation
-      {"hips", {Limb::kNone, G, false}}, {"hip", {Limb::kNone, G, false}}, {"waist", {Limb::kNone, G, false}},
-      {"pelvis", {Limb::kNone, G, false}}, {"butt", {Limb::kNone, G, false}}, {"buttocks", {Limb::kNone, G, false}},
+      {"hips", {Limb::kNone, G, false}},
+      {"hip", {Limb::kNone, G, false}},
+      {"waist", {Limb::kNone, G, false}},
+      {"pelvis", {Limb::kNone, G, false}},
+      {"butt", {Limb::kNone, G, false}},
+      {"buttocks", {Limb::kNone, G, false}},
   };
   return nouns;
 }
@@ -65,42 +105,57 @@ const std::unordered_map<std::string, PartSet>& Verbs() {
       for (const char* w : words) v.emplace(w, parts);  // the first list that names a verb decides
     };
     // locomotion and whole-body support: legs and the global orientation
-    add({"walk", "run", "jog", "jump", "hop", "skip", "step", "stand", "sit", "squat", "kneel", "crouch", "lie",
-         "crawl", "climb", "march", "stomp", "sprint", "shuffle", "gallop", "tiptoe", "lunge", "stumble", "fall",
-         "trip", "balance", "pace", "stroll", "wander", "go", "strut", "limp", "leap", "ascend", "descend", "land",
-         "stagger", "sidestep", "waddle", "skate", "ski", "rise", "get", "travel", "proceed", "move", "moving",
-         "backstep", "cartwheel", "somersault", "flip", "roll", "lay", "slide", "glide", "dodge", "duck", "swim",
-         "stance", "hurdle", "jumping", "jumps", "steps", "stairs", "squats", "lunges", "sits", "stands", "kneels",
-         "backpedal", "pedal", "approach", "retreat", "advance", "walkway", "jog", "mount", "dismount", "ride"},
+    add({"walk",       "run",      "jog",      "jump",    "hop",     "skip",     "step",
+         "stand",      "sit",      "squat",    "kneel",   "crouch",  "lie",      "crawl",
+         "climb",      "march",    "stomp",    "sprint",  "shuffle", "gallop",   "tiptoe",
+         "lunge",      "stumble",  "fall",     "trip",    "balance", "pace",     "stroll",
+         "wander",     "go",       "strut",    "limp",    "leap",    "ascend",   "descend",
+         "land",       "stagger",  "sidestep", "waddle",  "skate",   "ski",      "rise",
+         "get",        "travel",   "proceed",  "move",    "moving",  "backstep", "cartwheel",
+         "somersault", "flip",     "roll",     "lay",     "slide",   "glide",    "dodge",
+         "duck",       "swim",     "stance",   "hurdle",  "jumping", "jumps",    "steps",
+         "stairs",     "squats",   "lunges",   "sits",    "stands",  "kneels",   "backpedal",
+         "pedal",      "approach", "retreat",  "advance", "walkway", "jog",      "mount",
+         "dismount",   "ride"},
         G | kLegs);
     // legs only
     add({"kick", "knee", "stretch_leg"}, kLegs);
     // torso: looking, turning, bending at the waist
-    add({"look", "nod", "turn", "rotate", "twist", "glance", "gaze", "stare", "watch", "peek", "listen", "face",
-         "shrug", "bow", "tilt", "sway", "wiggle", "shiver", "breathe", "cough", "sneeze", "yawn", "laugh", "cry"},
+    add({"look",   "nod",    "turn",    "rotate", "twist",  "glance", "gaze",  "stare",
+         "watch",  "peek",   "listen",  "face",   "shrug",  "bow",    "tilt",  "sway",
+         "wiggle", "shiver", "breathe", "cough",  "sneeze", "yawn",   "laugh", "cry"},
         T);
-    add({"lean", "bend", "arch", "hunch", "slouch", "straighten", "recline", "curl", "sway", "rock"}, G | T);
+    add({"lean", "bend", "arch", "hunch", "slouch", "straighten", "recline", "curl", "sway",
+         "rock"},
+        G | T);
     add({"spin", "pivot"}, G | T | kLegs);
     add({"dance", "exercise", "celebrate", "wrestle", "yoga"}, G | T | kArms | kLegs);
     add({"act", "mime", "pretend", "imitate", "mimic", "zombie", "box"}, T | kArms);
     // the arms with the torso behind them: striking, reaching, pushing
-    add({"throw", "punch", "reach", "push", "pull", "stretch", "play", "answer", "adjust", "aim", "attack", "argue",
-         "fight", "strike", "hit", "jab", "uppercut", "hook", "block", "parry", "swat", "slap", "chop", "dig",
-         "sweep", "mop", "saw", "hammer", "row", "paddle", "shoot", "conduct", "drum", "shovel", "operate",
-         "assemble", "arrange", "beat", "beckon", "swim", "backstroke"},
+    add({"throw",    "punch",   "reach",    "push",    "pull",  "stretch",   "play",
+         "answer",   "adjust",  "aim",      "attack",  "argue", "fight",     "strike",
+         "hit",      "jab",     "uppercut", "hook",    "block", "parry",     "swat",
+         "slap",     "chop",    "dig",      "sweep",   "mop",   "saw",       "hammer",
+         "row",      "paddle",  "shoot",    "conduct", "drum",  "shovel",    "operate",
+         "assemble", "arrange", "beat",     "beckon",  "swim",  "backstroke"},
         T | kArms);
     // the arms: gestures, reaching, handling objects
-    add({"wave", "throw", "catch", "grab", "pick", "hold", "carry", "reach", "point", "punch", "clap", "lift", "raise",
-         "push", "pull", "touch", "scratch", "wipe", "drink", "eat", "salute", "put", "place", "give",
-         "swing", "flap", "open", "close", "pour", "brush", "comb", "type", "write", "draw", "slap",
-         "shake", "rub", "tap", "grip", "grasp", "toss", "pass", "drop", "fold", "cross", "extend", "spread",
-         "stretch", "gesture", "signal", "beckon", "hug", "embrace", "applaud", "conduct", "stir", "cut", "knock",
-         "paint", "clean", "adjust", "fix", "juggle", "dribble", "shoot", "aim", "row", "paddle", "pat", "poke",
-         "pinch", "squeeze", "press", "wring", "unscrew", "screw", "cheer",
-         "flail", "flex", "circle", "lower", "bring", "use", "hold", "set", "grab", "check", "answer", "call", "sign",
-         "feed", "dress", "wash", "shave", "blow", "smell", "sip", "bite", "swat", "fan", "block", "parry", "jab",
-         "uppercut", "hook", "elbow", "chop", "swipe", "scoop", "stack", "collect", "gather", "remove", "insert",
-         "attach", "tie", "untie", "button", "zip", "catching", "throwing"},
+    add({"wave",    "throw",  "catch",   "grab",   "pick",    "hold",    "carry",   "reach",
+         "point",   "punch",  "clap",    "lift",   "raise",   "push",    "pull",    "touch",
+         "scratch", "wipe",   "drink",   "eat",    "salute",  "put",     "place",   "give",
+         "swing",   "flap",   "open",    "close",  "pour",    "brush",   "comb",    "type",
+         "write",   "draw",   "slap",    "shake",  "rub",     "tap",     "grip",    "grasp",
+         "toss",    "pass",   "drop",    "fold",   "cross",   "extend",  "spread",  "stretch",
+         "gesture", "signal", "beckon",  "hug",    "embrace", "applaud", "conduct", "stir",
+         "cut",     "knock",  "paint",   "clean",  "adjust",  "fix",     "juggle",  "dribble",
+         "shoot",   "aim",    "row",     "paddle", "pat",     "poke",    "pinch",   "squeeze",
+         "press",   "wring",  "unscrew", "screw",  "cheer",   "flail",   "flex",    "circle",
+         "lower",   "bring",  "use",     "hold",   "set",     "grab",    "check",   "answer",
+         "call",    "sign",   "feed",    "dress",  "wash",    "shave",   "blow",    "smell",
+         "sip",     "bite",   "swat",    "fan",    "block",   "parry",   "jab",     "uppercut",
+         "hook",    "elbow",  "chop",    "swipe",  "scoop",   "stack",   "collect", "gather",
+         "remove",  "insert", "attach",  "tie",    "untie",   "button",  "zip",     "catching",
+         "throwing"},
         kArms);
     return v;
   }();
@@ -111,24 +166,27 @@ const std::unordered_map<std::string, PartSet>& Verbs() {
 // noun next to them they add nothing of their own.
 const std::unordered_set<std::string>& GenericVerbs() {
   static const std::unordered_set<std::string> words = {
-      "move", "go", "bend", "lift", "raise", "lower", "swing", "shake", "stretch", "extend", "cross", "circle", "twist",
-      "flex", "rotate", "turn", "tilt", "wave", "put", "place", "bring", "hold", "keep", "open", "close", "spread",
-      "flap", "roll", "rub", "tap", "drop", "point", "use", "pump", "balance", "straighten", "curl", "stomp", "step",
-      "shrug", "nod", "look", "lean", "sway", "wiggle", "throw", "kick", "stand", "land", "set", "get", "make"};
+      "move",   "go",    "bend",   "lift",  "raise", "lower",  "swing", "shake",   "stretch",
+      "extend", "cross", "circle", "twist", "flex",  "rotate", "turn",  "tilt",    "wave",
+      "put",    "place", "bring",  "hold",  "keep",  "open",   "close", "spread",  "flap",
+      "roll",   "rub",   "tap",    "drop",  "point", "use",    "pump",  "balance", "straighten",
+      "curl",   "stomp", "step",   "shrug", "nod",   "look",   "lean",  "sway",    "wiggle",
+      "throw",  "kick",  "stand",  "land",  "set",   "get",    "make"};
   return words;
 }
 
 // Words that may stand between a verb and the body part it moves.
 const std::unordered_set<std::string>& Fillers() {
-  static const std::unordered_set<std::string> words = {"the", "a", "an", "his", "her", "their", "its", "one", "both",
-                                                        "left", "right", "with", "up", "down", "out", "on", "in",
-                                                        "upper", "lower", "two", "each", "other", "over", "at"};
+  static const std::unordered_set<std::string> words = {
+      "the", "a",    "an",  "his", "her", "their", "its",   "one", "both", "left",  "right", "with",
+      "up",  "down", "out", "on",  "in",  "upper", "lower", "two", "each", "other", "over",  "at"};
   return words;
 }
 
 const std::unordered_set<std::string>& NegationWords() {
-  static const std::unordered_set<std::string> words = {"without", "not", "no", "dont", "don't", "never", "still",
-                                                        "motionless", "stationary", "unmoving", "keep", "keeping"};
+  static const std::unordered_set<std::string> words = {
+      "without", "not",        "no",         "dont",     "don't", "never",
+      "still",   "motionless", "stationary", "unmoving", "keep",  "keeping"};
   return words;
 }
 
@@ -155,7 +213,8 @@ std::vector<std::string> Tokens(const std::string& text) {
   return out;
 }
 
-// walking -> walk, waves -> wave, reaches -> reach, tries -> try; unknown forms come back unchanged.
+// walking -> walk, waves -> wave, reaches -> reach, tries -> try; unknown forms come back
+// unchanged.
 std::string VerbBase(const std::string& w) {
   const auto& verbs = Verbs();
   if (verbs.count(w)) return w;
@@ -164,18 +223,21 @@ std::string VerbBase(const std::string& w) {
   if (n > 4 && w.compare(n - 3, 3, "ing") == 0) {
     const std::string stem = w.substr(0, n - 3);
     if (known(stem)) return stem;
-    if (known(stem + "e")) return stem + "e";                                     // waving -> wave
-    if (stem.size() > 2 && stem[stem.size() - 1] == stem[stem.size() - 2] && known(stem.substr(0, stem.size() - 1))) {
-      return stem.substr(0, stem.size() - 1);                                      // running -> run
+    if (known(stem + "e")) return stem + "e";  // waving -> wave
+    if (stem.size() > 2 && stem[stem.size() - 1] == stem[stem.size() - 2] &&
+        known(stem.substr(0, stem.size() - 1))) {
+      return stem.substr(0, stem.size() - 1);  // running -> run
     }
     if (stem.size() > 1 && stem.back() == 'y' && known(stem.substr(0, stem.size() - 1) + "ie")) {
-      return stem.substr(0, stem.size() - 1) + "ie";                               // lying -> lie
+      return stem.substr(0, stem.size() - 1) + "ie";  // lying -> lie
     }
   }
   if (n > 3 && w.back() == 's') {
     if (known(w.substr(0, n - 1))) return w.substr(0, n - 1);
-    if (n > 4 && w.compare(n - 2, 2, "es") == 0 && known(w.substr(0, n - 2))) return w.substr(0, n - 2);
-    if (n > 4 && w.compare(n - 3, 3, "ies") == 0 && known(w.substr(0, n - 3) + "y")) return w.substr(0, n - 3) + "y";
+    if (n > 4 && w.compare(n - 2, 2, "es") == 0 && known(w.substr(0, n - 2)))
+      return w.substr(0, n - 2);
+    if (n > 4 && w.compare(n - 3, 3, "ies") == 0 && known(w.substr(0, n - 3) + "y"))
+      return w.substr(0, n - 3) + "y";
   }
   if (n > 3 && w.compare(n - 2, 2, "ed") == 0) {
     if (known(w.substr(0, n - 2))) return w.substr(0, n - 2);
@@ -193,13 +255,16 @@ PartSet LexiconParts(const std::string& text) {
   for (size_t k = 0; k + 1 < tokens.size(); ++k) {
     const std::string two = tokens[k] + " " + tokens[k + 1];
     PartSet p = 0;
-    if (two == "jumping jacks" || two == "jumping jack" || two == "star jumps") p = G | T | kArms | kLegs;
+    if (two == "jumping jacks" || two == "jumping jack" || two == "star jumps")
+      p = G | T | kArms | kLegs;
     if (two == "arm circles" || two == "arm circle") p = kArms;
     if (two == "t pose" || two == "a pose") p = T | kArms;
-    const bool filler = two == "in place" || two == "the spot" || two == "in front";  // not the verbs place/spot/front
+    const bool filler = two == "in place" || two == "the spot" ||
+                        two == "in front";  // not the verbs place/spot/front
     if (p == 0 && !filler) continue;
     phrase_parts |= p;
-    tokens.erase(tokens.begin() + static_cast<std::ptrdiff_t>(k), tokens.begin() + static_cast<std::ptrdiff_t>(k) + 2);
+    tokens.erase(tokens.begin() + static_cast<std::ptrdiff_t>(k),
+                 tokens.begin() + static_cast<std::ptrdiff_t>(k) + 2);
     --k;
   }
   const auto& nouns = Nouns();
@@ -211,7 +276,8 @@ PartSet LexiconParts(const std::string& text) {
   for (size_t k = 0; k < tokens.size(); ++k) {
     const std::string& w = tokens[k];
     if (NegationWords().count(w)) {
-      negation_left = (w == "still" || w == "motionless" || w == "stationary" || w == "unmoving") ? 0 : 5;
+      negation_left =
+          (w == "still" || w == "motionless" || w == "stationary" || w == "unmoving") ? 0 : 5;
       if (w == "still" || w == "motionless" || w == "stationary" || w == "unmoving") {
         // "legs still", "keep the arms motionless": the noun just before is negated.
         for (size_t back = k; back-- > 0 && back + 3 >= k;) {
@@ -226,8 +292,9 @@ PartSet LexiconParts(const std::string& text) {
       continue;
     }
     const auto noun = nouns.find(w);
-    if (noun != nouns.end() && !(w == "hand" && k + 1 < tokens.size() && nouns.count(tokens[k + 1]) == 0 &&
-                                 k == 0)) {  // "hand over" as a verb
+    if (noun != nouns.end() &&
+        !(w == "hand" && k + 1 < tokens.size() && nouns.count(tokens[k + 1]) == 0 &&
+          k == 0)) {  // "hand over" as a verb
       const Noun& n = noun->second;
       // A side within the two words before: "left hand", "right upper arm"; "both"/"either" = both.
       PartSet side = 0;  // bit 1 = left, bit 2 = right
@@ -236,9 +303,11 @@ PartSet LexiconParts(const std::string& text) {
       for (size_t back = k; back-- > 0 && back + 3 >= k;) {
         if (tokens[back] == "left") side |= 1;
         if (tokens[back] == "right") side |= 2;
-        if (tokens[back] == "both" || tokens[back] == "two" || tokens[back] == "either") both = true;
+        if (tokens[back] == "both" || tokens[back] == "two" || tokens[back] == "either")
+          both = true;
       }
-      if (side == 0) side = 3;  // an unsided limb ("raise arm", "wave hand"): both, as GPT mostly answers
+      if (side == 0)
+        side = 3;  // an unsided limb ("raise arm", "wave hand"): both, as GPT mostly answers
       const PartSet arm = static_cast<PartSet>(((side & 1) ? LA : 0) | ((side & 2) ? RA : 0));
       const PartSet leg = static_cast<PartSet>(((side & 1) ? LL : 0) | ((side & 2) ? RL : 0));
       if (negation_left > 0) {
@@ -279,14 +348,17 @@ PartSet LexiconParts(const std::string& text) {
       if (object) continue;
     }
     // "bend down", "crouch down": the legs take the body down.
-    if ((base == "bend" || base == "lean") && k + 1 < tokens.size() && (tokens[k + 1] == "down" || tokens[k + 1] == "over")) {
-      verb_parts |= tokens[k + 1] == "down" ? static_cast<PartSet>(G | kLegs) : static_cast<PartSet>(G | T);
+    if ((base == "bend" || base == "lean") && k + 1 < tokens.size() &&
+        (tokens[k + 1] == "down" || tokens[k + 1] == "over")) {
+      verb_parts |=
+          tokens[k + 1] == "down" ? static_cast<PartSet>(G | kLegs) : static_cast<PartSet>(G | T);
       continue;
     }
     verb_parts |= verb->second;
   }
   // Nouns decide a limb's sides over a verb's default ("raise left arm" -> left arm only).
-  PartSet parts = static_cast<PartSet>((verb_parts & static_cast<PartSet>(G | T)) | noun_parts | phrase_parts);
+  PartSet parts =
+      static_cast<PartSet>((verb_parts & static_cast<PartSet>(G | T)) | noun_parts | phrase_parts);
   parts |= arm_noun ? arm_sides : static_cast<PartSet>(verb_parts & kArms);
   parts |= leg_noun ? leg_sides : static_cast<PartSet>(verb_parts & kLegs);
   // A side word with an arm verb and no noun: "punch right", "wave left".
@@ -294,14 +366,18 @@ PartSet LexiconParts(const std::string& text) {
     const bool left = std::find(tokens.begin(), tokens.end(), "left") != tokens.end();
     const bool right = std::find(tokens.begin(), tokens.end(), "right") != tokens.end();
     // "turn left", "step right", "lean left": the side is a direction, not an arm.
-    static const std::unordered_set<std::string> directions = {"turn", "rotate", "look", "lean", "face", "twist", "spin",
-                                                               "step", "move", "go", "tilt", "bend", "glance", "pivot"};
+    static const std::unordered_set<std::string> directions = {
+        "turn", "rotate", "look", "lean", "face", "twist",  "spin",
+        "step", "move",   "go",   "tilt", "bend", "glance", "pivot"};
     bool directional = (verb_parts & kLegs) != 0;
-    for (const std::string& t : tokens) directional = directional || directions.count(VerbBase(t)) > 0;
-    if (!directional && left != right) parts = static_cast<PartSet>((parts & ~kArms) | (left ? LA : RA));
+    for (const std::string& t : tokens)
+      directional = directional || directions.count(VerbBase(t)) > 0;
+    if (!directional && left != right)
+      parts = static_cast<PartSet>((parts & ~kArms) | (left ? LA : RA));
   }
   parts = static_cast<PartSet>(parts & ~negated);
-  // Nothing recognised: GPT's answer to vague actions ("argue", "adopt ready pose") is the upper body.
+  // Nothing recognised: GPT's answer to vague actions ("argue", "adopt ready pose") is the upper
+  // body.
   if (parts == 0 && negated == 0) parts = static_cast<PartSet>(T | kArms);
   return parts;
 }

@@ -33,7 +33,8 @@ struct HttpResult {
   std::string error;  // transport error (no HTTP status)
 };
 
-HttpResult Post(const std::string& url, const std::string& body, const std::string& api_key, double timeout) {
+HttpResult Post(const std::string& url, const std::string& body, const std::string& api_key,
+                double timeout) {
   InitCurlOnce();
   HttpResult result;
   CURL* curl = curl_easy_init();
@@ -42,7 +43,8 @@ HttpResult Post(const std::string& url, const std::string& body, const std::stri
     return result;
   }
   curl_slist* headers = curl_slist_append(nullptr, "Content-Type: application/json");
-  if (!api_key.empty()) headers = curl_slist_append(headers, ("Authorization: Bearer " + api_key).c_str());
+  if (!api_key.empty())
+    headers = curl_slist_append(headers, ("Authorization: Bearer " + api_key).c_str());
   char error[CURL_ERROR_SIZE] = {0};
   curl_easy_setopt(curl, CURLOPT_URL, url.c_str());
   curl_easy_setopt(curl, CURLOPT_HTTPHEADER, headers);
@@ -51,7 +53,8 @@ HttpResult Post(const std::string& url, const std::string& body, const std::stri
   curl_easy_setopt(curl, CURLOPT_WRITEFUNCTION, AppendBody);
   curl_easy_setopt(curl, CURLOPT_WRITEDATA, &result.body);
   curl_easy_setopt(curl, CURLOPT_TIMEOUT_MS, static_cast<long>(timeout * 1000));
-  curl_easy_setopt(curl, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(std::min(timeout, 10.0) * 1000));
+  curl_easy_setopt(curl, CURLOPT_CONNECTTIMEOUT_MS,
+                   static_cast<long>(std::min(timeout, 10.0) * 1000));
   curl_easy_setopt(curl, CURLOPT_NOSIGNAL, 1L);
   curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, error);
   const CURLcode rc = curl_easy_perform(curl);
@@ -103,17 +106,20 @@ class LlmLabeler : public Labeler {
 
  private:
   std::string CachePath(const std::string& text) const {
-    return cache_dir_ + "/" + Sha256Hex(std::string(kPromptVersion) + "\n" + model_ + "\n" + text) + ".json";
+    return cache_dir_ + "/" + Sha256Hex(std::string(kPromptVersion) + "\n" + model_ + "\n" + text) +
+           ".json";
   }
 
   Result<std::string> Answer(const std::string& text) {
     const std::string path = CachePath(text);
     if (auto cached = ReadFile(path); cached.ok()) {
       const nlohmann::json j = nlohmann::json::parse(*cached, nullptr, false);
-      if (j.is_object() && j.value("text", std::string()) == text && j.contains("answer")) return j["answer"].get<std::string>();
+      if (j.is_object() && j.value("text", std::string()) == text && j.contains("answer"))
+        return j["answer"].get<std::string>();
     }
     const char* key = key_env_.empty() ? nullptr : std::getenv(key_env_.c_str());
-    nlohmann::json request = {{"model", model_}, {"temperature", temperature_}, {"max_tokens", max_tokens_}};
+    nlohmann::json request = {
+        {"model", model_}, {"temperature", temperature_}, {"max_tokens", max_tokens_}};
     std::string url;
     if (api_ == "chat") {
       url = endpoint_ + "/chat/completions";
@@ -141,26 +147,29 @@ class LlmLabeler : public Labeler {
         continue;
       }
       if (r.status != 200) {
-        return InvalidArgument("llm labeler: " + url + " answered HTTP " + std::to_string(r.status) + " for '" + text +
+        return InvalidArgument("llm labeler: " + url + " answered HTTP " +
+                               std::to_string(r.status) + " for '" + text +
                                "': " + r.body.substr(0, 300));
       }
       const nlohmann::json j = nlohmann::json::parse(r.body, nullptr, false);
       std::string answer;
       try {
         const auto& choice = j.at("choices").at(0);
-        answer = api_ == "chat" ? choice.at("message").at("content").get<std::string>() : choice.at("text").get<std::string>();
+        answer = api_ == "chat" ? choice.at("message").at("content").get<std::string>()
+                                : choice.at("text").get<std::string>();
       } catch (const nlohmann::json::exception&) {
         last_error = "unexpected response: " + r.body.substr(0, 200);
         continue;
       }
-      const nlohmann::json entry = {{"text", text}, {"answer", answer}, {"model", model_}, {"prompt", kPromptVersion}};
+      const nlohmann::json entry = {
+          {"text", text}, {"answer", answer}, {"model", model_}, {"prompt", kPromptVersion}};
       if (Status s = WriteFileAtomic(path, entry.dump() + "\n", false); !s.ok()) {
         MP_LOG(kWarn, "labels") << "llm labeler: cannot cache the answer: " << s.message();
       }
       return answer;
     }
-    return IoError("llm labeler: " + url + " failed for '" + text + "' after " + std::to_string(retries_ + 1) +
-                   " attempts: " + last_error);
+    return IoError("llm labeler: " + url + " failed for '" + text + "' after " +
+                   std::to_string(retries_ + 1) + " attempts: " + last_error);
   }
 
   std::string endpoint_, api_, model_, key_env_;
@@ -175,7 +184,8 @@ class LlmLabeler : public Labeler {
 }  // namespace
 
 std::string SincPrompt(const std::string& action) {
-  return "Choose answers from the list ['left arm', 'right arm', 'left leg', 'buttocks', 'waist', 'right leg', "
+  return "Choose answers from the list ['left arm', 'right arm', 'left leg', 'buttocks', 'waist', "
+         "'right leg', "
          "'torso', 'neck'].\n"
          "Q: What are the body parts involved in the action of: walk forwards?\n"
          "Answer: right leg\nleft leg\nbuttocks\n"
@@ -191,7 +201,8 @@ std::string SincPrompt(const std::string& action) {
 
 Result<std::unique_ptr<Labeler>> MakeLlmLabeler(const nlohmann::json& config) {
   const std::string api = config.value("api", std::string("completions"));
-  if (api != "completions" && api != "chat") return InvalidArgument("llm labeler: api must be completions or chat");
+  if (api != "completions" && api != "chat")
+    return InvalidArgument("llm labeler: api must be completions or chat");
   return std::unique_ptr<Labeler>(new LlmLabeler(config));
 }
 

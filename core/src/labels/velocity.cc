@@ -10,7 +10,9 @@ std::array<double, kNumBodyParts> PartSpeeds(const Motion& motion) {
   if (frames < 2 || motion.fps <= 0) return speeds;
   const Skeleton& skeleton = Skeleton::Smpl22();
   const std::vector<float> joints = ComputeJoints(skeleton, motion);
-  auto at = [&](int64_t f, int j, int a) { return static_cast<double>(joints[static_cast<size_t>((f * kNumJoints + j) * 3 + a)]); };
+  auto at = [&](int64_t f, int j, int a) {
+    return static_cast<double>(joints[static_cast<size_t>((f * kNumJoints + j) * 3 + a)]);
+  };
   const auto& part_joints = skeleton.part_joints();
   for (int part = 0; part < kNumBodyParts; ++part) {
     double total = 0;
@@ -46,14 +48,17 @@ class VelocityLabeler : public Labeler {
   Result<std::vector<PartSet>> Label(const std::vector<LabelInput>& inputs) override {
     std::vector<std::array<double, kNumBodyParts>> speeds;
     for (const auto& input : inputs) {
-      if (!input.motion) return InvalidArgument("velocity labeler: '" + input.text + "' has no motion (it labels motions, not texts)");
+      if (!input.motion)
+        return InvalidArgument("velocity labeler: '" + input.text +
+                               "' has no motion (it labels motions, not texts)");
       speeds.push_back(PartSpeeds(*input.motion));
     }
     std::array<double, kNumBodyParts> mean{}, stddev{};
     const bool standardise = static_cast<int>(inputs.size()) >= min_batch_;
     if (standardise) {
       for (const auto& s : speeds) {
-        for (int p = 0; p < kNumBodyParts; ++p) mean[static_cast<size_t>(p)] += s[static_cast<size_t>(p)];
+        for (int p = 0; p < kNumBodyParts; ++p)
+          mean[static_cast<size_t>(p)] += s[static_cast<size_t>(p)];
       }
       for (double& m : mean) m /= static_cast<double>(speeds.size());
       for (const auto& s : speeds) {
@@ -62,14 +67,17 @@ class VelocityLabeler : public Labeler {
           stddev[static_cast<size_t>(p)] += d * d;
         }
       }
-      for (double& sd : stddev) sd = std::sqrt(sd / static_cast<double>(std::max<size_t>(1, speeds.size() - 1)));
+      for (double& sd : stddev)
+        sd = std::sqrt(sd / static_cast<double>(std::max<size_t>(1, speeds.size() - 1)));
     }
     std::vector<PartSet> out;
     for (const auto& s : speeds) {
       PartSet parts = 0;
       for (int p = 0; p < kNumBodyParts; ++p) {
         const auto i = static_cast<size_t>(p);
-        const bool moving = standardise ? (stddev[i] > 0 && (s[i] - mean[i]) / stddev[i] > threshold_) : s[i] > absolute_;
+        const bool moving = standardise
+                                ? (stddev[i] > 0 && (s[i] - mean[i]) / stddev[i] > threshold_)
+                                : s[i] > absolute_;
         if (moving) parts |= static_cast<PartSet>(1u << p);
       }
       out.push_back(parts);
@@ -86,7 +94,8 @@ class VelocityLabeler : public Labeler {
 }  // namespace
 
 Result<std::unique_ptr<Labeler>> MakeVelocityLabeler(const nlohmann::json& config) {
-  return std::unique_ptr<Labeler>(new VelocityLabeler(config.value("threshold", 0.25), config.value("min_batch", 20),
+  return std::unique_ptr<Labeler>(new VelocityLabeler(config.value("threshold", 0.25),
+                                                      config.value("min_batch", 20),
                                                       config.value("absolute", 0.15)));
 }
 

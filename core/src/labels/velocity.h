@@ -10,7 +10,8 @@
 namespace motionpipe::labels {
 
 // Mean speeds (m/s) per part of one motion: the global part is the pelvis's world speed; the others
-// are the mean speed of their joints relative to the pelvis (so that walking does not move the arms).
+// are the mean speed of their joints relative to the pelvis (so that walking does not move the
+// arms).
 std::array<double, kNumBodyParts> PartSpeeds(const Motion& motion);
 
 // Config: threshold (z-score, default 0.25); min_batch (below it, `absolute` m/s thresholds are

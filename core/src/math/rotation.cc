@@ -8,7 +8,8 @@ Mat3 operator*(const Mat3& a, const Mat3& b) {
   Mat3 out;
   for (int row = 0; row < 3; ++row) {
     for (int col = 0; col < 3; ++col) {
-      out.m[row][col] = a.m[row][0] * b.m[0][col] + a.m[row][1] * b.m[1][col] + a.m[row][2] * b.m[2][col];
+      out.m[row][col] =
+          a.m[row][0] * b.m[0][col] + a.m[row][1] * b.m[1][col] + a.m[row][2] * b.m[2][col];
     }
   }
   return out;
@@ -31,14 +32,16 @@ Mat3 Transpose(const Mat3& r) {
 double MaxAbsDiff(const Mat3& a, const Mat3& b) {
   double worst = 0;
   for (int row = 0; row < 3; ++row) {
-    for (int col = 0; col < 3; ++col) worst = std::max(worst, std::abs(a.m[row][col] - b.m[row][col]));
+    for (int col = 0; col < 3; ++col)
+      worst = std::max(worst, std::abs(a.m[row][col] - b.m[row][col]));
   }
   return worst;
 }
 
 Quat operator*(const Quat& a, const Quat& b) {
-  return {a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z, a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y,
-          a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x, a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w};
+  return {
+      a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z, a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y,
+      a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x, a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w};
 }
 
 Quat Normalized(const Quat& q) {
@@ -60,7 +63,8 @@ Quat Slerp(const Quat& a, Quat b, double t) {
     wa = std::sin((1 - t) * half) / sin_half;
     wb = std::sin(t * half) / sin_half;
   }
-  return Normalized({wa * a.w + wb * b.w, wa * a.x + wb * b.x, wa * a.y + wb * b.y, wa * a.z + wb * b.z});
+  return Normalized(
+      {wa * a.w + wb * b.w, wa * a.x + wb * b.x, wa * a.y + wb * b.y, wa * a.z + wb * b.z});
 }
 
 Mat3 AxisAngleToMatrix(const Vec3& aa) {
@@ -89,16 +93,20 @@ Quat MatrixToQuat(const Mat3& r) {
   Quat q;
   if (trace > 0) {
     const double s = std::sqrt(trace + 1.0) * 2;
-    q = {0.25 * s, (r.m[2][1] - r.m[1][2]) / s, (r.m[0][2] - r.m[2][0]) / s, (r.m[1][0] - r.m[0][1]) / s};
+    q = {0.25 * s, (r.m[2][1] - r.m[1][2]) / s, (r.m[0][2] - r.m[2][0]) / s,
+         (r.m[1][0] - r.m[0][1]) / s};
   } else if (r.m[0][0] > r.m[1][1] && r.m[0][0] > r.m[2][2]) {
     const double s = std::sqrt(1.0 + r.m[0][0] - r.m[1][1] - r.m[2][2]) * 2;
-    q = {(r.m[2][1] - r.m[1][2]) / s, 0.25 * s, (r.m[0][1] + r.m[1][0]) / s, (r.m[0][2] + r.m[2][0]) / s};
+    q = {(r.m[2][1] - r.m[1][2]) / s, 0.25 * s, (r.m[0][1] + r.m[1][0]) / s,
+         (r.m[0][2] + r.m[2][0]) / s};
   } else if (r.m[1][1] > r.m[2][2]) {
     const double s = std::sqrt(1.0 + r.m[1][1] - r.m[0][0] - r.m[2][2]) * 2;
-    q = {(r.m[0][2] - r.m[2][0]) / s, (r.m[0][1] + r.m[1][0]) / s, 0.25 * s, (r.m[1][2] + r.m[2][1]) / s};
+    q = {(r.m[0][2] - r.m[2][0]) / s, (r.m[0][1] + r.m[1][0]) / s, 0.25 * s,
+         (r.m[1][2] + r.m[2][1]) / s};
   } else {
     const double s = std::sqrt(1.0 + r.m[2][2] - r.m[0][0] - r.m[1][1]) * 2;
-    q = {(r.m[1][0] - r.m[0][1]) / s, (r.m[0][2] + r.m[2][0]) / s, (r.m[1][2] + r.m[2][1]) / s, 0.25 * s};
+    q = {(r.m[1][0] - r.m[0][1]) / s, (r.m[0][2] + r.m[2][0]) / s, (r.m[1][2] + r.m[2][1]) / s,
+         0.25 * s};
   }
   if (q.w < 0) q = {-q.w, -q.x, -q.y, -q.z};
   return Normalized(q);
@@ -166,7 +174,9 @@ void WriteRot6d(const Mat3& r, float* out) {
   for (size_t k = 0; k < 6; ++k) out[k] = static_cast<float>(six[k]);
 }
 
-Mat3 ReadRot6d(const float* in) { return Rot6dToMatrix({in[0], in[1], in[2], in[3], in[4], in[5]}); }
+Mat3 ReadRot6d(const float* in) {
+  return Rot6dToMatrix({in[0], in[1], in[2], in[3], in[4], in[5]});
+}
 
 Mat3 RotX(double angle) {
   const double c = std::cos(angle), s = std::sin(angle);
@@ -194,10 +204,17 @@ Mat3 RemoveHeading(const Mat3& r) { return RotZ(-HeadingZYX(r)) * r; }
 namespace {
 int AxisIndex(char letter) {
   switch (letter) {
-    case 'X': case 'x': return 0;
-    case 'Y': case 'y': return 1;
-    case 'Z': case 'z': return 2;
-    default: return -1;
+    case 'X':
+    case 'x':
+      return 0;
+    case 'Y':
+    case 'y':
+      return 1;
+    case 'Z':
+    case 'z':
+      return 2;
+    default:
+      return -1;
   }
 }
 Mat3 AxisRotation(int axis, double angle) {
@@ -212,7 +229,8 @@ bool EulerOrderValid(const std::string& order) {
 }
 
 Mat3 EulerToMatrix(const std::string& order, const std::array<double, 3>& angles) {
-  return AxisRotation(AxisIndex(order[0]), angles[0]) * AxisRotation(AxisIndex(order[1]), angles[1]) *
+  return AxisRotation(AxisIndex(order[0]), angles[0]) *
+         AxisRotation(AxisIndex(order[1]), angles[1]) *
          AxisRotation(AxisIndex(order[2]), angles[2]);
 }
 

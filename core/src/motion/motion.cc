@@ -20,7 +20,8 @@ Motion Motion::Rest(int64_t frames, double fps, double pelvis_height) {
 }
 
 Mat3 Motion::LocalRotation(int64_t frame, int joint) const {
-  const float* aa = &poses[(static_cast<size_t>(frame) * kNumJoints + static_cast<size_t>(joint)) * 3];
+  const float* aa =
+      &poses[(static_cast<size_t>(frame) * kNumJoints + static_cast<size_t>(joint)) * 3];
   return AxisAngleToMatrix({aa[0], aa[1], aa[2]});
 }
 
@@ -60,7 +61,8 @@ Status ValidateMotion(const Motion& motion, const std::string& origin, int64_t m
   }
   for (size_t k = 0; k < motion.poses.size(); ++k) {
     if (!std::isfinite(motion.poses[k])) {
-      return DataLoss(origin + ": non-finite rotation at frame " + std::to_string(k / (kNumJoints * 3)));
+      return DataLoss(origin + ": non-finite rotation at frame " +
+                      std::to_string(k / (kNumJoints * 3)));
     }
   }
   for (size_t k = 0; k < motion.trans.size(); ++k) {
@@ -90,8 +92,10 @@ std::vector<float> ComputeJoints(const Skeleton& skeleton, const Motion& motion)
   std::array<Mat3, kNumJoints> global;
   std::array<Vec3, kNumJoints> positions;
   for (int64_t frame = 0; frame < frames; ++frame) {
-    for (int joint = 0; joint < kNumJoints; ++joint) local[static_cast<size_t>(joint)] = motion.LocalRotation(frame, joint);
-    ForwardKinematicsFrame(skeleton, local.data(), motion.Translation(frame), global.data(), positions.data());
+    for (int joint = 0; joint < kNumJoints; ++joint)
+      local[static_cast<size_t>(joint)] = motion.LocalRotation(frame, joint);
+    ForwardKinematicsFrame(skeleton, local.data(), motion.Translation(frame), global.data(),
+                           positions.data());
     float* out = &joints[static_cast<size_t>(frame) * kNumJoints * 3];
     for (int joint = 0; joint < kNumJoints; ++joint) {
       out[joint * 3 + 0] = static_cast<float>(positions[static_cast<size_t>(joint)].x);
@@ -108,8 +112,9 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end) {
   Motion out;
   out.fps = motion.fps;
   const size_t pose_stride = kNumJoints * 3;
-  out.poses.assign(motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(begin) * pose_stride),
-                   motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(end) * pose_stride));
+  out.poses.assign(
+      motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(begin) * pose_stride),
+      motion.poses.begin() + static_cast<std::ptrdiff_t>(static_cast<size_t>(end) * pose_stride));
   out.trans.assign(motion.trans.begin() + begin * 3, motion.trans.begin() + end * 3);
   return out;
 }
@@ -126,14 +131,16 @@ std::string Rate(double fps) {
 
 Status CheckResample(const Motion& motion, double target_fps, const std::string& origin) {
   if (std::isnan(target_fps) || target_fps > kMaxFrameRate) {
-    return InvalidArgument(origin + ": a frame rate of " + Rate(target_fps) + " fps is out of range (at most " +
-                           std::to_string(static_cast<int>(kMaxFrameRate)) + "; 0 keeps the file's)");
+    return InvalidArgument(
+        origin + ": a frame rate of " + Rate(target_fps) + " fps is out of range (at most " +
+        std::to_string(static_cast<int>(kMaxFrameRate)) + "; 0 keeps the file's)");
   }
   if (target_fps <= 0 || motion.num_frames() == 0 || !(motion.fps > 0)) return Status::Ok();
   const double frames = static_cast<double>(motion.num_frames() - 1) * target_fps / motion.fps + 1;
   if (frames > static_cast<double>(kMaxResampledFrames)) {
-    return InvalidArgument(origin + ": resampling " + std::to_string(motion.num_frames()) + " frames from " + Rate(motion.fps) +
-                           " to " + Rate(target_fps) + " fps would make " + std::to_string(static_cast<int64_t>(frames)) +
+    return InvalidArgument(origin + ": resampling " + std::to_string(motion.num_frames()) +
+                           " frames from " + Rate(motion.fps) + " to " + Rate(target_fps) +
+                           " fps would make " + std::to_string(static_cast<int64_t>(frames)) +
                            " frames (at most " + std::to_string(kMaxResampledFrames) + ")");
   }
   return Status::Ok();
@@ -150,7 +157,8 @@ Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) 
   }
   const double step = motion.fps / target_fps;  // source frames per output frame
   // Output frames cover the same duration: the last output frame maps inside the source.
-  const int64_t out_frames = std::max<int64_t>(1, static_cast<int64_t>(std::floor((frames - 1) / step + 1e-6)) + 1);
+  const int64_t out_frames =
+      std::max<int64_t>(1, static_cast<int64_t>(std::floor((frames - 1) / step + 1e-6)) + 1);
   Motion out;
   out.fps = target_fps;
   out.poses.resize(static_cast<size_t>(out_frames) * kNumJoints * 3);
@@ -158,10 +166,12 @@ Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) 
   for (int64_t frame = 0; frame < out_frames; ++frame) {
     const double src = static_cast<double>(frame) * step;
     if (method == ResampleMethod::kByIndex) {
-      const int64_t index = std::min<int64_t>(frames - 1, static_cast<int64_t>(std::floor(src + 1e-9)));
+      const int64_t index =
+          std::min<int64_t>(frames - 1, static_cast<int64_t>(std::floor(src + 1e-9)));
       std::copy_n(&motion.poses[static_cast<size_t>(index) * kNumJoints * 3], kNumJoints * 3,
                   &out.poses[static_cast<size_t>(frame) * kNumJoints * 3]);
-      std::copy_n(&motion.trans[static_cast<size_t>(index) * 3], 3, &out.trans[static_cast<size_t>(frame) * 3]);
+      std::copy_n(&motion.trans[static_cast<size_t>(index) * 3], 3,
+                  &out.trans[static_cast<size_t>(frame) * 3]);
       continue;
     }
     const int64_t lo = std::min<int64_t>(frames - 1, static_cast<int64_t>(std::floor(src)));

@@ -13,18 +13,41 @@ constexpr double kRadToDeg = 180.0 / kPi;
 // the spine joints each bend a fraction of the back's range.
 double MaxRotationDegrees(int joint) {
   switch (joint) {
-    case 0: return 360;                  // global orientation: free
-    case 1: case 2: return 140;          // hips
-    case 4: case 5: return 165;          // knees
-    case 7: case 8: return 75;           // ankles
-    case 10: case 11: return 60;         // toes
-    case 3: case 6: case 9: return 60;   // spine
-    case 12: case 15: return 75;         // neck, head
-    case 13: case 14: return 50;         // collars
-    case 16: case 17: return 180;        // shoulders: free
-    case 18: case 19: return 165;        // elbows
-    case 20: case 21: return 130;        // wrists (SMPL puts part of the forearm twist here)
-    default: return 180;
+    case 0:
+      return 360;  // global orientation: free
+    case 1:
+    case 2:
+      return 140;  // hips
+    case 4:
+    case 5:
+      return 165;  // knees
+    case 7:
+    case 8:
+      return 75;  // ankles
+    case 10:
+    case 11:
+      return 60;  // toes
+    case 3:
+    case 6:
+    case 9:
+      return 60;  // spine
+    case 12:
+    case 15:
+      return 75;  // neck, head
+    case 13:
+    case 14:
+      return 50;  // collars
+    case 16:
+    case 17:
+      return 180;  // shoulders: free
+    case 18:
+    case 19:
+      return 165;  // elbows
+    case 20:
+    case 21:
+      return 130;  // wrists (SMPL puts part of the forearm twist here)
+    default:
+      return 180;
   }
 }
 
@@ -37,23 +60,27 @@ std::string CheckJointLimit(const Skeleton& skeleton, int joint, const Mat3& loc
   const std::string& name = skeleton.joint_names()[static_cast<size_t>(joint)];
   char buffer[128];
   if (angle > limit) {
-    std::snprintf(buffer, sizeof(buffer), "%s rotated %.0f deg (limit %.0f)", name.c_str(), angle, limit);
+    std::snprintf(buffer, sizeof(buffer), "%s rotated %.0f deg (limit %.0f)", name.c_str(), angle,
+                  limit);
     return buffer;
   }
-  // Hinges must not bend backwards: knees flex about +x, the left elbow about -y, the right about +y.
+  // Hinges must not bend backwards: knees flex about +x, the left elbow about -y, the right about
+  // +y.
   double flexion = 0;
   if (joint == 4 || joint == 5) flexion = std::atan2(local.m[2][1], local.m[1][1]);
   if (joint == 18) flexion = -std::atan2(local.m[0][2], local.m[0][0]);
   if (joint == 19) flexion = std::atan2(local.m[0][2], local.m[0][0]);
   if ((joint == 4 || joint == 5 || joint == 18 || joint == 19) && flexion * kRadToDeg < -15) {
-    std::snprintf(buffer, sizeof(buffer), "%s hyperextended by %.0f deg", name.c_str(), -flexion * kRadToDeg);
+    std::snprintf(buffer, sizeof(buffer), "%s hyperextended by %.0f deg", name.c_str(),
+                  -flexion * kRadToDeg);
     return buffer;
   }
   return "";
 }
 
-PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* joints, int64_t frames, double fps,
-                                        const std::vector<Mat3>* local, const PlausibilityOptions& options) {
+PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* joints,
+                                        int64_t frames, double fps, const std::vector<Mat3>* local,
+                                        const PlausibilityOptions& options) {
   PlausibilityReport report;
   report.frames = frames;
   if (frames <= 0) return report;
@@ -61,8 +88,8 @@ PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* j
     const float* p = joints + (frame * kNumJoints + joint) * 3;
     return Vec3{p[0], p[1], p[2]};
   };
-  const int feet[4] = {skeleton.left_foot_joints()[0], skeleton.left_foot_joints()[1], skeleton.right_foot_joints()[0],
-                       skeleton.right_foot_joints()[1]};
+  const int feet[4] = {skeleton.left_foot_joints()[0], skeleton.left_foot_joints()[1],
+                       skeleton.right_foot_joints()[0], skeleton.right_foot_joints()[1]};
   double skate_sum = 0;
   int64_t contact = 0, skating = 0, floating = 0;
   double penetration_sum = 0;
@@ -78,14 +105,19 @@ PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* j
       if (parent >= 0) {
         const double length = Norm(at(frame, joint) - at(frame, parent));
         report.bone_length_error =
-            std::max(report.bone_length_error, std::abs(length - skeleton.bone_lengths()[static_cast<size_t>(joint)]));
+            std::max(report.bone_length_error,
+                     std::abs(length - skeleton.bone_lengths()[static_cast<size_t>(joint)]));
       }
-      if (frame > 0) report.max_joint_step = std::max(report.max_joint_step, Norm(at(frame, joint) - at(frame - 1, joint)));
+      if (frame > 0)
+        report.max_joint_step =
+            std::max(report.max_joint_step, Norm(at(frame, joint) - at(frame - 1, joint)));
     }
     if (frame == 0) continue;
     for (int joint : feet) {
       const Vec3 a = at(frame - 1, joint), b = at(frame, joint);
-      if (a.z > options.floor + options.contact_height || b.z > options.floor + options.contact_height) continue;
+      if (a.z > options.floor + options.contact_height ||
+          b.z > options.floor + options.contact_height)
+        continue;
       const double speed = std::hypot(b.x - a.x, b.y - a.y) * fps;
       skate_sum += speed;
       ++contact;
@@ -104,7 +136,8 @@ PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* j
     for (int64_t frame = 3; frame < frames; ++frame) {
       for (int joint = 0; joint < kNumJoints; ++joint) {
         // Third finite difference: x3 - 3 x2 + 3 x1 - x0.
-        const Vec3 j = at(frame, joint) - 3.0 * at(frame - 1, joint) + 3.0 * at(frame - 2, joint) - at(frame - 3, joint);
+        const Vec3 j = at(frame, joint) - 3.0 * at(frame - 1, joint) + 3.0 * at(frame - 2, joint) -
+                       at(frame - 3, joint);
         jerk_sum += Norm(j) * fps * fps * fps;
         ++count;
       }
@@ -114,9 +147,11 @@ PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* j
   if (local) {
     for (int64_t frame = 0; frame < frames; ++frame) {
       for (int joint = 1; joint < kNumJoints; ++joint) {
-        const std::string problem = CheckJointLimit(skeleton, joint, (*local)[static_cast<size_t>(frame * kNumJoints + joint)]);
+        const std::string problem = CheckJointLimit(
+            skeleton, joint, (*local)[static_cast<size_t>(frame * kNumJoints + joint)]);
         if (problem.empty()) continue;
-        if (report.joint_limit_violations == 0) report.worst_joint_limit = problem + " at frame " + std::to_string(frame);
+        if (report.joint_limit_violations == 0)
+          report.worst_joint_limit = problem + " at frame " + std::to_string(frame);
         ++report.joint_limit_violations;
       }
     }
@@ -128,7 +163,8 @@ PlausibilityReport EvaluateMotionPlausibility(const Skeleton& skeleton, const Mo
                                               const PlausibilityOptions& options) {
   const std::vector<float> joints = ComputeJoints(skeleton, motion);
   const std::vector<Mat3> local = LocalRotations(motion);
-  return EvaluatePlausibility(skeleton, joints.data(), motion.num_frames(), motion.fps, &local, options);
+  return EvaluatePlausibility(skeleton, joints.data(), motion.num_frames(), motion.fps, &local,
+                              options);
 }
 
 }  // namespace motionpipe

@@ -28,10 +28,10 @@ Mat3 FromColumns(const Vec3& x, const Vec3& y, const Vec3& z) {
 }
 
 struct TwoBone {
-  Vec3 middle;    // knee / elbow position
-  Vec3 end;       // achieved ankle / wrist position
-  Vec3 hinge;     // unit hinge axis n: the second bone is the first rotated about n by `bend`
-  Vec3 upper;     // unit direction of the first bone
+  Vec3 middle;  // knee / elbow position
+  Vec3 end;     // achieved ankle / wrist position
+  Vec3 hinge;   // unit hinge axis n: the second bone is the first rotated about n by `bend`
+  Vec3 upper;   // unit direction of the first bone
   double bend = 0;
   double reach_error = 0;
 };
@@ -78,7 +78,8 @@ Mat3 PelvisOrientation(double facing, const Vec3& angles) {
   return RotZ(facing + kPi / 2) * YUpToZUp() * BodyAngles(angles);
 }
 
-Vec3 HipPosition(const Skeleton& skeleton, const Vec3& pelvis, const Mat3& pelvis_orientation, int side) {
+Vec3 HipPosition(const Skeleton& skeleton, const Vec3& pelvis, const Mat3& pelvis_orientation,
+                 int side) {
   return pelvis + pelvis_orientation * skeleton.rest_offsets()[static_cast<size_t>(kHip[side])];
 }
 
@@ -98,7 +99,8 @@ UpperBodyFrame ComputeUpperBody(const Skeleton& skeleton, const PoseTargets& t) 
     const double sign = side == 0 ? 1.0 : -1.0;
     const Vec3 collar = p + g * offsets[static_cast<size_t>(kCollar[side])];
     const Mat3 g_collar = g * RotZ(sign * t.hands[static_cast<size_t>(side)].collar_raise);
-    frame.shoulders[static_cast<size_t>(side)] = collar + g_collar * offsets[static_cast<size_t>(kShoulder[side])];
+    frame.shoulders[static_cast<size_t>(side)] =
+        collar + g_collar * offsets[static_cast<size_t>(kShoulder[side])];
   }
   return frame;
 }
@@ -122,7 +124,8 @@ SolvedPose SolvePose(const Skeleton& skeleton, const PoseTargets& t) {
     local[static_cast<size_t>(joint)] = rotation;
     global[static_cast<size_t>(joint)] = global[static_cast<size_t>(parent)] * rotation;
     position[static_cast<size_t>(joint)] =
-        position[static_cast<size_t>(parent)] + global[static_cast<size_t>(parent)] * offsets[static_cast<size_t>(joint)];
+        position[static_cast<size_t>(parent)] +
+        global[static_cast<size_t>(parent)] * offsets[static_cast<size_t>(joint)];
   };
   chain(3, BodyAngles(t.spine[0]));
   chain(6, BodyAngles(t.spine[1]));
@@ -136,8 +139,9 @@ SolvedPose SolvePose(const Skeleton& skeleton, const PoseTargets& t) {
     const Vec3 hip = HipPosition(skeleton, t.pelvis, pelvis, side);
     position[static_cast<size_t>(kHip[side])] = hip;
     const Vec3 pelvis_x = pelvis * Vec3{1, 0, 0};
-    const TwoBone leg = SolveTwoBone(hip, foot.ankle, lengths[static_cast<size_t>(kKnee[side])],
-                                     lengths[static_cast<size_t>(kAnkle[side])], foot.knee_pole, pelvis_x);
+    const TwoBone leg =
+        SolveTwoBone(hip, foot.ankle, lengths[static_cast<size_t>(kKnee[side])],
+                     lengths[static_cast<size_t>(kAnkle[side])], foot.knee_pole, pelvis_x);
     out.leg_reach_error[static_cast<size_t>(side)] = leg.reach_error;
     // Columns: x -> hinge, y -> -thigh, z = x cross y = thigh x hinge (a proper rotation).
     const Mat3 g_hip = FromColumns(leg.hinge, -1.0 * leg.upper, Cross(leg.upper, leg.hinge));
@@ -159,14 +163,17 @@ SolvedPose SolvePose(const Skeleton& skeleton, const PoseTargets& t) {
     const double sign = side == 0 ? 1.0 : -1.0;  // left arm rests along +x, right along -x
     chain(kCollar[side], RotZ(sign * hand.collar_raise));
     const Mat3 g_collar = global[static_cast<size_t>(kCollar[side])];
-    const Vec3 shoulder = position[static_cast<size_t>(kCollar[side])] + g_collar * offsets[static_cast<size_t>(kShoulder[side])];
+    const Vec3 shoulder = position[static_cast<size_t>(kCollar[side])] +
+                          g_collar * offsets[static_cast<size_t>(kShoulder[side])];
     const Vec3 chest_y = global[9] * Vec3{0, 1, 0};
-    const TwoBone arm = SolveTwoBone(shoulder, hand.wrist, lengths[static_cast<size_t>(kElbow[side])],
-                                     lengths[static_cast<size_t>(kWrist[side])], hand.elbow_pole, -sign * chest_y);
+    const TwoBone arm =
+        SolveTwoBone(shoulder, hand.wrist, lengths[static_cast<size_t>(kElbow[side])],
+                     lengths[static_cast<size_t>(kWrist[side])], hand.elbow_pole, -sign * chest_y);
     out.arm_reach_error[static_cast<size_t>(side)] = arm.reach_error;
     // Left: x -> upper, y -> -hinge; right: x -> -upper, y -> hinge; z = x cross y = hinge x upper.
-    const Mat3 g_shoulder = side == 0 ? FromColumns(arm.upper, -1.0 * arm.hinge, Cross(arm.hinge, arm.upper))
-                                      : FromColumns(-1.0 * arm.upper, arm.hinge, Cross(arm.hinge, arm.upper));
+    const Mat3 g_shoulder =
+        side == 0 ? FromColumns(arm.upper, -1.0 * arm.hinge, Cross(arm.hinge, arm.upper))
+                  : FromColumns(-1.0 * arm.upper, arm.hinge, Cross(arm.hinge, arm.upper));
     const Mat3 elbow_local = RotY(-sign * arm.bend);
     local[static_cast<size_t>(kShoulder[side])] = Transpose(g_collar) * g_shoulder;
     local[static_cast<size_t>(kElbow[side])] = elbow_local;

@@ -4,28 +4,44 @@ namespace motionpipe::net {
 
 const char* MessageTypeName(MessageType type) {
   switch (type) {
-    case MessageType::kReady: return "ready";
-    case MessageType::kHeartbeat: return "heartbeat";
-    case MessageType::kAssign: return "assign";
-    case MessageType::kTaskResult: return "task_result";
-    case MessageType::kCancel: return "cancel";
-    case MessageType::kDrain: return "drain";
-    case MessageType::kDisconnect: return "disconnect";
-    case MessageType::kControlRequest: return "control_request";
-    case MessageType::kControlReply: return "control_reply";
+    case MessageType::kReady:
+      return "ready";
+    case MessageType::kHeartbeat:
+      return "heartbeat";
+    case MessageType::kAssign:
+      return "assign";
+    case MessageType::kTaskResult:
+      return "task_result";
+    case MessageType::kCancel:
+      return "cancel";
+    case MessageType::kDrain:
+      return "drain";
+    case MessageType::kDisconnect:
+      return "disconnect";
+    case MessageType::kControlRequest:
+      return "control_request";
+    case MessageType::kControlReply:
+      return "control_reply";
   }
   return "unknown";
 }
 
 const char* DropReasonName(DropReason reason) {
   switch (reason) {
-    case DropReason::kNone: return "none";
-    case DropReason::kFrameCount: return "frame_count";
-    case DropReason::kBadHeader: return "bad_header";
-    case DropReason::kVersion: return "version";
-    case DropReason::kType: return "type";
-    case DropReason::kOversized: return "oversized";
-    case DropReason::kUndecodable: return "undecodable";
+    case DropReason::kNone:
+      return "none";
+    case DropReason::kFrameCount:
+      return "frame_count";
+    case DropReason::kBadHeader:
+      return "bad_header";
+    case DropReason::kVersion:
+      return "version";
+    case DropReason::kType:
+      return "type";
+    case DropReason::kOversized:
+      return "oversized";
+    case DropReason::kUndecodable:
+      return "undecodable";
   }
   return "unknown";
 }
@@ -45,7 +61,8 @@ DropReason DecodeFrames(std::vector<zmq::message_t>& frames, bool has_identity, 
   const auto* h = static_cast<const unsigned char*>(header.data());
   if (h[0] != 'M' || h[1] != 'P') return DropReason::kBadHeader;
   if (h[2] != kProtocolVersion) return DropReason::kVersion;
-  if (h[3] < static_cast<unsigned char>(MessageType::kReady) || h[3] > static_cast<unsigned char>(MessageType::kControlReply)) {
+  if (h[3] < static_cast<unsigned char>(MessageType::kReady) ||
+      h[3] > static_cast<unsigned char>(MessageType::kControlReply)) {
     return DropReason::kType;
   }
   if (body.size() > kMaxFrameBytes) return DropReason::kOversized;
@@ -54,13 +71,17 @@ DropReason DecodeFrames(std::vector<zmq::message_t>& frames, bool has_identity, 
   return DropReason::kNone;
 }
 
-bool Send(zmq::socket_t& socket, const std::string* identity, MessageType type, const google::protobuf::MessageLite& body) {
+bool Send(zmq::socket_t& socket, const std::string* identity, MessageType type,
+          const google::protobuf::MessageLite& body) {
   std::string payload;
   if (!body.SerializeToString(&payload)) return false;
   const std::string header = EncodeHeader(type);
   try {
-    if (identity && !socket.send(zmq::buffer(*identity), zmq::send_flags::sndmore | zmq::send_flags::dontwait)) return false;
-    if (!socket.send(zmq::buffer(header), zmq::send_flags::sndmore | zmq::send_flags::dontwait)) return false;
+    if (identity &&
+        !socket.send(zmq::buffer(*identity), zmq::send_flags::sndmore | zmq::send_flags::dontwait))
+      return false;
+    if (!socket.send(zmq::buffer(header), zmq::send_flags::sndmore | zmq::send_flags::dontwait))
+      return false;
     return socket.send(zmq::buffer(payload), zmq::send_flags::dontwait).has_value();
   } catch (const zmq::error_t&) {
     return false;  // EHOSTUNREACH with ROUTER_MANDATORY: the peer is gone
@@ -93,6 +114,8 @@ int Poll(zmq::pollitem_t* items, size_t count, std::chrono::milliseconds timeout
   }
 }
 
-bool ParseBody(const std::string& body, google::protobuf::MessageLite* message) { return message->ParseFromString(body); }
+bool ParseBody(const std::string& body, google::protobuf::MessageLite* message) {
+  return message->ParseFromString(body);
+}
 
 }  // namespace motionpipe::net

@@ -1,11 +1,10 @@
 #include "motionpipe/net/security.h"
 
-#include "motionpipe/net/protocol.h"
-
 #include <sstream>
 
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/log.h"
+#include "motionpipe/net/protocol.h"
 
 namespace motionpipe::net {
 
@@ -29,8 +28,10 @@ Result<CurveKeyPair> GenerateCurveKeyPair() {
 }
 
 std::string FormatKeyFile(const CurveKeyPair& keys) {
-  return "# motionpipe CurveZMQ key pair: share the public key, keep this file private (chmod 600)\n"
-         "public-key: " + keys.public_key + "\nsecret-key: " + keys.secret_key + "\n";
+  return "# motionpipe CurveZMQ key pair: share the public key, keep this file private (chmod "
+         "600)\n"
+         "public-key: " +
+         keys.public_key + "\nsecret-key: " + keys.secret_key + "\n";
 }
 
 Result<CurveKeyPair> LoadKeyFile(const std::string& path) {
@@ -42,12 +43,17 @@ Result<CurveKeyPair> LoadKeyFile(const std::string& path) {
     line = Trim(line);
     if (line.empty() || line[0] == '#') continue;
     const size_t colon = line.find(':');
-    if (colon == std::string::npos) return DataLoss(path + ": expected 'public-key: ...' or 'secret-key: ...'");
+    if (colon == std::string::npos)
+      return DataLoss(path + ": expected 'public-key: ...' or 'secret-key: ...'");
     const std::string key = Trim(line.substr(0, colon)), value = Trim(line.substr(colon + 1));
-    if (!ValidZ85Key(value)) return DataLoss(path + ": '" + key + "' is not a 40-character Z85 key");
-    if (key == "public-key") keys.public_key = value;
-    else if (key == "secret-key") keys.secret_key = value;
-    else return DataLoss(path + ": unknown entry '" + key + "'");
+    if (!ValidZ85Key(value))
+      return DataLoss(path + ": '" + key + "' is not a 40-character Z85 key");
+    if (key == "public-key")
+      keys.public_key = value;
+    else if (key == "secret-key")
+      keys.secret_key = value;
+    else
+      return DataLoss(path + ": unknown entry '" + key + "'");
   }
   if (keys.public_key.empty()) return DataLoss(path + ": no public-key line");
   return keys;
@@ -69,11 +75,13 @@ Result<std::set<std::string>> LoadAllowList(const std::string& path) {
     if (space != std::string::npos) {
       const std::string rest = Trim(line.substr(space));
       if (!rest.empty() && rest[0] != '#') {
-        return DataLoss(path + ":" + std::to_string(number) + ": one key per line (comments start with '#')");
+        return DataLoss(path + ":" + std::to_string(number) +
+                        ": one key per line (comments start with '#')");
       }
       line.resize(space);
     }
-    if (!ValidZ85Key(line)) return DataLoss(path + ":" + std::to_string(number) + ": not a 40-character Z85 public key");
+    if (!ValidZ85Key(line))
+      return DataLoss(path + ":" + std::to_string(number) + ": not a 40-character Z85 public key");
     keys.insert(line);
   }
   return keys;
@@ -124,7 +132,8 @@ void ZapAuthenticator::Loop() {
       } else {
         ++refused_;
       }
-      socket_->send(zmq::buffer(version.empty() ? std::string("1.0") : version), zmq::send_flags::sndmore);
+      socket_->send(zmq::buffer(version.empty() ? std::string("1.0") : version),
+                    zmq::send_flags::sndmore);
       socket_->send(zmq::buffer(request_id), zmq::send_flags::sndmore);
       socket_->send(zmq::buffer(status), zmq::send_flags::sndmore);
       socket_->send(zmq::buffer(text), zmq::send_flags::sndmore);
@@ -143,7 +152,8 @@ void ConfigureCurveServer(zmq::socket_t& socket, const CurveKeyPair& server_keys
   socket.set(zmq::sockopt::zap_domain, "motionpipe");
 }
 
-void ConfigureCurveClient(zmq::socket_t& socket, const CurveKeyPair& client_keys, const std::string& server_public_key) {
+void ConfigureCurveClient(zmq::socket_t& socket, const CurveKeyPair& client_keys,
+                          const std::string& server_public_key) {
   socket.set(zmq::sockopt::curve_serverkey, server_public_key);
   socket.set(zmq::sockopt::curve_publickey, client_keys.public_key);
   socket.set(zmq::sockopt::curve_secretkey, client_keys.secret_key);

@@ -35,11 +35,13 @@ std::vector<double> NiceTicks(double lo, double hi, int count) {
     step = m * magnitude;
     if (step >= raw) break;
   }
-  for (double t = std::ceil(lo / step - 1e-9) * step; t <= hi + step * 1e-9; t += step) ticks.push_back(std::fabs(t) < step * 1e-9 ? 0.0 : t);
+  for (double t = std::ceil(lo / step - 1e-9) * step; t <= hi + step * 1e-9; t += step)
+    ticks.push_back(std::fabs(t) < step * 1e-9 ? 0.0 : t);
   return ticks;
 }
 
-Panel::Panel(Image* image, int x, int y, int width, int height) : image_(image), x_(x), y_(y), width_(width), height_(height) {
+Panel::Panel(Image* image, int x, int y, int width, int height)
+    : image_(image), x_(x), y_(y), width_(width), height_(height) {
   left_ = x + 26 + 7 * 6 * kScale / 2 + 14;
   right_ = x + width - 14;
   top_ = y + 12 + Image::TextHeight(kScale) + 10;
@@ -52,38 +54,46 @@ void Panel::SetLimits(double x_min, double x_max, double y_min, double y_max, bo
   log_x_ = log_x && x_min > 0;
   // Room on the left for the widest y tick label and the vertical axis label.
   int widest = 0;
-  for (const double t : NiceTicks(y_min_, y_max_, 5)) widest = std::max(widest, Image::TextWidth(TickLabel(t), kScale));
+  for (const double t : NiceTicks(y_min_, y_max_, 5))
+    widest = std::max(widest, Image::TextWidth(TickLabel(t), kScale));
   left_ = x_ + 8 + Image::TextHeight(kScale) + 10 + widest + 10;
 }
 
 double Panel::PixelX(double x) const {
   double t;
   if (log_x_) {
-    t = (std::log10(std::max(x, 1e-300)) - std::log10(x_min_)) / (std::log10(x_max_) - std::log10(x_min_));
+    t = (std::log10(std::max(x, 1e-300)) - std::log10(x_min_)) /
+        (std::log10(x_max_) - std::log10(x_min_));
   } else {
     t = (x - x_min_) / (x_max_ - x_min_);
   }
   return left_ + t * (right_ - left_);
 }
 
-double Panel::PixelY(double y) const { return bottom_ - (y - y_min_) / (y_max_ - y_min_) * (bottom_ - top_); }
+double Panel::PixelY(double y) const {
+  return bottom_ - (y - y_min_) / (y_max_ - y_min_) * (bottom_ - top_);
+}
 
 void Panel::DrawAxes() {
-  image_->Text(x_ + (width_ - Image::TextWidth(title_, kScale)) / 2.0, y_ + 10, title_, kBlack, kScale);
+  image_->Text(x_ + (width_ - Image::TextWidth(title_, kScale)) / 2.0, y_ + 10, title_, kBlack,
+               kScale);
   // y grid and ticks
   for (const double t : NiceTicks(y_min_, y_max_, 5)) {
     const double py = PixelY(t);
     image_->Line(left_, py, right_, py, kGrid, 1.0);
     image_->Line(left_ - 5, py, left_, py, kAxis, 1.0);
     const std::string label = TickLabel(t);
-    image_->Text(left_ - 8 - Image::TextWidth(label, kScale), py - Image::TextHeight(kScale) / 2.0, label, kAxis, kScale);
+    image_->Text(left_ - 8 - Image::TextWidth(label, kScale), py - Image::TextHeight(kScale) / 2.0,
+                 label, kAxis, kScale);
   }
   // x ticks
   std::vector<std::pair<double, std::string>> xticks;
   if (!categories_.empty()) {
-    for (size_t k = 0; k < categories_.size(); ++k) xticks.emplace_back(static_cast<double>(k), categories_[k]);
+    for (size_t k = 0; k < categories_.size(); ++k)
+      xticks.emplace_back(static_cast<double>(k), categories_[k]);
   } else if (log_x_) {
-    for (double decade = std::pow(10.0, std::floor(std::log10(x_min_))); decade <= x_max_ * 1.0001; decade *= 10) {
+    for (double decade = std::pow(10.0, std::floor(std::log10(x_min_))); decade <= x_max_ * 1.0001;
+         decade *= 10) {
       for (const double m : {1.0, 2.0, 5.0}) {
         const double t = m * decade;
         if (t >= x_min_ * 0.9999 && t <= x_max_ * 1.0001) xticks.emplace_back(t, TickLabel(t));
@@ -99,23 +109,28 @@ void Panel::DrawAxes() {
     image_->Text(px - Image::TextWidth(label, kScale) / 2.0, bottom_ + 9, label, kAxis, kScale);
   }
   image_->StrokeRect(left_, top_, right_, bottom_, kAxis, 1.0);
-  image_->Text((left_ + right_ - Image::TextWidth(x_label_, kScale)) / 2.0, bottom_ + 14 + Image::TextHeight(kScale), x_label_,
-               kBlack, kScale);
-  image_->Text(x_ + 8, (top_ + bottom_ + Image::TextWidth(y_label_, kScale)) / 2.0, y_label_, kBlack, kScale, true);
+  image_->Text((left_ + right_ - Image::TextWidth(x_label_, kScale)) / 2.0,
+               bottom_ + 14 + Image::TextHeight(kScale), x_label_, kBlack, kScale);
+  image_->Text(x_ + 8, (top_ + bottom_ + Image::TextWidth(y_label_, kScale)) / 2.0, y_label_,
+               kBlack, kScale, true);
 }
 
-void Panel::LinePlot(const std::vector<double>& xs, const std::vector<double>& ys, Color c, double width) {
+void Panel::LinePlot(const std::vector<double>& xs, const std::vector<double>& ys, Color c,
+                     double width) {
   std::vector<double> px, py;
   for (size_t k = 0; k < std::min(xs.size(), ys.size()); ++k) {
     px.push_back(PixelX(xs[k]));
-    py.push_back(std::clamp(PixelY(ys[k]), static_cast<double>(top_), static_cast<double>(bottom_)));
+    py.push_back(
+        std::clamp(PixelY(ys[k]), static_cast<double>(top_), static_cast<double>(bottom_)));
   }
   image_->Polyline(px, py, c, width);
 }
 
 void Panel::Bar(double x_left, double x_right, double height, Color c, double alpha) {
-  const double base = std::clamp(PixelY(std::max(y_min_, 0.0)), static_cast<double>(top_), static_cast<double>(bottom_));
-  const double top = std::clamp(PixelY(height), static_cast<double>(top_), static_cast<double>(bottom_));
+  const double base = std::clamp(PixelY(std::max(y_min_, 0.0)), static_cast<double>(top_),
+                                 static_cast<double>(bottom_));
+  const double top =
+      std::clamp(PixelY(height), static_cast<double>(top_), static_cast<double>(bottom_));
   image_->FillRect(PixelX(x_left), top, PixelX(x_right), base, c, alpha);
 }
 
@@ -128,15 +143,18 @@ void Panel::HorizontalLine(double y, Color c, double width, double dash) {
 }
 
 void Panel::ShadeX(double x0, double x1, Color c, double alpha) {
-  image_->FillRect(std::max<double>(left_, PixelX(x0)), top_, std::min<double>(right_, PixelX(x1)), bottom_, c, alpha);
+  image_->FillRect(std::max<double>(left_, PixelX(x0)), top_, std::min<double>(right_, PixelX(x1)),
+                   bottom_, c, alpha);
 }
 
 void Panel::Legend(const std::vector<std::pair<std::string, Color>>& entries) {
   int widest = 0;
-  for (const auto& entry : entries) widest = std::max(widest, Image::TextWidth(entry.first, kScale));
+  for (const auto& entry : entries)
+    widest = std::max(widest, Image::TextWidth(entry.first, kScale));
   const int line = Image::TextHeight(kScale) + 6;
   const double x0 = right_ - widest - 44, y0 = top_ + 8;
-  image_->FillRect(x0 - 6, y0 - 6, right_ - 6, y0 + line * static_cast<double>(entries.size()), kWhite, 0.85);
+  image_->FillRect(x0 - 6, y0 - 6, right_ - 6, y0 + line * static_cast<double>(entries.size()),
+                   kWhite, 0.85);
   for (size_t k = 0; k < entries.size(); ++k) {
     const double y = y0 + line * static_cast<double>(k);
     image_->FillRect(x0, y + 2, x0 + 22, y + Image::TextHeight(kScale) - 2, entries[k].second);
@@ -146,7 +164,8 @@ void Panel::Legend(const std::vector<std::pair<std::string, Color>>& entries) {
 
 void Panel::Note(const std::vector<std::string>& lines, Color c) {
   const int line = Image::TextHeight(kScale) + 6;
-  for (size_t k = 0; k < lines.size(); ++k) image_->Text(left_ + 10, top_ + 10 + line * static_cast<double>(k), lines[k], c, kScale);
+  for (size_t k = 0; k < lines.size(); ++k)
+    image_->Text(left_ + 10, top_ + 10 + line * static_cast<double>(k), lines[k], c, kScale);
 }
 
 }  // namespace motionpipe::render

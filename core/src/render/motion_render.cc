@@ -16,11 +16,16 @@ constexpr double kPi = 3.14159265358979323846;
 // Bone colours by body part: global/torso grey-blue, left arm/leg warm, right arm/leg cool.
 Color PartColor(BodyPart part) {
   switch (part) {
-    case BodyPart::kLeftArm: return {213, 94, 0};
-    case BodyPart::kLeftLeg: return {230, 159, 0};
-    case BodyPart::kRightArm: return {0, 114, 178};
-    case BodyPart::kRightLeg: return {86, 180, 233};
-    default: return {70, 70, 90};
+    case BodyPart::kLeftArm:
+      return {213, 94, 0};
+    case BodyPart::kLeftLeg:
+      return {230, 159, 0};
+    case BodyPart::kRightArm:
+      return {0, 114, 178};
+    case BodyPart::kRightLeg:
+      return {86, 180, 233};
+    default:
+      return {70, 70, 90};
   }
 }
 
@@ -44,26 +49,30 @@ struct Camera {
   }
 };
 
-void DrawPanelAt(Image* image, int x0, int y0, const MotionPanel& panel, const std::vector<float>& joints, double seconds,
-                 const RenderOptions& o) {
+void DrawPanelAt(Image* image, int x0, int y0, const MotionPanel& panel,
+                 const std::vector<float>& joints, double seconds, const RenderOptions& o) {
   const int w = o.panel_width, h = o.panel_height;
   const int64_t frames = panel.motion.num_frames();
   if (frames == 0) return;
-  const int64_t f = std::clamp<int64_t>(static_cast<int64_t>(std::floor(seconds * panel.motion.fps)), 0, frames - 1);
+  const int64_t f = std::clamp<int64_t>(
+      static_cast<int64_t>(std::floor(seconds * panel.motion.fps)), 0, frames - 1);
   // The camera follows the pelvis, smoothed over +-0.5 s so that it does not shake.
   const int64_t half = std::max<int64_t>(1, static_cast<int64_t>(panel.motion.fps / 2));
   double px = 0, py = 0;
   int64_t count = 0;
-  for (int64_t k = std::max<int64_t>(0, f - half); k <= std::min(frames - 1, f + half); ++k, ++count) {
+  for (int64_t k = std::max<int64_t>(0, f - half); k <= std::min(frames - 1, f + half);
+       ++k, ++count) {
     px += joints[static_cast<size_t>(k * 66)];
     py += joints[static_cast<size_t>(k * 66 + 1)];
   }
   px /= static_cast<double>(count), py /= static_cast<double>(count);
   const double az = o.azimuth_degrees * kPi / 180, el = o.elevation_degrees * kPi / 180;
-  Camera cam{px, py, 0.9, std::cos(az), std::sin(az), std::cos(el), std::sin(el), o.distance, 1.1 * h, x0 + w / 2, y0 + h * 11 / 20};
+  Camera cam{px,           py,         0.9,     std::cos(az), std::sin(az),    std::cos(el),
+             std::sin(el), o.distance, 1.1 * h, x0 + w / 2,   y0 + h * 11 / 20};
   // Floor grid: 0.5 m lines fixed in the world, within 3 m of the followed point.
   const double step = 0.5, reach = 3.0;
-  const double gx0 = std::floor((px - reach) / step) * step, gy0 = std::floor((py - reach) / step) * step;
+  const double gx0 = std::floor((px - reach) / step) * step,
+               gy0 = std::floor((py - reach) / step) * step;
   for (double g = 0; g <= 2 * reach + 1e-9; g += step) {
     double ax, ay, ad, bx, by, bd;
     cam.Project(gx0 + g, gy0, 0, &ax, &ay, &ad);
@@ -83,16 +92,21 @@ void DrawPanelAt(Image* image, int x0, int y0, const MotionPanel& panel, const s
   std::iota(order.begin(), order.end(), 1);
   std::vector<double> depth(kNumJoints);
   std::vector<double> xs(kNumJoints), ys(kNumJoints);
-  for (int k = 0; k < kNumJoints; ++k) cam.Project(j[3 * k], j[3 * k + 1], j[3 * k + 2], &xs[static_cast<size_t>(k)], &ys[static_cast<size_t>(k)], &depth[static_cast<size_t>(k)]);
+  for (int k = 0; k < kNumJoints; ++k)
+    cam.Project(j[3 * k], j[3 * k + 1], j[3 * k + 2], &xs[static_cast<size_t>(k)],
+                &ys[static_cast<size_t>(k)], &depth[static_cast<size_t>(k)]);
   const auto& parents = skeleton.parents();
   std::sort(order.begin(), order.end(), [&](int a, int b) {
-    return depth[static_cast<size_t>(a)] + depth[static_cast<size_t>(parents[static_cast<size_t>(a)])] >
-           depth[static_cast<size_t>(b)] + depth[static_cast<size_t>(parents[static_cast<size_t>(b)])];
+    return depth[static_cast<size_t>(a)] +
+               depth[static_cast<size_t>(parents[static_cast<size_t>(a)])] >
+           depth[static_cast<size_t>(b)] +
+               depth[static_cast<size_t>(parents[static_cast<size_t>(b)])];
   });
   for (int k : order) {
     const int p = parents[static_cast<size_t>(k)];
     const Color c = PartColor(skeleton.part_of_joint(k));
-    image->Line(xs[static_cast<size_t>(p)], ys[static_cast<size_t>(p)], xs[static_cast<size_t>(k)], ys[static_cast<size_t>(k)], c, 4.0);
+    image->Line(xs[static_cast<size_t>(p)], ys[static_cast<size_t>(p)], xs[static_cast<size_t>(k)],
+                ys[static_cast<size_t>(k)], c, 4.0);
     image->Disc(xs[static_cast<size_t>(k)], ys[static_cast<size_t>(k)], 2.5, c);
   }
   image->Disc(xs[15], ys[15], 6, PartColor(BodyPart::kTorso));  // the head
@@ -125,8 +139,8 @@ void DrawPanelAt(Image* image, int x0, int y0, const MotionPanel& panel, const s
 }
 
 // Draws a panel clipped to its rectangle: into an image of its own, then copied into place.
-void DrawPanel(Image* image, int x0, int y0, const MotionPanel& panel, const std::vector<float>& joints, double seconds,
-               const RenderOptions& o) {
+void DrawPanel(Image* image, int x0, int y0, const MotionPanel& panel,
+               const std::vector<float>& joints, double seconds, const RenderOptions& o) {
   Image own(o.panel_width, o.panel_height);
   DrawPanelAt(&own, 0, 0, panel, joints, seconds, o);
   for (int y = 0; y < own.height(); ++y) {
@@ -212,7 +226,8 @@ void Put16(std::string* out, int v) {
   out->push_back(static_cast<char>((v >> 8) & 0xff));
 }
 
-// Palette index of a colour: the 6x6x6 cube (0..215) or, for near-greys, one of 40 greys (216..255).
+// Palette index of a colour: the 6x6x6 cube (0..215) or, for near-greys, one of 40 greys
+// (216..255).
 uint8_t Quantise(uint8_t r, uint8_t g, uint8_t b) {
   const int hi = std::max({r, g, b}), lo = std::min({r, g, b});
   if (hi - lo < 12) return static_cast<uint8_t>(216 + std::min(39, (r + g + b) / 3 * 40 / 256));
@@ -222,10 +237,14 @@ uint8_t Quantise(uint8_t r, uint8_t g, uint8_t b) {
 
 }  // namespace
 
-Image RenderFrame(const std::vector<MotionPanel>& panels, double seconds, const RenderOptions& options) {
+Image RenderFrame(const std::vector<MotionPanel>& panels, double seconds,
+                  const RenderOptions& options) {
   const auto joints = JointsOf(panels);
-  Image image(options.panel_width * static_cast<int>(std::max<size_t>(1, panels.size())), options.panel_height);
-  for (size_t k = 0; k < panels.size(); ++k) DrawPanel(&image, static_cast<int>(k) * options.panel_width, 0, panels[k], joints[k], seconds, options);
+  Image image(options.panel_width * static_cast<int>(std::max<size_t>(1, panels.size())),
+              options.panel_height);
+  for (size_t k = 0; k < panels.size(); ++k)
+    DrawPanel(&image, static_cast<int>(k) * options.panel_width, 0, panels[k], joints[k], seconds,
+              options);
   return image;
 }
 
@@ -263,17 +282,20 @@ std::string EncodeGif(const std::vector<Image>& frames, int delay_cs) {
     out.push_back('\x08');  // LZW minimum code size
     std::vector<uint8_t> indices(static_cast<size_t>(w) * static_cast<size_t>(h));
     const auto& px = frame.pixels();
-    for (size_t i = 0; i < indices.size(); ++i) indices[i] = Quantise(px[3 * i], px[3 * i + 1], px[3 * i + 2]);
+    for (size_t i = 0; i < indices.size(); ++i)
+      indices[i] = Quantise(px[3 * i], px[3 * i + 1], px[3 * i + 2]);
     GifLzw(&out).Encode(indices);
   }
   out.push_back(';');
   return out;
 }
 
-Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>& panels, const RenderOptions& options) {
+Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>& panels,
+                        const RenderOptions& options) {
   if (panels.empty()) return InvalidArgument(path + ": nothing to render");
   for (const auto& p : panels) {
-    if (p.motion.num_frames() == 0) return InvalidArgument(path + ": '" + p.title + "' has no frames");
+    if (p.motion.num_frames() == 0)
+      return InvalidArgument(path + ": '" + p.title + "' has no frames");
   }
   const auto ends_with = [&](const char* suffix) {
     const std::string s = suffix;
@@ -288,7 +310,8 @@ Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>&
     for (size_t row = 0; row < panels.size(); ++row) {
       for (int k = 0; k < n; ++k) {
         const double t = n == 1 ? 0 : seconds * k / (n - 1);
-        DrawPanel(&image, k * options.panel_width, static_cast<int>(row) * options.panel_height, panels[row], joints[row], t, options);
+        DrawPanel(&image, k * options.panel_width, static_cast<int>(row) * options.panel_height,
+                  panels[row], joints[row], t, options);
       }
     }
     return image.WritePng(path);
@@ -299,14 +322,17 @@ Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>&
     for (int k = 0; k < count; ++k) {
       Image image(options.panel_width * static_cast<int>(panels.size()), options.panel_height);
       for (size_t i = 0; i < panels.size(); ++i) {
-        DrawPanel(&image, static_cast<int>(i) * options.panel_width, 0, panels[i], joints[i], k / options.fps, options);
+        DrawPanel(&image, static_cast<int>(i) * options.panel_width, 0, panels[i], joints[i],
+                  k / options.fps, options);
       }
       frames.push_back(std::move(image));
     }
-    return WriteFileAtomic(path, EncodeGif(frames, std::max(2, static_cast<int>(std::lround(100 / options.fps)))));
+    return WriteFileAtomic(
+        path, EncodeGif(frames, std::max(2, static_cast<int>(std::lround(100 / options.fps)))));
   }
   if (ends_with(".mp4")) {
-    return Unimplemented(path + ": mp4 output is not available (no video encoder here); write .gif or .png");
+    return Unimplemented(
+        path + ": mp4 output is not available (no video encoder here); write .gif or .png");
   }
   return InvalidArgument(path + ": the output must end in .gif (animation) or .png (film strip)");
 }

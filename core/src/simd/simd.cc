@@ -15,17 +15,19 @@ bool HasAvx2() {
 #endif
 }
 
-void RawSimilarity(const float* source, int64_t source_frames, const float* target, int64_t target_frames, int window,
-                   double* raw_rot, double* raw_loc) {
+void RawSimilarity(const float* source, int64_t source_frames, const float* target,
+                   int64_t target_frames, int window, double* raw_rot, double* raw_loc) {
   if (HasAvx2()) {
-    avx2::RawSimilarityKernel(source, source_frames, target, target_frames, window, raw_rot, raw_loc);
+    avx2::RawSimilarityKernel(source, source_frames, target, target_frames, window, raw_rot,
+                              raw_loc);
   } else {
-    generic::RawSimilarityKernel(source, source_frames, target, target_frames, window, raw_rot, raw_loc);
+    generic::RawSimilarityKernel(source, source_frames, target, target_frames, window, raw_rot,
+                                 raw_loc);
   }
 }
 
-void AxisAngleToMatrices(const float* ax, const float* ay, const float* az, int64_t n, float* out, int64_t plane_stride,
-                         int rows) {
+void AxisAngleToMatrices(const float* ax, const float* ay, const float* az, int64_t n, float* out,
+                         int64_t plane_stride, int rows) {
   if (HasAvx2()) {
     avx2::AxisAngleToMatrices(ax, ay, az, n, out, plane_stride, rows);
   } else {
@@ -33,8 +35,8 @@ void AxisAngleToMatrices(const float* ax, const float* ay, const float* az, int6
   }
 }
 
-void ForwardKinematics(const float* local, int64_t frames, const int* parents, const float* offsets, float* global,
-                       float* positions) {
+void ForwardKinematics(const float* local, int64_t frames, const int* parents, const float* offsets,
+                       float* global, float* positions) {
   if (HasAvx2()) {
     avx2::ForwardKinematicsPlanes(local, frames, parents, offsets, global, positions);
   } else {
@@ -42,7 +44,8 @@ void ForwardKinematics(const float* local, int64_t frames, const int* parents, c
   }
 }
 
-void Transpose(const float* src, int64_t src_stride, int64_t rows, int64_t cols, float* dst, int64_t dst_stride) {
+void Transpose(const float* src, int64_t src_stride, int64_t rows, int64_t cols, float* dst,
+               int64_t dst_stride) {
   if (HasAvx2()) {
     avx2::Transpose(src, src_stride, rows, cols, dst, dst_stride);
   } else {
@@ -66,7 +69,8 @@ const SkeletonArrays& TemplateSkeleton() {
   return arrays;
 }
 
-void JointPlanes(const float* poses, const float* trans, int64_t frames, std::vector<float>* scratch, float* out) {
+void JointPlanes(const float* poses, const float* trans, int64_t frames,
+                 std::vector<float>* scratch, float* out) {
   const int64_t n = frames * kNumJoints;
   scratch->resize(static_cast<size_t>(n * (3 + 9 + 9)));
   float* axis = scratch->data();
@@ -87,6 +91,8 @@ void JointPlanes(const float* poses, const float* trans, int64_t frames, std::ve
   }
 }
 
-bool AllFinite(const float* values, int64_t n) { return HasAvx2() ? avx2::AllFinite(values, n) : generic::AllFinite(values, n); }
+bool AllFinite(const float* values, int64_t n) {
+  return HasAvx2() ? avx2::AllFinite(values, n) : generic::AllFinite(values, n);
+}
 
 }  // namespace motionpipe::simd

@@ -32,15 +32,22 @@ std::vector<double> Boundaries(int classes) {
   return out;
 }
 
-json ConfusionJson(const std::vector<std::array<int64_t, 3>>& counts, const std::vector<double>& boundaries) {
+json ConfusionJson(const std::vector<std::array<int64_t, 3>>& counts,
+                   const std::vector<double>& boundaries) {
   json out = json::array();
   for (size_t b = 0; b < boundaries.size(); ++b) {
     const auto [tp, fp, fn] = counts[b];
-    const double precision = tp + fp > 0 ? static_cast<double>(tp) / static_cast<double>(tp + fp) : 0;
+    const double precision =
+        tp + fp > 0 ? static_cast<double>(tp) / static_cast<double>(tp + fp) : 0;
     const double recall = tp + fn > 0 ? static_cast<double>(tp) / static_cast<double>(tp + fn) : 0;
     const double f1 = precision + recall > 0 ? 2 * precision * recall / (precision + recall) : 0;
-    out.push_back({{"below", boundaries[b]}, {"tp", tp}, {"fp", fp}, {"fn", fn},
-                   {"precision", precision}, {"recall", recall}, {"f1", f1}});
+    out.push_back({{"below", boundaries[b]},
+                   {"tp", tp},
+                   {"fp", fp},
+                   {"fn", fn},
+                   {"precision", precision},
+                   {"recall", recall},
+                   {"f1", f1}});
   }
   return out;
 }
@@ -62,21 +69,25 @@ Result<std::vector<TripletFile>> ResolveTripletFiles(const std::vector<std::stri
       files.push_back({input, 0});
       continue;
     }
-    if (!fs::is_directory(input, ec)) return NotFound(input + ": no such triplets file or directory");
+    if (!fs::is_directory(input, ec))
+      return NotFound(input + ": no such triplets file or directory");
     std::vector<std::string> found;
     for (const auto& [dir, pattern_prefix] : std::vector<std::pair<std::string, std::string>>{
              {input + "/motionfix", "triplets-"}, {input, "triplets-"}, {input, ""}}) {
       if (!fs::is_directory(dir, ec)) continue;
       for (const auto& entry : fs::directory_iterator(dir, ec)) {
         const std::string name = entry.path().filename().string();
-        if (entry.is_regular_file() && name.size() > 4 && name.compare(name.size() - 4, 4, ".npz") == 0 &&
+        if (entry.is_regular_file() && name.size() > 4 &&
+            name.compare(name.size() - 4, 4, ".npz") == 0 &&
             name.compare(0, pattern_prefix.size(), pattern_prefix) == 0) {
           found.push_back(entry.path().string());
         }
       }
       if (!found.empty()) break;
     }
-    if (found.empty()) return NotFound(input + ": no triplets files (motionfix/triplets-*.npz, triplets-*.npz or *.npz) found");
+    if (found.empty())
+      return NotFound(
+          input + ": no triplets files (motionfix/triplets-*.npz, triplets-*.npz or *.npz) found");
     std::sort(found.begin(), found.end());
     for (auto& path : found) files.push_back({std::move(path), 0});
   }
@@ -96,7 +107,8 @@ std::vector<ShardSlice> PlanShard(const std::vector<TripletFile>& files, int sha
     int64_t before = 0;
     for (const auto& file : files) {
       const int64_t middle = before + file.count / 2;
-      const int owner = total > 0 ? static_cast<int>(std::min<int64_t>(shards - 1, middle * shards / total)) : 0;
+      const int owner =
+          total > 0 ? static_cast<int>(std::min<int64_t>(shards - 1, middle * shards / total)) : 0;
       if (owner == index && file.count > 0) slices.push_back({file.path, 0, file.count});
       before += file.count;
     }
@@ -113,7 +125,8 @@ std::vector<ShardSlice> PlanShard(const std::vector<TripletFile>& files, int sha
   return slices;
 }
 
-Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices, const SimilarityOptions& options, int threads,
+Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices,
+                                const SimilarityOptions& options, int threads,
                                 const std::string& out_dir) {
   MP_RETURN_IF_ERROR(ValidateOptions(options, "similarity options"));
   const auto started = std::chrono::steady_clock::now();
@@ -150,7 +163,8 @@ Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices, const Sim
       Workspace workspace;
 #pragma omp for schedule(dynamic, 4)
       for (int64_t row = 0; row < n; ++row) {
-        results[static_cast<size_t>(row)] = ComputeSimilarity(SideView(columns.source, row), SideView(columns.target, row), options, &workspace);
+        results[static_cast<size_t>(row)] = ComputeSimilarity(
+            SideView(columns.source, row), SideView(columns.target, row), options, &workspace);
       }
     }
     triplets += n;
@@ -165,8 +179,11 @@ Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices, const Sim
         ++snr_list.infinite;
       }
       if (!r.kept()) {
-        json entry = {{"id", columns.ids[k]}, {"file", slice.path}, {"row", file_row},
-                      {"reason", DropReasonName(r.dropped)}, {"detail", r.detail}};
+        json entry = {{"id", columns.ids[k]},
+                      {"file", slice.path},
+                      {"row", file_row},
+                      {"reason", DropReasonName(r.dropped)},
+                      {"detail", r.detail}};
         if (std::isfinite(r.snr)) entry["snr"] = r.snr;
         dropped.push_back(std::move(entry));
         ++dropped_by_reason[DropReasonName(r.dropped)];
@@ -238,9 +255,11 @@ Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices, const Sim
   ShardReport report;
   report.triplets = triplets;
   report.kept = n;
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  report.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   json by_kind = json::object();
-  for (const auto& [kind, counts] : confusion_by_kind) by_kind[kind] = ConfusionJson(counts, boundaries);
+  for (const auto& [kind, counts] : confusion_by_kind)
+    by_kind[kind] = ConfusionJson(counts, boundaries);
   json stats = {{"triplets", triplets},
                 {"kept", n},
                 {"kept_frames", kept_frames},
@@ -251,9 +270,10 @@ Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices, const Sim
                 {"snr_infinite", snr_list.infinite},
                 {"classes", options.classes},
                 {"class_frames", options.classes > 0 ? json(class_frames) : json::array()},
-                {"edit_range", {{"triplets", ground_truth_triplets},
-                                {"boundaries", ConfusionJson(confusion, boundaries)},
-                                {"by_kind", by_kind}}},
+                {"edit_range",
+                 {{"triplets", ground_truth_triplets},
+                  {"boundaries", ConfusionJson(confusion, boundaries)},
+                  {"by_kind", by_kind}}},
                 {"options", OptionsToJson(options)},
                 {"seconds", report.seconds},
                 {"threads", threads}};
@@ -266,7 +286,8 @@ Result<SimilarityTable> ReadSimilarity(const std::string& path) {
   MP_ASSIGN_OR_RETURN(const NpyArray* format, GetShaped(npz, "format", {}, path));
   MP_ASSIGN_OR_RETURN(auto format_text, format->ToStrings(path));
   if (format_text.front() != kSimilarityFormat) {
-    return DataLoss(path + ": format is '" + format_text.front() + "', expected '" + kSimilarityFormat + "'");
+    return DataLoss(path + ": format is '" + format_text.front() + "', expected '" +
+                    kSimilarityFormat + "'");
   }
   SimilarityTable table;
   MP_ASSIGN_OR_RETURN(const NpyArray* options_a, GetShaped(npz, "options", {}, path));
@@ -287,12 +308,16 @@ Result<SimilarityTable> ReadSimilarity(const std::string& path) {
   MP_ASSIGN_OR_RETURN(table.offsets, offsets->ToInt64(path));
   const int64_t frames = table.offsets.back();
   for (size_t k = 1; k < table.offsets.size(); ++k) {
-    if (table.offsets[k] < table.offsets[k - 1] || table.offsets.front() != 0) return DataLoss(path + ": 'offsets' are not monotone from 0");
+    if (table.offsets[k] < table.offsets[k - 1] || table.offsets.front() != 0)
+      return DataLoss(path + ": 'offsets' are not monotone from 0");
   }
   MP_ASSIGN_OR_RETURN(const NpyArray* snr, GetShaped(npz, "snr", {n}, path));
   MP_ASSIGN_OR_RETURN(table.snr, snr->ToFloat64(path));
-  for (const auto& [name, field] : std::vector<std::pair<const char*, std::vector<float>*>>{
-           {"similarity", &table.similarity}, {"combined", &table.combined}, {"raw_rot", &table.raw_rot}, {"raw_loc", &table.raw_loc}}) {
+  for (const auto& [name, field] :
+       std::vector<std::pair<const char*, std::vector<float>*>>{{"similarity", &table.similarity},
+                                                                {"combined", &table.combined},
+                                                                {"raw_rot", &table.raw_rot},
+                                                                {"raw_loc", &table.raw_loc}}) {
     MP_ASSIGN_OR_RETURN(const NpyArray* a, GetShaped(npz, name, {frames}, path));
     MP_ASSIGN_OR_RETURN(*field, a->ToFloat32(path));
   }
@@ -336,7 +361,8 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
   const double threshold = summary["options"]["snr_threshold"].get<double>();
   {  // MotionSNR histogram, kept and dropped stacked, log x.
     Panel panel(&image, 0, 0, 800, 500);
-    panel.SetTitle("MotionSNR (kappa = " + std::to_string(summary["options"]["kappa"].get<int>()) + ")");
+    panel.SetTitle("MotionSNR (kappa = " + std::to_string(summary["options"]["kappa"].get<int>()) +
+                   ")");
     panel.SetLabels("MotionSNR (log scale)", "triplets");
     const auto& hist = summary["snr_histogram"];
     const auto& edges = hist["edges"];
@@ -344,7 +370,8 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
     for (size_t b = 0; b + 1 < edges.size(); ++b) {
       peak = std::max(peak, hist["kept"][b].get<int64_t>() + hist["dropped"][b].get<int64_t>());
     }
-    panel.SetLimits(edges.front().get<double>(), edges.back().get<double>(), 0, static_cast<double>(peak) * 1.1, true);
+    panel.SetLimits(edges.front().get<double>(), edges.back().get<double>(), 0,
+                    static_cast<double>(peak) * 1.1, true);
     panel.DrawAxes();
     for (size_t b = 0; b + 1 < edges.size(); ++b) {
       const double lo = edges[b].get<double>(), hi = edges[b + 1].get<double>();
@@ -353,7 +380,9 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
       panel.Bar(lo, hi, kept, kPalette[0], 0.9);
     }
     panel.VerticalLine(threshold, kBlack, 2.0, 8);
-    panel.Legend({{"kept", kPalette[0]}, {"dropped", kPalette[1]}, {"threshold " + TickLabel(threshold), kBlack}});
+    panel.Legend({{"kept", kPalette[0]},
+                  {"dropped", kPalette[1]},
+                  {"threshold " + TickLabel(threshold), kBlack}});
   }
   {  // Frames per class (or the counts of each drop reason in regression mode).
     Panel panel(&image, 800, 0, 800, 500);
@@ -381,11 +410,14 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
     panel.SetLimits(-0.6, static_cast<double>(names.size()) - 0.4, 0, std::max(1.0, peak * 1.15));
     panel.DrawAxes();
     for (size_t c = 0; c < values.size(); ++c) {
-      panel.Bar(static_cast<double>(c) - 0.35, static_cast<double>(c) + 0.35, values[c], kPalette[(c + 2) % 7]);
+      panel.Bar(static_cast<double>(c) - 0.35, static_cast<double>(c) + 0.35, values[c],
+                kPalette[(c + 2) % 7]);
     }
-    std::vector<std::string> lines = {"kept " + std::to_string(summary["kept"].get<int64_t>()) + " of " +
-                                      std::to_string(summary["triplets"].get<int64_t>()) + " triplets"};
-    for (const auto& [reason, count] : summary["dropped"].items()) lines.push_back(reason + ": " + std::to_string(count.get<int64_t>()));
+    std::vector<std::string> lines = {"kept " + std::to_string(summary["kept"].get<int64_t>()) +
+                                      " of " + std::to_string(summary["triplets"].get<int64_t>()) +
+                                      " triplets"};
+    for (const auto& [reason, count] : summary["dropped"].items())
+      lines.push_back(reason + ": " + std::to_string(count.get<int64_t>()));
     panel.Note(lines);
   }
   {  // Example curves with the known edited frames shaded.
@@ -396,8 +428,10 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
     std::vector<size_t> picks;
     if (examples != nullptr) {
       const size_t n = examples->ids.size();
-      for (size_t k = 0; k < n && picks.size() < 3; k += std::max<size_t>(1, n / 3)) picks.push_back(k);
-      for (const size_t k : picks) longest = std::max(longest, examples->offsets[k + 1] - examples->offsets[k]);
+      for (size_t k = 0; k < n && picks.size() < 3; k += std::max<size_t>(1, n / 3))
+        picks.push_back(k);
+      for (const size_t k : picks)
+        longest = std::max(longest, examples->offsets[k + 1] - examples->offsets[k]);
     }
     panel.SetLimits(0, static_cast<double>(longest - 1), -0.02, 1.02);
     panel.DrawAxes();
@@ -412,10 +446,12 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
         xs.push_back(static_cast<double>(i - begin));
         ys.push_back(examples->similarity[static_cast<size_t>(i)]);
       }
-      if (examples->edit_start[k] >= 0) panel.ShadeX(examples->edit_start[k], examples->edit_end[k], kPalette[e], 0.12);
+      if (examples->edit_start[k] >= 0)
+        panel.ShadeX(examples->edit_start[k], examples->edit_end[k], kPalette[e], 0.12);
       panel.LinePlot(xs, ys, kPalette[e], 2.5);
       char label[64];
-      std::snprintf(label, sizeof label, "%s (SNR %.1f)", examples->ids[k].c_str(), examples->snr[k]);
+      std::snprintf(label, sizeof label, "%s (SNR %.1f)", examples->ids[k].c_str(),
+                    examples->snr[k]);
       legend.emplace_back(label, kPalette[e]);
     }
     if (!legend.empty()) panel.Legend(legend);
@@ -440,7 +476,8 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
       std::snprintf(text, sizeof text, "  F1        %.3f", b["f1"].get<double>());
       lines.push_back(text);
     }
-    if (er["triplets"].get<int64_t>() == 0) lines = {"no triplet has a known", "edited frame range"};
+    if (er["triplets"].get<int64_t>() == 0)
+      lines = {"no triplet has a known", "edited frame range"};
     panel.Note(lines);
   }
   return image.WritePng(path);
@@ -448,7 +485,8 @@ Status DrawSummary(const json& summary, const SimilarityTable* examples, const s
 
 }  // namespace
 
-Result<json> SummarizeFilter(const std::vector<std::string>& shard_dirs, const std::string& out_dir) {
+Result<json> SummarizeFilter(const std::vector<std::string>& shard_dirs,
+                             const std::string& out_dir) {
   MP_RETURN_IF_ERROR(MakeDirs(out_dir));
   json summary = {{"format", "motionpipe.similarity-summary/1"}};
   int64_t triplets = 0, kept = 0, kept_frames = 0, infinite = 0, ground_truth = 0;
@@ -473,17 +511,21 @@ Result<json> SummarizeFilter(const std::vector<std::string>& shard_dirs, const s
       kept += stats["kept"].get<int64_t>();
       kept_frames += stats["kept_frames"].get<int64_t>();
       infinite += stats["snr_infinite"].get<int64_t>();
-      for (const auto& [reason, count] : stats["dropped"].items()) dropped_by_reason[reason] += count.get<int64_t>();
-      for (const auto& [split, count] : stats["kept_by_split"].items()) kept_by_split[split] += count.get<int64_t>();
+      for (const auto& [reason, count] : stats["dropped"].items())
+        dropped_by_reason[reason] += count.get<int64_t>();
+      for (const auto& [split, count] : stats["kept_by_split"].items())
+        kept_by_split[split] += count.get<int64_t>();
       for (const auto& v : stats["snr"]) snr_all.push_back(v.get<double>());
-      for (const auto& v : stats["snr_kept"]) snr_kept.push_back(static_cast<uint8_t>(v.get<int>()));
+      for (const auto& v : stats["snr_kept"])
+        snr_kept.push_back(static_cast<uint8_t>(v.get<int>()));
       classes = stats["classes"].get<int>();
       const auto& cf = stats["class_frames"];
       class_frames.resize(cf.size(), 0);
       for (size_t c = 0; c < cf.size(); ++c) class_frames[c] += cf[c].get<int64_t>();
       ground_truth += stats["edit_range"]["triplets"].get<int64_t>();
       AddConfusion(stats["edit_range"]["boundaries"], &confusion);
-      for (const auto& [kind, counts] : stats["edit_range"]["by_kind"].items()) AddConfusion(counts, &by_kind[kind]);
+      for (const auto& [kind, counts] : stats["edit_range"]["by_kind"].items())
+        AddConfusion(counts, &by_kind[kind]);
       options = stats["options"];
       seconds += stats["seconds"].get<double>();
     } catch (const json::exception& e) {
@@ -492,9 +534,12 @@ Result<json> SummarizeFilter(const std::vector<std::string>& shard_dirs, const s
     for (const auto& entry : shard_dropped) dropped.push_back(entry);
     std::error_code ec;
     const fs::path relative = fs::relative(fs::path(dir) / "similarity.npz", out_dir, ec);
-    index.push_back({{"path", ec ? dir + "/similarity.npz" : relative.string()}, {"kept", stats["kept"]}});
+    index.push_back(
+        {{"path", ec ? dir + "/similarity.npz" : relative.string()}, {"kept", stats["kept"]}});
   }
-  MP_ASSIGN_OR_RETURN(const SimilarityOptions parsed, OptionsFromJson(options.is_null() ? json::object() : options, "stats.json options"));
+  MP_ASSIGN_OR_RETURN(
+      const SimilarityOptions parsed,
+      OptionsFromJson(options.is_null() ? json::object() : options, "stats.json options"));
   const std::vector<double> boundaries = Boundaries(parsed.classes);
   confusion.resize(boundaries.size(), {0, 0, 0});
 
@@ -508,30 +553,40 @@ Result<json> SummarizeFilter(const std::vector<std::string>& shard_dirs, const s
   std::vector<int64_t> hist_kept(bins, 0), hist_dropped(bins, 0);
   for (size_t k = 0; k < snr_all.size(); ++k) {
     const double v = std::max(1.0, snr_all[k]);
-    const int b = std::clamp(static_cast<int>(std::floor(std::log(v) / std::log(top) * bins)), 0, bins - 1);
+    const int b =
+        std::clamp(static_cast<int>(std::floor(std::log(v) / std::log(top) * bins)), 0, bins - 1);
     ++(snr_kept[k] ? hist_kept : hist_dropped)[static_cast<size_t>(b)];
   }
   json kinds = json::object();
   for (const auto& [kind, counts] : by_kind) kinds[kind] = ConfusionJson(counts, boundaries);
   json fractions = json::array();
   int64_t class_total = std::accumulate(class_frames.begin(), class_frames.end(), int64_t{0});
-  for (const int64_t c : class_frames) fractions.push_back(class_total > 0 ? static_cast<double>(c) / static_cast<double>(class_total) : 0.0);
+  for (const int64_t c : class_frames)
+    fractions.push_back(class_total > 0 ? static_cast<double>(c) / static_cast<double>(class_total)
+                                        : 0.0);
   summary["triplets"] = triplets;
   summary["kept"] = kept;
-  summary["kept_fraction"] = triplets > 0 ? static_cast<double>(kept) / static_cast<double>(triplets) : 0.0;
+  summary["kept_fraction"] =
+      triplets > 0 ? static_cast<double>(kept) / static_cast<double>(triplets) : 0.0;
   summary["kept_frames"] = kept_frames;
   summary["kept_by_split"] = kept_by_split;
   summary["dropped"] = dropped_by_reason;
   summary["classes"] = classes;
   summary["class_frames"] = class_frames;
   summary["class_fractions"] = fractions;
-  summary["snr"] = {{"count", snr_all.size()},     {"infinite", infinite},
+  summary["snr"] = {{"count", snr_all.size()},
+                    {"infinite", infinite},
                     {"min", sorted.empty() ? 0 : sorted.front()},
-                    {"p05", Quantile(sorted, 0.05)}, {"p25", Quantile(sorted, 0.25)},
-                    {"median", Quantile(sorted, 0.5)}, {"p75", Quantile(sorted, 0.75)},
-                    {"p95", Quantile(sorted, 0.95)}, {"max", sorted.empty() ? 0 : sorted.back()}};
+                    {"p05", Quantile(sorted, 0.05)},
+                    {"p25", Quantile(sorted, 0.25)},
+                    {"median", Quantile(sorted, 0.5)},
+                    {"p75", Quantile(sorted, 0.75)},
+                    {"p95", Quantile(sorted, 0.95)},
+                    {"max", sorted.empty() ? 0 : sorted.back()}};
   summary["snr_histogram"] = {{"edges", edges}, {"kept", hist_kept}, {"dropped", hist_dropped}};
-  summary["edit_range"] = {{"triplets", ground_truth}, {"boundaries", ConfusionJson(confusion, boundaries)}, {"by_kind", kinds}};
+  summary["edit_range"] = {{"triplets", ground_truth},
+                           {"boundaries", ConfusionJson(confusion, boundaries)},
+                           {"by_kind", kinds}};
   summary["options"] = options.is_null() ? OptionsToJson(parsed) : options;
   summary["shards"] = shard_dirs.size();
   summary["task_seconds"] = seconds;
@@ -545,9 +600,12 @@ Result<json> SummarizeFilter(const std::vector<std::string>& shard_dirs, const s
       break;
     }
   }
-  MP_RETURN_IF_ERROR(DrawSummary(summary, examples ? &*examples : nullptr, out_dir + "/summary.png"));
+  MP_RETURN_IF_ERROR(
+      DrawSummary(summary, examples ? &*examples : nullptr, out_dir + "/summary.png"));
   MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/dropped.json", dropped.dump(1) + "\n", false));
-  MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/index.json", json({{"format", kSimilarityFormat}, {"shards", index}}).dump(1) + "\n", false));
+  MP_RETURN_IF_ERROR(WriteFileAtomic(
+      out_dir + "/index.json",
+      json({{"format", kSimilarityFormat}, {"shards", index}}).dump(1) + "\n", false));
   MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/summary.json", summary.dump(1) + "\n", false));
   return summary;
 }
@@ -560,21 +618,26 @@ std::string FormatFilterSummary(const json& summary) {
   for (const auto& [reason, count] : summary["dropped"].items()) {
     reasons += (reasons.empty() ? "" : ", ") + reason + " " + std::to_string(count.get<int64_t>());
   }
-  std::snprintf(line, sizeof line, "filtered %lld triplets: kept %lld (%.1f%%), dropped %lld%s%s%s\n",
-                static_cast<long long>(triplets), static_cast<long long>(kept),
-                triplets > 0 ? 100.0 * static_cast<double>(kept) / static_cast<double>(triplets) : 0.0,
-                static_cast<long long>(triplets - kept), reasons.empty() ? "" : " (", reasons.c_str(), reasons.empty() ? "" : ")");
+  std::snprintf(
+      line, sizeof line, "filtered %lld triplets: kept %lld (%.1f%%), dropped %lld%s%s%s\n",
+      static_cast<long long>(triplets), static_cast<long long>(kept),
+      triplets > 0 ? 100.0 * static_cast<double>(kept) / static_cast<double>(triplets) : 0.0,
+      static_cast<long long>(triplets - kept), reasons.empty() ? "" : " (", reasons.c_str(),
+      reasons.empty() ? "" : ")");
   out += line;
   const auto& snr = summary["snr"];
-  std::snprintf(line, sizeof line, "MotionSNR: p05 %.2f, median %.2f, p95 %.2f, %lld infinite (threshold %.3g, kappa %d)\n",
-                snr["p05"].get<double>(), snr["median"].get<double>(), snr["p95"].get<double>(),
-                static_cast<long long>(snr["infinite"].get<int64_t>()), summary["options"]["snr_threshold"].get<double>(),
-                summary["options"]["kappa"].get<int>());
+  std::snprintf(
+      line, sizeof line,
+      "MotionSNR: p05 %.2f, median %.2f, p95 %.2f, %lld infinite (threshold %.3g, kappa %d)\n",
+      snr["p05"].get<double>(), snr["median"].get<double>(), snr["p95"].get<double>(),
+      static_cast<long long>(snr["infinite"].get<int64_t>()),
+      summary["options"]["snr_threshold"].get<double>(), summary["options"]["kappa"].get<int>());
   out += line;
   if (summary["classes"].get<int>() > 0) {
     out += "frames per class:";
     for (size_t c = 0; c < summary["class_fractions"].size(); ++c) {
-      std::snprintf(line, sizeof line, " %zu: %.1f%%", c, 100.0 * summary["class_fractions"][c].get<double>());
+      std::snprintf(line, sizeof line, " %zu: %.1f%%", c,
+                    100.0 * summary["class_fractions"][c].get<double>());
       out += line;
     }
     out += "\n";
@@ -583,11 +646,13 @@ std::string FormatFilterSummary(const json& summary) {
   }
   const auto& er = summary["edit_range"];
   if (er["triplets"].get<int64_t>() > 0) {
-    std::snprintf(line, sizeof line, "known edited frames (%lld triplets):", static_cast<long long>(er["triplets"].get<int64_t>()));
+    std::snprintf(line, sizeof line, "known edited frames (%lld triplets):",
+                  static_cast<long long>(er["triplets"].get<int64_t>()));
     out += line;
     for (const auto& b : er["boundaries"]) {
-      std::snprintf(line, sizeof line, " S^N < %.2f: precision %.3f recall %.3f F1 %.3f;", b["below"].get<double>(),
-                    b["precision"].get<double>(), b["recall"].get<double>(), b["f1"].get<double>());
+      std::snprintf(line, sizeof line, " S^N < %.2f: precision %.3f recall %.3f F1 %.3f;",
+                    b["below"].get<double>(), b["precision"].get<double>(),
+                    b["recall"].get<double>(), b["f1"].get<double>());
       out += line;
     }
     out.back() = '\n';

@@ -9,8 +9,9 @@
 
 namespace motionpipe::similarity {
 
-static_assert(kFrameStride == simd::kFrameStride && kLocOffset == simd::kLocOffset && kRotDims == simd::kRotDims &&
-              kLocDims == simd::kLocDims, "the kernels and the filter must agree on the frame layout");
+static_assert(kFrameStride == simd::kFrameStride && kLocOffset == simd::kLocOffset &&
+                  kRotDims == simd::kRotDims && kLocDims == simd::kLocDims,
+              "the kernels and the filter must agree on the frame layout");
 
 namespace {
 
@@ -23,8 +24,8 @@ int64_t FirstNonFinite(const float* values, int64_t n) {
 }
 
 // Checks one motion; fills `reason`/`detail` on failure.
-bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions& options, DropReason* reason,
-                 std::string* detail) {
+bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions& options,
+                 DropReason* reason, std::string* detail) {
   const std::string who = side;
   if (m.frames == 0) {
     *reason = DropReason::kEmpty;
@@ -33,7 +34,8 @@ bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions&
   }
   if (m.joints < kNumJoints) {
     *reason = DropReason::kBadShape;
-    *detail = who + " poses have " + std::to_string(m.joints) + " joints; the 22 SMPL body joints are needed";
+    *detail = who + " poses have " + std::to_string(m.joints) +
+              " joints; the 22 SMPL body joints are needed";
     return false;
   }
   struct Array {
@@ -44,11 +46,12 @@ bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions&
   };
   for (const Array& a : {Array{m.poses, m.frames * m.joints * 3, m.joints * 3, " poses"},
                          Array{m.trans, m.frames * 3, 3, " translation"},
-                         Array{m.positions, m.positions ? m.frames * m.position_joints * 3 : 0, std::max(1, m.position_joints * 3),
-                               " joint positions"}}) {
+                         Array{m.positions, m.positions ? m.frames * m.position_joints * 3 : 0,
+                               std::max(1, m.position_joints * 3), " joint positions"}}) {
     if (a.count == 0 || simd::AllFinite(a.values, a.count)) continue;
     *reason = DropReason::kNonFinite;
-    *detail = who + a.what + " hold NaN/Inf at frame " + std::to_string(FirstNonFinite(a.values, a.count) / a.per_frame);
+    *detail = who + a.what + " hold NaN/Inf at frame " +
+              std::to_string(FirstNonFinite(a.values, a.count) / a.per_frame);
     return false;
   }
   if (m.frames == 1) {
@@ -58,8 +61,8 @@ bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions&
   }
   if (m.frames < options.min_frames) {
     *reason = DropReason::kTooShort;
-    *detail = who + " motion has " + std::to_string(m.frames) + " frames, fewer than min_frames = " +
-              std::to_string(options.min_frames);
+    *detail = who + " motion has " + std::to_string(m.frames) +
+              " frames, fewer than min_frames = " + std::to_string(options.min_frames);
     return false;
   }
   return true;
@@ -69,23 +72,34 @@ bool CheckMotion(const MotionView& m, const char* side, const SimilarityOptions&
 
 const char* LocationSourceName(LocationSource source) {
   switch (source) {
-    case LocationSource::kAuto: return "auto";
-    case LocationSource::kStored: return "stored";
-    case LocationSource::kForwardKinematics: return "fk";
+    case LocationSource::kAuto:
+      return "auto";
+    case LocationSource::kStored:
+      return "stored";
+    case LocationSource::kForwardKinematics:
+      return "fk";
   }
   return "?";
 }
 
 const char* DropReasonName(DropReason reason) {
   switch (reason) {
-    case DropReason::kNone: return "kept";
-    case DropReason::kBadShape: return "bad_shape";
-    case DropReason::kNonFinite: return "non_finite";
-    case DropReason::kEmpty: return "empty";
-    case DropReason::kOneFrame: return "one_frame";
-    case DropReason::kTooShort: return "too_short";
-    case DropReason::kNoSignal: return "no_signal";
-    case DropReason::kLowSnr: return "low_snr";
+    case DropReason::kNone:
+      return "kept";
+    case DropReason::kBadShape:
+      return "bad_shape";
+    case DropReason::kNonFinite:
+      return "non_finite";
+    case DropReason::kEmpty:
+      return "empty";
+    case DropReason::kOneFrame:
+      return "one_frame";
+    case DropReason::kTooShort:
+      return "too_short";
+    case DropReason::kNoSignal:
+      return "no_signal";
+    case DropReason::kLowSnr:
+      return "low_snr";
   }
   return "?";
 }
@@ -101,7 +115,9 @@ Result<SimilarityOptions> SimilarityPreset(const std::string& name) {
 }
 
 Status ValidateOptions(const SimilarityOptions& o, const std::string& origin) {
-  auto bad = [&](const std::string& key, const std::string& why) { return InvalidArgument(origin + ": " + key + ": " + why); };
+  auto bad = [&](const std::string& key, const std::string& why) {
+    return InvalidArgument(origin + ": " + key + ": " + why);
+  };
   if (o.window < 1) return bad("window", "must be >= 1 (got " + std::to_string(o.window) + ")");
   if (o.smooth < 1) return bad("smooth", "must be >= 1 (1 = no smoothing)");
   if (!(o.w_rot >= 0) || !(o.w_loc >= 0) || !(o.w_rot + o.w_loc > 0)) {
@@ -110,16 +126,19 @@ Status ValidateOptions(const SimilarityOptions& o, const std::string& origin) {
   if (o.kappa < 1) return bad("kappa", "must be >= 1");
   if (!(o.snr_threshold >= 0)) return bad("snr_threshold", "must be >= 0");
   if (o.min_frames < 2) return bad("min_frames", "must be >= 2");
-  if (o.classes != 0 && (o.classes < 2 || o.classes > 255)) return bad("classes", "must be 0 (regression) or 2..255");
+  if (o.classes != 0 && (o.classes < 2 || o.classes > 255))
+    return bad("classes", "must be 0 (regression) or 2..255");
   return Status::Ok();
 }
 
 Result<SimilarityOptions> OptionsFromJson(const nlohmann::json& config, const std::string& origin,
                                           const std::vector<std::string>& ignore) {
-  if (!config.is_object()) return InvalidArgument(origin + ": similarity options must be a mapping");
+  if (!config.is_object())
+    return InvalidArgument(origin + ": similarity options must be a mapping");
   SimilarityOptions options;
   if (config.contains("preset")) {
-    if (!config["preset"].is_string()) return InvalidArgument(origin + ": preset: must be a string");
+    if (!config["preset"].is_string())
+      return InvalidArgument(origin + ": preset: must be a string");
     auto preset = SimilarityPreset(config["preset"].get<std::string>());
     if (!preset.ok()) return InvalidArgument(origin + ": preset: " + preset.status().message());
     options = *preset;
@@ -128,7 +147,8 @@ Result<SimilarityOptions> OptionsFromJson(const nlohmann::json& config, const st
     const std::string key = item.key();
     const nlohmann::json& value = item.value();
     auto need_int = [&](int* field) -> Status {
-      if (!value.is_number_integer()) return InvalidArgument(origin + ": " + key + ": must be an integer");
+      if (!value.is_number_integer())
+        return InvalidArgument(origin + ": " + key + ": must be an integer");
       *field = value.get<int>();
       return Status::Ok();
     };
@@ -171,7 +191,8 @@ Result<SimilarityOptions> OptionsFromJson(const nlohmann::json& config, const st
       }
     } else if (std::find(ignore.begin(), ignore.end(), key) == ignore.end()) {
       return InvalidArgument(origin + ": unknown key '" + key +
-                             "' (known: preset, window, smooth, w_rot, w_loc, kappa, snr_threshold, min_frames, classes, locations)");
+                             "' (known: preset, window, smooth, w_rot, w_loc, kappa, "
+                             "snr_threshold, min_frames, classes, locations)");
     }
   }
   MP_RETURN_IF_ERROR(ValidateOptions(options, origin));
@@ -179,10 +200,14 @@ Result<SimilarityOptions> OptionsFromJson(const nlohmann::json& config, const st
 }
 
 nlohmann::json OptionsToJson(const SimilarityOptions& o) {
-  return {{"window", o.window},         {"smooth", o.smooth},
-          {"w_rot", o.w_rot},           {"w_loc", o.w_loc},
-          {"kappa", o.kappa},           {"snr_threshold", o.snr_threshold},
-          {"min_frames", o.min_frames}, {"classes", o.classes},
+  return {{"window", o.window},
+          {"smooth", o.smooth},
+          {"w_rot", o.w_rot},
+          {"w_loc", o.w_loc},
+          {"kappa", o.kappa},
+          {"snr_threshold", o.snr_threshold},
+          {"min_frames", o.min_frames},
+          {"classes", o.classes},
           {"locations", LocationSourceName(o.locations)}};
 }
 
@@ -210,20 +235,21 @@ void BranchFeatures(const MotionView& motion, bool use_stored, std::vector<float
   // layout changes are blocked 8 x 8 transposes.
   thread_local std::vector<float> scratch;
   scratch.resize(static_cast<size_t>(n * (3 + 9 + 9 + 3)));
-  float* axis = scratch.data();         // [(3 j + a) T + f]
-  float* local = axis + 3 * n;          // [k n + j T + f]
+  float* axis = scratch.data();  // [(3 j + a) T + f]
+  float* local = axis + 3 * n;   // [k n + j T + f]
   float* global = local + 9 * n;
-  float* positions = global + 9 * n;    // [(3 j + a) T + f]
+  float* positions = global + 9 * n;  // [(3 j + a) T + f]
   simd::Transpose(motion.poses, motion.joints * 3, frames, 3 * kNumJoints, axis, frames);
   for (int j = 0; j < kNumJoints; ++j) {
     const float* a = axis + 3 * j * frames;
     // Nine output planes of this joint: the kernel writes element k at out + k * n.
     simd::AxisAngleToMatrices(a, a + frames, a + 2 * frames, frames, local + j * frames, n);
   }
-  // Rotation branch: 6D (first two rows) of joints 1..21, element-major within the frame (entry k of
-  // joints 1..21 at [21 k, 21 k + 21)); the L1 distance does not depend on the order.
+  // Rotation branch: 6D (first two rows) of joints 1..21, element-major within the frame (entry k
+  // of joints 1..21 at [21 k, 21 k + 21)); the L1 distance does not depend on the order.
   for (int k = 0; k < 6; ++k) {
-    simd::Transpose(local + k * n + frames, frames, kNumJoints - 1, frames, features + k * (kNumJoints - 1), kFrameStride);
+    simd::Transpose(local + k * n + frames, frames, kNumJoints - 1, frames,
+                    features + k * (kNumJoints - 1), kFrameStride);
   }
   for (int64_t f = 0; f < frames; ++f) {
     float* row = features + f * kFrameStride;
@@ -247,8 +273,8 @@ void BranchFeatures(const MotionView& motion, bool use_stored, std::vector<float
   simd::Transpose(positions, frames, 3 * kNumJoints, frames, features + kLocOffset, kFrameStride);
 }
 
-void RawSimilarity(const float* source, int64_t source_frames, const float* target, int64_t target_frames, int window,
-                   double* raw_rot, double* raw_loc) {
+void RawSimilarity(const float* source, int64_t source_frames, const float* target,
+                   int64_t target_frames, int window, double* raw_rot, double* raw_loc) {
   simd::RawSimilarity(source, source_frames, target, target_frames, window, raw_rot, raw_loc);
 }
 
@@ -271,8 +297,10 @@ std::vector<double> MovingAverage(const std::vector<double>& x, int m) {
 
 double MotionSnr(const std::vector<double>& similarity, int kappa) {
   std::vector<double> distance(similarity.size());
-  std::transform(similarity.begin(), similarity.end(), distance.begin(), [](double s) { return -s; });
-  const auto k = static_cast<ptrdiff_t>(std::min<size_t>(static_cast<size_t>(kappa), distance.size()));
+  std::transform(similarity.begin(), similarity.end(), distance.begin(),
+                 [](double s) { return -s; });
+  const auto k =
+      static_cast<ptrdiff_t>(std::min<size_t>(static_cast<size_t>(kappa), distance.size()));
   if (k == 0) return std::numeric_limits<double>::quiet_NaN();
   // Eq. (7)-(8): the kappa largest and the kappa smallest distances.
   std::nth_element(distance.begin(), distance.begin() + k - 1, distance.end());
@@ -281,7 +309,9 @@ double MotionSnr(const std::vector<double>& similarity, int kappa) {
   std::nth_element(distance.begin(), distance.end() - k, distance.end());
   double largest = 0;
   for (auto it = distance.end() - k; it != distance.end(); ++it) largest += *it;
-  if (smallest <= 0) return largest > 0 ? std::numeric_limits<double>::infinity() : std::numeric_limits<double>::quiet_NaN();
+  if (smallest <= 0)
+    return largest > 0 ? std::numeric_limits<double>::infinity()
+                       : std::numeric_limits<double>::quiet_NaN();
   return largest / smallest;  // the kappa's cancel: a ratio of means
 }
 
@@ -301,8 +331,8 @@ uint8_t Quantize(double normalized, int classes) {
   return static_cast<uint8_t>(std::clamp(bin, 0.0, static_cast<double>(classes - 1)));
 }
 
-SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& target, const SimilarityOptions& options,
-                                   Workspace* workspace) {
+SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& target,
+                                   const SimilarityOptions& options, Workspace* workspace) {
   SimilarityResult result;
   result.snr = std::numeric_limits<double>::quiet_NaN();
   if (!CheckMotion(source, "source", options, &result.dropped, &result.detail) ||
@@ -311,19 +341,26 @@ SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& t
   }
   if (source.joints != target.joints) {
     result.dropped = DropReason::kBadShape;
-    result.detail = "source has " + std::to_string(source.joints) + " joints, target " + std::to_string(target.joints);
+    result.detail = "source has " + std::to_string(source.joints) + " joints, target " +
+                    std::to_string(target.joints);
     return result;
   }
-  const bool both_stored = source.positions && target.positions && source.position_joints >= kNumJoints &&
+  const bool both_stored = source.positions && target.positions &&
+                           source.position_joints >= kNumJoints &&
                            target.position_joints >= kNumJoints;
   bool use_stored = false;
   switch (options.locations) {
-    case LocationSource::kAuto: use_stored = both_stored; break;
-    case LocationSource::kForwardKinematics: use_stored = false; break;
+    case LocationSource::kAuto:
+      use_stored = both_stored;
+      break;
+    case LocationSource::kForwardKinematics:
+      use_stored = false;
+      break;
     case LocationSource::kStored:
       if (!both_stored) {
         result.dropped = DropReason::kBadShape;
-        result.detail = "locations: stored, but the triplet has no stored positions of the 22 body joints";
+        result.detail =
+            "locations: stored, but the triplet has no stored positions of the 22 body joints";
         return result;
       }
       use_stored = true;
@@ -331,8 +368,8 @@ SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& t
   }
   if (use_stored && source.position_joints != target.position_joints) {
     result.dropped = DropReason::kBadShape;
-    result.detail = "source positions have " + std::to_string(source.position_joints) + " joints, target " +
-                    std::to_string(target.position_joints);
+    result.detail = "source positions have " + std::to_string(source.position_joints) +
+                    " joints, target " + std::to_string(target.position_joints);
     return result;
   }
 
@@ -341,13 +378,14 @@ SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& t
   const auto ts = static_cast<size_t>(source.frames);
   result.raw_rot.resize(ts);
   result.raw_loc.resize(ts);
-  RawSimilarity(workspace->source.data(), source.frames, workspace->target.data(), target.frames, options.window,
-                result.raw_rot.data(), result.raw_loc.data());
+  RawSimilarity(workspace->source.data(), source.frames, workspace->target.data(), target.frames,
+                options.window, result.raw_rot.data(), result.raw_loc.data());
   // Eq. (5) on the smoothed branches.
   const std::vector<double> rot = MovingAverage(result.raw_rot, options.smooth);
   const std::vector<double> loc = MovingAverage(result.raw_loc, options.smooth);
   result.combined.resize(ts);
-  for (size_t i = 0; i < ts; ++i) result.combined[i] = options.w_rot * rot[i] + options.w_loc * loc[i];
+  for (size_t i = 0; i < ts; ++i)
+    result.combined[i] = options.w_rot * rot[i] + options.w_loc * loc[i];
 
   result.snr = MotionSnr(result.combined, options.kappa);
   if (std::isnan(result.snr) || !MinMaxNormalize(result.combined, &result.normalized)) {
@@ -358,13 +396,15 @@ SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& t
   if (result.snr < options.snr_threshold) {
     result.dropped = DropReason::kLowSnr;
     char text[96];
-    std::snprintf(text, sizeof text, "MotionSNR %.4g < threshold %.4g", result.snr, options.snr_threshold);
+    std::snprintf(text, sizeof text, "MotionSNR %.4g < threshold %.4g", result.snr,
+                  options.snr_threshold);
     result.detail = text;
     return result;
   }
   if (options.classes > 0) {
     result.classes.resize(ts);
-    for (size_t i = 0; i < ts; ++i) result.classes[i] = Quantize(result.normalized[i], options.classes);
+    for (size_t i = 0; i < ts; ++i)
+      result.classes[i] = Quantize(result.normalized[i], options.classes);
   }
   return result;
 }

@@ -13,8 +13,8 @@ Result<CropMode> ParseCropMode(const std::string& name) {
   return InvalidArgument("crop: '" + name + "' (known: first, centre)");
 }
 
-CompositionPlan PlanComposition(int64_t first_frames, PartSet first_parts, int64_t second_frames, PartSet second_parts,
-                                CropMode crop) {
+CompositionPlan PlanComposition(int64_t first_frames, PartSet first_parts, int64_t second_frames,
+                                PartSet second_parts, CropMode crop) {
   CompositionPlan plan;
   // Step 2: B is the one with fewer parts.
   plan.swapped = PartCount(second_parts) > PartCount(first_parts);
@@ -35,7 +35,8 @@ CompositionPlan PlanComposition(int64_t first_frames, PartSet first_parts, int64
   const auto& part_joints = Skeleton::Smpl22().part_joints();
   for (int part = 0; part < kNumBodyParts; ++part) {
     if (!(plan.from_b & (1u << part))) continue;
-    for (const int joint : part_joints[static_cast<size_t>(part)]) plan.joint_from_b[static_cast<size_t>(joint)] = true;
+    for (const int joint : part_joints[static_cast<size_t>(part)])
+      plan.joint_from_b[static_cast<size_t>(joint)] = true;
   }
   return plan;
 }
@@ -58,19 +59,22 @@ Motion ApplyComposition(const CompositionPlan& plan, const Motion& first, const 
       const bool from_b = plan.joint_from_b[static_cast<size_t>(j)];
       int end = j + 1;
       while (end < kNumJoints && plan.joint_from_b[static_cast<size_t>(end)] == from_b) ++end;
-      std::memcpy(dst + 3 * j, (from_b ? pb : pa) + 3 * j, sizeof(float) * 3 * static_cast<size_t>(end - j));
+      std::memcpy(dst + 3 * j, (from_b ? pb : pa) + 3 * j,
+                  sizeof(float) * 3 * static_cast<size_t>(end - j));
       j = end;
     }
   }
   const Motion& root = plan.root_from_b ? b : a;
   const int64_t root_start = plan.root_from_b ? plan.b_start : plan.a_start;
-  std::memcpy(out.trans.data(), root.trans.data() + root_start * 3, sizeof(float) * 3 * static_cast<size_t>(frames));
+  std::memcpy(out.trans.data(), root.trans.data() + root_start * 3,
+              sizeof(float) * 3 * static_cast<size_t>(frames));
   return out;
 }
 
-Motion Compose(const Motion& first, PartSet first_parts, const Motion& second, PartSet second_parts, CropMode crop,
-               CompositionPlan* plan_out) {
-  const CompositionPlan plan = PlanComposition(first.num_frames(), first_parts, second.num_frames(), second_parts, crop);
+Motion Compose(const Motion& first, PartSet first_parts, const Motion& second, PartSet second_parts,
+               CropMode crop, CompositionPlan* plan_out) {
+  const CompositionPlan plan =
+      PlanComposition(first.num_frames(), first_parts, second.num_frames(), second_parts, crop);
   if (plan_out) *plan_out = plan;
   return ApplyComposition(plan, first, second);
 }

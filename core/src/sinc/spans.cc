@@ -20,8 +20,8 @@ Motion SpanTable::MotionOf(int64_t i) const {
   return m;
 }
 
-void SpanTable::Add(const std::string& id, const std::string& split, const std::string& source, const Motion& motion,
-                    const std::string& a, const std::string& b) {
+void SpanTable::Add(const std::string& id, const std::string& split, const std::string& source,
+                    const Motion& motion, const std::string& a, const std::string& b) {
   ids.push_back(id);
   splits.push_back(split);
   sources.push_back(source);
@@ -37,8 +37,9 @@ void SpanTable::Add(const std::string& id, const std::string& split, const std::
   trans = own_trans.data();
 }
 
-Result<SpanTable> ExtractBabelSpans(const std::vector<std::string>& babel_files, const std::string& amass_root,
-                                    const SpanExtraction& options, int64_t* skipped, std::string* first_problem) {
+Result<SpanTable> ExtractBabelSpans(const std::vector<std::string>& babel_files,
+                                    const std::string& amass_root, const SpanExtraction& options,
+                                    int64_t* skipped, std::string* first_problem) {
   SpanTable table;
   int64_t missing = 0;
   BabelSpanOptions sweep = options.sweep;
@@ -67,7 +68,8 @@ Result<SpanTable> ExtractBabelSpans(const std::vector<std::string>& babel_files,
         const int64_t end = std::min<int64_t>(span.end_frame, motion.num_frames());
         if (end - span.start_frame < sweep.min_frames) continue;
         const Motion cut = SliceFrames(motion, span.start_frame, end);
-        table.Add(seq.sid + "/" + std::to_string(n++), split, seq.feat_p + ":" + std::to_string(span.start_frame) + "-" + std::to_string(end),
+        table.Add(seq.sid + "/" + std::to_string(n++), split,
+                  seq.feat_p + ":" + std::to_string(span.start_frame) + "-" + std::to_string(end),
                   cut, span.labels[0], span.labels.size() > 1 ? span.labels[1] : "");
       }
     }
@@ -91,8 +93,11 @@ Status WriteSpans(const std::string& path, const SpanTable& t) {
   npz.Add("offsets", NpyArray::Int64({n + 1}, t.offsets));
   npz.Add("parts_a", NpyArray::UInt8({n}, t.parts_a));
   npz.Add("parts_b", NpyArray::UInt8({n}, t.parts_b));
-  npz.Add("poses", NpyArray::Float32({frames, kNumJoints, 3}, std::vector<float>(t.poses, t.poses + frames * kNumJoints * 3)));
-  npz.Add("trans", NpyArray::Float32({frames, 3}, std::vector<float>(t.trans, t.trans + frames * 3)));
+  npz.Add("poses",
+          NpyArray::Float32({frames, kNumJoints, 3},
+                            std::vector<float>(t.poses, t.poses + frames * kNumJoints * 3)));
+  npz.Add("trans",
+          NpyArray::Float32({frames, 3}, std::vector<float>(t.trans, t.trans + frames * 3)));
   return WriteNpz(path, npz, false);
 }
 
@@ -108,12 +113,16 @@ Result<SpanTable> ReadSpans(const std::string& path) {
   views.reserve(entries.size());
   for (const ZipEntry& entry : entries) {
     std::string name = entry.name;
-    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0) name.resize(name.size() - 4);
+    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0)
+      name.resize(name.size() - 4);
     if ((name == "poses" || name == "trans") && entry.method == 0) {
       MP_RETURN_IF_ERROR(CheckZipCrc(entry, entry.payload, path));
-      MP_ASSIGN_OR_RETURN(NpyView view, ParseNpyView(entry.payload, path + ": array '" + name + "'"));
-      if (view.dtype != DType::kFloat32 || !view.Native() || reinterpret_cast<uintptr_t>(view.data.data()) % 4 != 0) {
-        return DataLoss(path + ": array '" + name + "' must be native float32 (write the file with motionpipe)");
+      MP_ASSIGN_OR_RETURN(NpyView view,
+                          ParseNpyView(entry.payload, path + ": array '" + name + "'"));
+      if (view.dtype != DType::kFloat32 || !view.Native() ||
+          reinterpret_cast<uintptr_t>(view.data.data()) % 4 != 0) {
+        return DataLoss(path + ": array '" + name +
+                        "' must be native float32 (write the file with motionpipe)");
       }
       views.push_back(view);
       (name == "poses" ? poses : trans) = &views.back();
@@ -125,12 +134,17 @@ Result<SpanTable> ReadSpans(const std::string& path) {
   }
   MP_ASSIGN_OR_RETURN(const NpyArray* format, GetShaped(small, "format", {}, path));
   MP_ASSIGN_OR_RETURN(auto format_text, format->ToStrings(path));
-  if (format_text.front() != kSpansFormat) return DataLoss(path + ": format is '" + format_text.front() + "', expected '" + kSpansFormat + "'");
+  if (format_text.front() != kSpansFormat)
+    return DataLoss(path + ": format is '" + format_text.front() + "', expected '" + kSpansFormat +
+                    "'");
   MP_ASSIGN_OR_RETURN(const NpyArray* ids, GetShaped(small, "ids", {-1}, path));
   const int64_t n = ids->shape[0];
   MP_ASSIGN_OR_RETURN(t.ids, ids->ToStrings(path));
-  for (const auto& [name, field] : std::vector<std::pair<const char*, std::vector<std::string>*>>{
-           {"splits", &t.splits}, {"sources", &t.sources}, {"text_a", &t.text_a}, {"text_b", &t.text_b}}) {
+  for (const auto& [name, field] :
+       std::vector<std::pair<const char*, std::vector<std::string>*>>{{"splits", &t.splits},
+                                                                      {"sources", &t.sources},
+                                                                      {"text_a", &t.text_a},
+                                                                      {"text_b", &t.text_b}}) {
     MP_ASSIGN_OR_RETURN(const NpyArray* a, GetShaped(small, name, {n}, path));
     MP_ASSIGN_OR_RETURN(*field, a->ToStrings(path + ": '" + name + "'"));
   }
@@ -141,7 +155,8 @@ Result<SpanTable> ReadSpans(const std::string& path) {
   MP_ASSIGN_OR_RETURN(t.fps, fps->ToFloat64(path));
   MP_ASSIGN_OR_RETURN(const NpyArray* offsets, GetShaped(small, "offsets", {n + 1}, path));
   MP_ASSIGN_OR_RETURN(t.offsets, offsets->ToInt64(path));
-  for (const auto& [name, field] : std::vector<std::pair<const char*, std::vector<uint8_t>*>>{{"parts_a", &t.parts_a}, {"parts_b", &t.parts_b}}) {
+  for (const auto& [name, field] : std::vector<std::pair<const char*, std::vector<uint8_t>*>>{
+           {"parts_a", &t.parts_a}, {"parts_b", &t.parts_b}}) {
     MP_ASSIGN_OR_RETURN(const NpyArray* a, GetShaped(small, name, {n}, path));
     MP_ASSIGN_OR_RETURN(auto values, a->ToInt64(path));
     field->assign(values.begin(), values.end());

@@ -3,11 +3,10 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-#include <cstdio>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 
 #include "../simd/simd.h"
 #include "motionpipe/base/file.h"
@@ -33,7 +32,8 @@ int64_t CurrentRssBytes() {
   long pages = 0, resident = 0;
   const int read = std::fscanf(f, "%ld %ld", &pages, &resident);
   std::fclose(f);
-  return read == 2 ? static_cast<int64_t>(resident) * static_cast<int64_t>(sysconf(_SC_PAGESIZE)) : 0;
+  return read == 2 ? static_cast<int64_t>(resident) * static_cast<int64_t>(sysconf(_SC_PAGESIZE))
+                   : 0;
 }
 
 // A random non-empty subset of `allowed`.
@@ -99,7 +99,10 @@ CompositionScores ScoreComposition(const Motion& motion) {
     }
   }
   scores.penetration = std::max(0.f, penetration);
-  scores.skate_ratio = contacts > 0 ? static_cast<float>(static_cast<double>(skating) / static_cast<double>(contacts)) : 0.f;
+  scores.skate_ratio =
+      contacts > 0
+          ? static_cast<float>(static_cast<double>(skating) / static_cast<double>(contacts))
+          : 0.f;
   // Per frame at 30 fps: scale the step of other rates.
   scores.max_step = std::sqrt(step) * static_cast<float>(fps / 30.0);
   return scores;
@@ -133,11 +136,13 @@ Result<SynthOptions> SynthOptionsFromJson(const nlohmann::json& p, const std::st
   } catch (const nlohmann::json::exception& e) {
     return InvalidArgument(origin + ": " + e.what());
   }
-  if (o.max_attempts_per_pair < 1) return InvalidArgument(origin + ": max_attempts_per_pair must be >= 1");
+  if (o.max_attempts_per_pair < 1)
+    return InvalidArgument(origin + ": max_attempts_per_pair must be >= 1");
   return o;
 }
 
-PairSampler::PairSampler(const SpanTable& table, const SynthOptions& options) : table_(table), options_(options) {
+PairSampler::PairSampler(const SpanTable& table, const SynthOptions& options)
+    : table_(table), options_(options) {
   for (int64_t i = 0; i < table.size(); ++i) {
     if (!table.single(i)) continue;
     if (!options.split.empty() && table.splits[static_cast<size_t>(i)] != options.split) continue;
@@ -153,7 +158,8 @@ bool PairSampler::DrawPartner(int32_t first, Rng& rng, PairRecipe* recipe) const
   if (options_.parts == PartSource::kRandom) {
     if (singles_.size() < 2) return false;
     int32_t second = first;
-    while (second == first) second = singles_[static_cast<size_t>(rng.Int(0, static_cast<int>(singles_.size()) - 1))];
+    while (second == first)
+      second = singles_[static_cast<size_t>(rng.Int(0, static_cast<int>(singles_.size()) - 1))];
     recipe->second = second;
     // A random non-empty part set for the first, then one from the remaining parts for the second.
     PartSet a = RandomSubset(kAllParts, rng);
@@ -166,7 +172,8 @@ bool PairSampler::DrawPartner(int32_t first, Rng& rng, PairRecipe* recipe) const
     double total = 0;
     for (int b = 1; b < 64; ++b) {
       if (!Compatible(a, static_cast<PartSet>(b))) continue;
-      weights[static_cast<size_t>(b)] = static_cast<double>(by_parts_[static_cast<size_t>(b)].size());
+      weights[static_cast<size_t>(b)] =
+          static_cast<double>(by_parts_[static_cast<size_t>(b)].size());
       total += weights[static_cast<size_t>(b)];
     }
     if (total == 0) return false;
@@ -184,7 +191,8 @@ bool PairSampler::Draw(Rng& rng, PairRecipe* recipe) const {
   if (singles_.empty()) return false;
   // A few tries: a single whose parts leave nothing compatible is redrawn.
   for (int attempt = 0; attempt < 64; ++attempt) {
-    const int32_t first = singles_[static_cast<size_t>(rng.Int(0, static_cast<int>(singles_.size()) - 1))];
+    const int32_t first =
+        singles_[static_cast<size_t>(rng.Int(0, static_cast<int>(singles_.size()) - 1))];
     if (DrawPartner(first, rng, recipe)) return true;
   }
   return false;
@@ -194,7 +202,8 @@ Motion MaterialiseMotion(const SpanTable& table, const PairRecipe& recipe, CropM
   // Views would do; copies keep the composition code simple and the cost is small next to FK.
   thread_local Motion a, b;
   auto fill = [&](int32_t i, Motion* m) {
-    const int64_t f0 = table.offsets[static_cast<size_t>(i)], f1 = table.offsets[static_cast<size_t>(i) + 1];
+    const int64_t f0 = table.offsets[static_cast<size_t>(i)],
+                  f1 = table.offsets[static_cast<size_t>(i) + 1];
     m->fps = table.fps[static_cast<size_t>(i)];
     m->poses.assign(table.poses + f0 * kNumJoints * 3, table.poses + f1 * kNumJoints * 3);
     m->trans.assign(table.trans + f0 * 3, table.trans + f1 * 3);
@@ -204,17 +213,23 @@ Motion MaterialiseMotion(const SpanTable& table, const PairRecipe& recipe, CropM
   return Compose(a, recipe.first_parts, b, recipe.second_parts, crop);
 }
 
-int64_t MaterialiseFeatures(const SpanTable& table, const PairRecipe& recipe, CropMode crop, float* out) {
-  const CompositionPlan plan = PlanComposition(table.frames(recipe.first), recipe.first_parts, table.frames(recipe.second),
-                                               recipe.second_parts, crop);
+int64_t MaterialiseFeatures(const SpanTable& table, const PairRecipe& recipe, CropMode crop,
+                            float* out) {
+  const CompositionPlan plan =
+      PlanComposition(table.frames(recipe.first), recipe.first_parts, table.frames(recipe.second),
+                      recipe.second_parts, crop);
   const int32_t a = plan.swapped ? recipe.second : recipe.first;
   const int32_t b = plan.swapped ? recipe.first : recipe.second;
-  const float* a_poses = table.poses + (table.offsets[static_cast<size_t>(a)] + plan.a_start) * kNumJoints * 3;
-  const float* b_poses = table.poses + (table.offsets[static_cast<size_t>(b)] + plan.b_start) * kNumJoints * 3;
+  const float* a_poses =
+      table.poses + (table.offsets[static_cast<size_t>(a)] + plan.a_start) * kNumJoints * 3;
+  const float* b_poses =
+      table.poses + (table.offsets[static_cast<size_t>(b)] + plan.b_start) * kNumJoints * 3;
   const float* joints[kNumJoints];
-  for (int j = 0; j < kNumJoints; ++j) joints[j] = plan.joint_from_b[static_cast<size_t>(j)] ? b_poses : a_poses;
-  const float* trans = plan.root_from_b ? table.trans + (table.offsets[static_cast<size_t>(b)] + plan.b_start) * 3
-                                        : table.trans + (table.offsets[static_cast<size_t>(a)] + plan.a_start) * 3;
+  for (int j = 0; j < kNumJoints; ++j)
+    joints[j] = plan.joint_from_b[static_cast<size_t>(j)] ? b_poses : a_poses;
+  const float* trans =
+      plan.root_from_b ? table.trans + (table.offsets[static_cast<size_t>(b)] + plan.b_start) * 3
+                       : table.trans + (table.offsets[static_cast<size_t>(a)] + plan.a_start) * 3;
   EncodeTemos135FastJoints(joints, trans, plan.frames, out);
   return plan.frames;
 }
@@ -226,13 +241,15 @@ std::string MaterialiseText(const SpanTable& table, const PairRecipe& recipe) {
   return recipe.text_swapped ? PairText(b, a, pattern) : PairText(a, b, pattern);
 }
 
-Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOptions& options, int64_t index, int64_t count,
-                                         int threads, const std::string& out_dir) {
+Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOptions& options,
+                                         int64_t index, int64_t count, int threads,
+                                         const std::string& out_dir) {
   const auto started = std::chrono::steady_clock::now();
   SynthShardReport report;
   const PairSampler sampler(table, options);
   if (sampler.singles() < 2) {
-    return InvalidArgument("synth: fewer than two labelled single actions in split '" + options.split + "' of the spans table");
+    return InvalidArgument("synth: fewer than two labelled single actions in split '" +
+                           options.split + "' of the spans table");
   }
   Rng rng(MixSeed(options.seed, static_cast<uint64_t>(index)));
   std::vector<PairRecipe> accepted;
@@ -241,13 +258,16 @@ Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOpti
   const int64_t max_candidates = count * options.max_attempts_per_pair;
   while (static_cast<int64_t>(accepted.size()) < count) {
     if (report.candidates >= max_candidates) {
-      return Internal("synth: only " + std::to_string(accepted.size()) + " of " + std::to_string(count) + " pairs passed the checks after " +
-                      std::to_string(report.candidates) + " candidates; loosen the checks or check the spans");
+      return Internal("synth: only " + std::to_string(accepted.size()) + " of " +
+                      std::to_string(count) + " pairs passed the checks after " +
+                      std::to_string(report.candidates) +
+                      " candidates; loosen the checks or check the spans");
     }
     // Draw a batch in order, check it in parallel, accept in draw order.
     std::vector<PairRecipe> candidates(static_cast<size_t>(batch));
     for (auto& c : candidates) {
-      if (!sampler.Draw(rng, &c)) return InvalidArgument("synth: no two single actions have compatible body parts");
+      if (!sampler.Draw(rng, &c))
+        return InvalidArgument("synth: no two single actions have compatible body parts");
     }
     std::vector<std::string> failed(candidates.size());
 #pragma omp parallel for schedule(dynamic, 8) num_threads(std::max(1, threads))
@@ -256,7 +276,8 @@ Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOpti
       c.scores = ScoreComposition(MaterialiseMotion(table, c, options.crop));
       failed[static_cast<size_t>(k)] = FailedCheck(c.scores, options.checks);
     }
-    for (size_t k = 0; k < candidates.size() && static_cast<int64_t>(accepted.size()) < count; ++k) {
+    for (size_t k = 0; k < candidates.size() && static_cast<int64_t>(accepted.size()) < count;
+         ++k) {
       ++report.candidates;
       if (!failed[k].empty()) {
         ++report.dropped[failed[k]];
@@ -298,36 +319,41 @@ Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOpti
   const std::string bytes = SerializeNpz(npz, false);
   MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/pairs.npz", bytes, false));
   report.bytes = static_cast<int64_t>(bytes.size());
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  report.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   report.peak_rss_bytes = PeakRssBytes();
   report.rss_bytes = CurrentRssBytes();
-  const nlohmann::json stats = {{"index", index},
-                                {"pairs", report.pairs},
-                                {"candidates", report.candidates},
-                                {"dropped", report.dropped},
-                                {"seconds", report.seconds},
-                                {"bytes", report.bytes},
-                                {"peak_rss_bytes", report.peak_rss_bytes},
-                                {"rss_bytes", report.rss_bytes},
-                                {"pid", static_cast<int64_t>(::getpid())},
-                                {"singles", sampler.singles()},
-                                {"parts", options.parts == PartSource::kLabels ? "labels" : "random"},
-                                {"crop", CropModeName(options.crop)},
-                                {"seed", options.seed}};
+  const nlohmann::json stats = {
+      {"index", index},
+      {"pairs", report.pairs},
+      {"candidates", report.candidates},
+      {"dropped", report.dropped},
+      {"seconds", report.seconds},
+      {"bytes", report.bytes},
+      {"peak_rss_bytes", report.peak_rss_bytes},
+      {"rss_bytes", report.rss_bytes},
+      {"pid", static_cast<int64_t>(::getpid())},
+      {"singles", sampler.singles()},
+      {"parts", options.parts == PartSource::kLabels ? "labels" : "random"},
+      {"crop", CropModeName(options.crop)},
+      {"seed", options.seed}};
   MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/stats.json", stats.dump(1) + "\n", false));
   return report;
 }
 
-Status ExportPairsAsClips(const SpanTable& table, const std::vector<PairRecipe>& recipes, CropMode crop, const std::string& path) {
+Status ExportPairsAsClips(const SpanTable& table, const std::vector<PairRecipe>& recipes,
+                          CropMode crop, const std::string& path) {
   std::vector<Clip> clips;
   for (size_t k = 0; k < recipes.size(); ++k) {
     const PairRecipe& r = recipes[k];
     Clip clip;
     clip.id = "pair" + std::to_string(k);
-    clip.source = "sinc:" + table.ids[static_cast<size_t>(r.first)] + "+" + table.ids[static_cast<size_t>(r.second)];
+    clip.source = "sinc:" + table.ids[static_cast<size_t>(r.first)] + "+" +
+                  table.ids[static_cast<size_t>(r.second)];
     clip.motion = MaterialiseMotion(table, r, crop);
     clip.texts = {MaterialiseText(table, r)};
-    CompositionPlan plan = PlanComposition(table.frames(r.first), r.first_parts, table.frames(r.second), r.second_parts, crop);
+    CompositionPlan plan = PlanComposition(table.frames(r.first), r.first_parts,
+                                           table.frames(r.second), r.second_parts, crop);
     Segment a, b;
     a.start_frame = b.start_frame = 0;
     a.end_frame = b.end_frame = static_cast<int32_t>(plan.frames);
@@ -341,18 +367,20 @@ Status ExportPairsAsClips(const SpanTable& table, const std::vector<PairRecipe>&
   return WriteClips(path, clips, false);
 }
 
-Status ExportPairsAsFeatures(const SpanTable& table, const std::vector<PairRecipe>& recipes, CropMode crop,
-                             const std::string& path, int threads) {
+Status ExportPairsAsFeatures(const SpanTable& table, const std::vector<PairRecipe>& recipes,
+                             CropMode crop, const std::string& path, int threads) {
   const auto n = static_cast<int64_t>(recipes.size());
   std::vector<int64_t> offsets(static_cast<size_t>(n) + 1, 0);
   for (int64_t k = 0; k < n; ++k) {
     const PairRecipe& r = recipes[static_cast<size_t>(k)];
-    offsets[static_cast<size_t>(k) + 1] = offsets[static_cast<size_t>(k)] + std::min(table.frames(r.first), table.frames(r.second));
+    offsets[static_cast<size_t>(k) + 1] =
+        offsets[static_cast<size_t>(k)] + std::min(table.frames(r.first), table.frames(r.second));
   }
   std::vector<float> features(static_cast<size_t>(offsets.back() * kTemosFeatureDim));
 #pragma omp parallel for schedule(dynamic, 16) num_threads(std::max(1, threads))
   for (int64_t k = 0; k < n; ++k) {
-    MaterialiseFeatures(table, recipes[static_cast<size_t>(k)], crop, features.data() + offsets[static_cast<size_t>(k)] * kTemosFeatureDim);
+    MaterialiseFeatures(table, recipes[static_cast<size_t>(k)], crop,
+                        features.data() + offsets[static_cast<size_t>(k)] * kTemosFeatureDim);
   }
   std::vector<std::string> texts;
   std::vector<int32_t> first, second;
@@ -380,7 +408,9 @@ Result<PairShard> ReadPairs(const std::string& path) {
   MP_ASSIGN_OR_RETURN(const Npz npz, ReadNpz(path));
   MP_ASSIGN_OR_RETURN(const NpyArray* format, GetShaped(npz, "format", {}, path));
   MP_ASSIGN_OR_RETURN(auto format_text, format->ToStrings(path));
-  if (format_text.front() != kPairsFormat) return DataLoss(path + ": format is '" + format_text.front() + "', expected '" + kPairsFormat + "'");
+  if (format_text.front() != kPairsFormat)
+    return DataLoss(path + ": format is '" + format_text.front() + "', expected '" + kPairsFormat +
+                    "'");
   PairShard shard;
   MP_ASSIGN_OR_RETURN(const NpyArray* crop, GetShaped(npz, "crop", {}, path));
   MP_ASSIGN_OR_RETURN(auto crop_text, crop->ToStrings(path));

@@ -1,17 +1,16 @@
 #include "motionpipe/skeleton/skeleton.h"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <cmath>
+#include <nlohmann/json.hpp>
 
 #include "smpl22_json.h"  // generated: kSmpl22Json
 
 namespace motionpipe {
 
 const std::array<std::string, kNumBodyParts>& BodyPartNames() {
-  static const std::array<std::string, kNumBodyParts> names = {"global",   "torso",    "left arm",
-                                                               "right arm", "left leg", "right leg"};
+  static const std::array<std::string, kNumBodyParts> names = {
+      "global", "torso", "left arm", "right arm", "left leg", "right leg"};
   return names;
 }
 
@@ -58,7 +57,8 @@ Result<Skeleton> Skeleton::FromJson(const std::string& json_text, const std::str
   try {
     s.joint_names_ = doc.at("joint_names").get<std::vector<std::string>>();
     s.parents_ = doc.at("parents").get<std::vector<int>>();
-    const auto directions = doc.at("rest_offset_directions_yup").get<std::vector<std::vector<double>>>();
+    const auto directions =
+        doc.at("rest_offset_directions_yup").get<std::vector<std::vector<double>>>();
     s.bone_lengths_ = doc.at("bone_lengths_m").get<std::vector<double>>();
     s.chains_ = doc.at("kinematic_chains").get<std::vector<std::vector<int>>>();
     if (s.joint_names_.size() != kNumJoints) return Bad(origin, "joint_names must list 22 joints");
@@ -72,10 +72,12 @@ Result<Skeleton> Skeleton::FromJson(const std::string& json_text, const std::str
         return Bad(origin, "parents[" + std::to_string(joint) + "] must precede the joint");
       }
       const auto& d = directions[static_cast<size_t>(joint)];
-      if (d.size() != 3) return Bad(origin, "rest direction " + std::to_string(joint) + " needs 3 values");
+      if (d.size() != 3)
+        return Bad(origin, "rest direction " + std::to_string(joint) + " needs 3 values");
       Vec3 dir{d[0], d[1], d[2]};
       const double n = Norm(dir);
-      if (joint > 0 && n == 0) return Bad(origin, "rest direction " + std::to_string(joint) + " is zero");
+      if (joint > 0 && n == 0)
+        return Bad(origin, "rest direction " + std::to_string(joint) + " is zero");
       if (n > 0) dir = (1.0 / n) * dir;
       s.rest_offsets_.push_back(s.bone_lengths_[static_cast<size_t>(joint)] * dir);
     }
@@ -84,14 +86,16 @@ Result<Skeleton> Skeleton::FromJson(const std::string& json_text, const std::str
       const auto& name = BodyPartNames()[static_cast<size_t>(part)];
       s.part_joints_[static_cast<size_t>(part)] = parts.at(name).get<std::vector<int>>();
       for (int joint : s.part_joints_[static_cast<size_t>(part)]) {
-        if (joint < 0 || joint >= kNumJoints) return Bad(origin, "body part '" + name + "' has bad joint");
+        if (joint < 0 || joint >= kNumJoints)
+          return Bad(origin, "body part '" + name + "' has bad joint");
         s.joint_part_[static_cast<size_t>(joint)] = static_cast<BodyPart>(part);
       }
     }
     if (doc.contains("feet_joints")) {
       const auto left = doc["feet_joints"].at("left").get<std::vector<int>>();
       const auto right = doc["feet_joints"].at("right").get<std::vector<int>>();
-      if (left.size() != 2 || right.size() != 2) return Bad(origin, "feet_joints needs two per side");
+      if (left.size() != 2 || right.size() != 2)
+        return Bad(origin, "feet_joints needs two per side");
       s.left_feet_ = {left[0], left[1]};
       s.right_feet_ = {right[0], right[1]};
     }
@@ -103,7 +107,8 @@ Result<Skeleton> Skeleton::FromJson(const std::string& json_text, const std::str
     // places. The head sits above the neck, not in front of it.
     const int head = s.JointIndex("head");
     if (head < 0) return Bad(origin, "missing joint head");
-    s.rest_offsets_[static_cast<size_t>(head)] = Vec3{0, s.bone_lengths_[static_cast<size_t>(head)], 0};
+    s.rest_offsets_[static_cast<size_t>(head)] =
+        Vec3{0, s.bone_lengths_[static_cast<size_t>(head)], 0};
     // And the arm chain points sideways: SMPL pose parameters are relative to the T-pose.
     for (const char* side : {"left", "right"}) {
       const double sign = std::string(side) == "left" ? 1.0 : -1.0;
@@ -148,7 +153,8 @@ void ForwardKinematicsFrame(const Skeleton& skeleton, const Mat3* local, const V
   for (int joint = 1; joint < kNumJoints; ++joint) {
     const int parent = parents[static_cast<size_t>(joint)];
     global_out[joint] = global_out[parent] * local[joint];
-    positions_out[joint] = positions_out[parent] + global_out[parent] * offsets[static_cast<size_t>(joint)];
+    positions_out[joint] =
+        positions_out[parent] + global_out[parent] * offsets[static_cast<size_t>(joint)];
   }
 }
 

@@ -4,8 +4,11 @@
 #include "motionpipe_plugin.h"
 
 #if defined(BAD_ABI)
-static const mp_plugin kPlugin = {MOTIONPIPE_PLUGIN_ABI_VERSION + 41, sizeof(mp_plugin), "bad_abi", "0", 0, nullptr, 0, nullptr};
-extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) { return &kPlugin; }
+static const mp_plugin kPlugin = {
+    MOTIONPIPE_PLUGIN_ABI_VERSION + 41, sizeof(mp_plugin), "bad_abi", "0", 0, nullptr, 0, nullptr};
+extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) {
+  return &kPlugin;
+}
 #elif defined(THROWS)
 extern "C" __attribute__((visibility("default"))) const mp_plugin* motionpipe_plugin_v1(void) {
   throw std::runtime_error("cannot find my model weights");

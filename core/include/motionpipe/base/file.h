@@ -49,8 +49,9 @@ class FileLock {
   int fd_ = -1;
 };
 
-// Atomically replaces `path` with `bytes` (temporary name + fsync + rename). Creates no directories.
-// `sync` = false skips the fsync for bulk outputs (the rename still hides partial files).
+// Atomically replaces `path` with `bytes` (temporary name + fsync + rename). Creates no
+// directories. `sync` = false skips the fsync for bulk outputs (the rename still hides partial
+// files).
 Status WriteFileAtomic(const std::string& path, std::string_view bytes, bool sync = true);
 
 // fsync(2)s every regular file and directory under `dir` (each directory after its contents) and

@@ -35,8 +35,8 @@ class LogMessage {
 
 }  // namespace motionpipe
 
-#define MP_LOG(level, component)                                        \
-  !(::motionpipe::LogLevel::level >= ::motionpipe::GetLogLevel())       \
-      ? (void)0                                                         \
-      : ::motionpipe::internal::LogVoidify() &                          \
+#define MP_LOG(level, component)                                  \
+  !(::motionpipe::LogLevel::level >= ::motionpipe::GetLogLevel()) \
+      ? (void)0                                                   \
+      : ::motionpipe::internal::LogVoidify() &                    \
             ::motionpipe::internal::LogMessage(::motionpipe::LogLevel::level, component).stream()

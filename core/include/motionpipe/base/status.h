@@ -1,5 +1,6 @@
-// Errors as values (LevelDB's Status): every fallible operation on a user path returns a Status or a
-// Result<T>; exceptions are reserved for programmer errors and for LibTorch at the plugin boundary.
+// Errors as values (LevelDB's Status): every fallible operation on a user path returns a Status or
+// a Result<T>; exceptions are reserved for programmer errors and for LibTorch at the plugin
+// boundary.
 #pragma once
 
 #include <cassert>
@@ -53,7 +54,7 @@ Status Internal(std::string message);
 template <typename T>
 class Result {
  public:
-  Result(T value) : value_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(T value) : value_(std::move(value)) {}         // NOLINT(google-explicit-constructor)
   Result(Status status) : status_(std::move(status)) {  // NOLINT(google-explicit-constructor)
     assert(!status_.ok() && "Result constructed from an ok Status");
   }
@@ -88,10 +89,10 @@ class Result {
 #define MP_CONCAT(a, b) MP_CONCAT_INNER(a, b)
 
 // Returns the Status from the enclosing function when it is not ok.
-#define MP_RETURN_IF_ERROR(expr)                     \
-  do {                                               \
-    ::motionpipe::Status mp_status_ = (expr);        \
-    if (!mp_status_.ok()) return mp_status_;         \
+#define MP_RETURN_IF_ERROR(expr)              \
+  do {                                        \
+    ::motionpipe::Status mp_status_ = (expr); \
+    if (!mp_status_.ok()) return mp_status_;  \
   } while (0)
 
 #define MP_ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr) \

@@ -1,13 +1,15 @@
 // The embedded default dataset: a procedural motion corpus written in the real formats, so the real
 // loaders read it and every stage can run without licensed data.
 //
-//   DIR/manifest.json                 what was generated, counts, options, sha256 of every file (written last)
-//   DIR/clips/clips-NNNNN.npz         our clip layout: motions, captions, labelled segments with ground-truth parts
-//   DIR/amass/<id>_poses.npz          AMASS-style npz per clip (poses [T,156], trans, mocap_framerate, betas)
-//   DIR/babel/{train,val,test}.json   BABEL-style annotations (seq_ann, frame_ann with proc_label, start_t, end_t)
-//   DIR/motionfix/triplets-NNNNN.npz  MotionFix-style editing triplets in our converted layout, with edit ranges
-//   DIR/motionfix/splits.json         triplet ids per split, as MotionFix ships them
-//   DIR/texts/labels.json             every label and caption with its ground-truth body parts (labeler evaluation)
+//   DIR/manifest.json                 what was generated, counts, options, sha256 of every file
+//   (written last) DIR/clips/clips-NNNNN.npz         our clip layout: motions, captions, labelled
+//   segments with ground-truth parts DIR/amass/<id>_poses.npz          AMASS-style npz per clip
+//   (poses [T,156], trans, mocap_framerate, betas) DIR/babel/{train,val,test}.json   BABEL-style
+//   annotations (seq_ann, frame_ann with proc_label, start_t, end_t)
+//   DIR/motionfix/triplets-NNNNN.npz  MotionFix-style editing triplets in our converted layout,
+//   with edit ranges DIR/motionfix/splits.json         triplet ids per split, as MotionFix ships
+//   them DIR/texts/labels.json             every label and caption with its ground-truth body parts
+//   (labeler evaluation)
 #pragma once
 
 #include <cstdint>
@@ -37,9 +39,9 @@ struct CorpusOptions {
   int64_t triplets = -1;  // -1: as many as clips
   double fps = 30;
   int shard_size = 500;
-  int threads = 0;          // OpenMP threads; 0 = the runtime's default
+  int threads = 0;             // OpenMP threads; 0 = the runtime's default
   bool triplet_joints = true;  // store FK joint positions with the triplets (as MotionFix does)
-  bool write_amass = true;  // per-clip AMASS npz files (many small files)
+  bool write_amass = true;     // per-clip AMASS npz files (many small files)
   ScriptOptions script;
   PlausibilityGate gate;
 };
@@ -63,7 +65,8 @@ Result<CorpusSummary> GenerateCorpus(const CorpusOptions& options);
 // GenerateCorpus whichever worker generated which shard.
 int64_t ShardCount(const CorpusOptions& options);
 Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const std::string& dir);
-Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options, const std::vector<std::string>& shard_dirs);
+Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options,
+                                     const std::vector<std::string>& shard_dirs);
 
 // The split of item `index` (clips and triplets hash separately): train 80%, val 10%, test 10%.
 std::string SplitOf(uint64_t seed, uint64_t stream, int64_t index);

@@ -10,7 +10,19 @@
 
 namespace motionpipe::corpus {
 
-enum class EditKind { kSpeed, kAmplitude, kSide, kAddAction, kRemoveAction, kReplaceAction, kRepetitions, kTiming, kReplaceBase, kPosture, kCount };
+enum class EditKind {
+  kSpeed,
+  kAmplitude,
+  kSide,
+  kAddAction,
+  kRemoveAction,
+  kReplaceAction,
+  kRepetitions,
+  kTiming,
+  kReplaceBase,
+  kPosture,
+  kCount
+};
 const char* EditKindName(EditKind kind);
 
 struct Edit {

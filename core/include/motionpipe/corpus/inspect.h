@@ -3,8 +3,8 @@
 // plausibility of every clip recomputed.
 #pragma once
 
-#include <cstdint>
 #include <array>
+#include <cstdint>
 #include <map>
 #include <string>
 
@@ -24,7 +24,8 @@ struct CorpusReport {
   // Triplets.
   double mean_source_seconds = 0, mean_target_seconds = 0, mean_edited_fraction = 0;
   // Plausibility over every clip.
-  double skate_mean = 0, skate_p95 = 0, skate_max = 0, penetration_max = 0, jerk_mean = 0, bone_error_max = 0;
+  double skate_mean = 0, skate_p95 = 0, skate_max = 0, penetration_max = 0, jerk_mean = 0,
+         bone_error_max = 0;
   int64_t joint_limit_violations = 0;
 };
 

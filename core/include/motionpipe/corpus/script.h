@@ -62,7 +62,7 @@ struct ScriptOptions {
   double fps = 30;
   double min_seconds = 3;
   double max_seconds = 12;
-  double overlay_probability = 0.55;        // per base action
+  double overlay_probability = 0.55;  // per base action
   double second_overlay_probability = 0.15;
   double annotate_stand_probability = 0.5;  // 'stand' under a gesture is labelled this often
 };
@@ -73,13 +73,14 @@ ClipScript SampleScript(Rng& rng, const ScriptOptions& options, const std::strin
 
 // Samples one action instance of `id` with random parameters, texts and a duration; start = 0.
 ActionInstance SampleInstance(ActionId id, Rng& rng);
-// Duration implied by an action's parameters (repetitions at its tempo), or a sample from its range.
+// Duration implied by an action's parameters (repetitions at its tempo), or a sample from its
+// range.
 double NaturalDuration(const ActionInstance& instance, Rng& rng);
 // Rewrites the label and caption for the instance's current parameters.
 void RetextInstance(ActionInstance* instance, Rng& rng);
 
-// A verb-first phrase for an instance ("wave with the right hand", "put their hands on their hips"),
-// in the second person for instructions ("your") or the third for descriptions ("their").
+// A verb-first phrase for an instance ("wave with the right hand", "put their hands on their
+// hips"), in the second person for instructions ("your") or the third for descriptions ("their").
 enum class Person { kSecond, kThird };
 std::string VerbPhrase(const ActionInstance& instance, Person person);
 

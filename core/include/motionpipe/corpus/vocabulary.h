@@ -15,16 +15,56 @@ namespace motionpipe::corpus {
 
 enum class ActionId : int {
   // locomotion (global + legs)
-  kStand, kWalk, kJog, kRun, kWalkBackwards, kSideStep, kTurnInPlace, kWalkCircle, kJump, kHop, kMarchInPlace,
+  kStand,
+  kWalk,
+  kJog,
+  kRun,
+  kWalkBackwards,
+  kSideStep,
+  kTurnInPlace,
+  kWalkCircle,
+  kJump,
+  kHop,
+  kMarchInPlace,
   // whole body
-  kSitDown, kStandUp, kSquat, kKneel, kCrouch, kBow, kJumpingJacks, kSway, kTiptoe,
+  kSitDown,
+  kStandUp,
+  kSquat,
+  kKneel,
+  kCrouch,
+  kBow,
+  kJumpingJacks,
+  kSway,
+  kTiptoe,
   // legs (while standing)
-  kKick, kKneeLift, kStomp, kStretchLeg,
+  kKick,
+  kKneeLift,
+  kStomp,
+  kStretchLeg,
   // arms
-  kWave, kRaiseArm, kPunch, kClap, kReachForward, kArmCircle, kThrow, kDrink, kHandsOnHips, kCrossArms, kPoint,
-  kSalute, kScratchHead, kShrug, kStretchArms,
+  kWave,
+  kRaiseArm,
+  kPunch,
+  kClap,
+  kReachForward,
+  kArmCircle,
+  kThrow,
+  kDrink,
+  kHandsOnHips,
+  kCrossArms,
+  kPoint,
+  kSalute,
+  kScratchHead,
+  kShrug,
+  kStretchArms,
   // torso and head
-  kBendForward, kLean, kTwist, kNod, kShakeHead, kLookAround, kLookUp,
+  kBendForward,
+  kLean,
+  kTwist,
+  kNod,
+  kShakeHead,
+  kLookAround,
+  kLookUp,
   kCount
 };
 constexpr int kNumActions = static_cast<int>(ActionId::kCount);
@@ -45,7 +85,7 @@ struct ActionDef {
   bool allows_both;  // side may be "both"
   PartSet parts;     // parts when not sided (sided: the side's arm or leg, see PartsOf)
   double min_seconds, max_seconds;
-  int min_reps, max_reps;  // 0 = not a repeated action
+  int min_reps, max_reps;             // 0 = not a repeated action
   std::vector<std::string> labels;    // BABEL-style, with placeholders (see FillTemplate)
   std::vector<std::string> captions;  // HumanML3D-style
 };

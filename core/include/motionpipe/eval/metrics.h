@@ -3,7 +3,8 @@
 //   retrieval   motion-to-motion (or text-to-motion) R@1/2/3 in percent and AvgR, ties averaged, in
 //               seeded batches of 32 (remainder dropped; SimMotionEdit's protocol) or over all;
 //   APE / AVE   TEMOS's average positional error and average variance error: root joint, global
-//               trajectory (horizontal root), mean local (joints relative to the root), mean global;
+//               trajectory (horizontal root), mean local (joints relative to the root), mean
+//               global;
 //   FID         Frechet distance between two embedding sets; diversity and multimodality.
 #pragma once
 
@@ -36,7 +37,8 @@ RetrievalScores Summarise(const std::vector<double>& ranks);
 // Query i of `queries` should retrieve row i of `gallery`. batch <= 0: one batch of everything.
 // Otherwise a seeded shuffle split into batches of `batch` (the remainder dropped), ranks within
 // each batch, scores over all the batches' queries.
-RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch, uint64_t seed);
+RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch,
+                          uint64_t seed);
 
 struct PositionErrors {
   double root = 0, trajectory = 0, mean_local = 0, mean_global = 0;
@@ -46,18 +48,20 @@ struct HeadingJoints {
   int left = -1, right = -1;
 };
 inline constexpr HeadingJoints kSmpl22Hips{1, 2};
-// Puts a motion's joints [frames, count, 3] in its first frame's body frame on the ground plane: the
-// first root at x = y = 0 and, with hips given, the first hips' axis along +x. TEMOS compares
+// Puts a motion's joints [frames, count, 3] in its first frame's body frame on the ground plane:
+// the first root at x = y = 0 and, with hips given, the first hips' axis along +x. TEMOS compares
 // motions so (its features drop the first frame's position and heading); generated motions start
 // canonical and the ground truth starts anywhere in its world.
 void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& heading);
-// APE and AVE between generated and ground-truth joints [frames, joints, 3] (z up; joint 0 the root)
-// (REFERENCE 4.6): root joint, ground-plane trajectory, mean global (all joints) and mean local
-// (joints relative to the root, each frame's heading removed when `heading` names the hips).
+// APE and AVE between generated and ground-truth joints [frames, joints, 3] (z up; joint 0 the
+// root) (REFERENCE 4.6): root joint, ground-plane trajectory, mean global (all joints) and mean
+// local (joints relative to the root, each frame's heading removed when `heading` names the hips).
 // Both motions are cropped to the shorter length.
-PositionErrors AveragePositionalError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+PositionErrors AveragePositionalError(const std::vector<float>& generated,
+                                      const std::vector<float>& truth, int joints,
                                       const HeadingJoints& heading = {});
-PositionErrors AverageVarianceError(const std::vector<float>& generated, const std::vector<float>& truth, int joints,
+PositionErrors AverageVarianceError(const std::vector<float>& generated,
+                                    const std::vector<float>& truth, int joints,
                                     const HeadingJoints& heading = {});
 
 // Frechet distance between Gaussians fitted to two embedding sets (unbiased covariances).
@@ -69,6 +73,7 @@ double Multimodality(const Embeddings& x, const std::vector<std::vector<int64_t>
 
 // Eigen-decomposition of a symmetric matrix (cyclic Jacobi): eigenvalues, and eigenvectors as
 // columns of a row-major n x n matrix.
-void SymmetricEigen(std::vector<double> matrix, int64_t n, std::vector<double>* values, std::vector<double>* vectors);
+void SymmetricEigen(std::vector<double> matrix, int64_t n, std::vector<double>* values,
+                    std::vector<double>* vectors);
 
 }  // namespace motionpipe::eval

@@ -1,9 +1,8 @@
 // The 207-d per-frame editing feature of MotionFix / TMED / SimMotionEdit (REFERENCE.md section 2):
-//   0:3     pelvis translation velocity in the previous frame's pelvis frame, R_{i-1}^T (t_i - t_{i-1})
-//   3:9     global orientation with its heading removed, 6D
-//   9:15    heading change Rz_{i-1}^T Rz_i, 6D (identity at frame 0)
-//   15:141  the 21 local joint rotations (joints 1..21), 6D
-//   141:207 the 22 joint positions relative to the pelvis, heading removed
+//   0:3     pelvis translation velocity in the previous frame's pelvis frame, R_{i-1}^T (t_i -
+//   t_{i-1}) 3:9     global orientation with its heading removed, 6D 9:15    heading change
+//   Rz_{i-1}^T Rz_i, 6D (identity at frame 0) 15:141  the 21 local joint rotations (joints 1..21),
+//   6D 141:207 the 22 joint positions relative to the pelvis, heading removed
 // The feature is relative: decoding needs the first frame's heading and translation (MotionAnchor).
 #pragma once
 

@@ -1,6 +1,6 @@
-// Feature normalisation statistics: compute, save, load (ours and the reference files in data/stats),
-// apply. Standardisation is (x - mean) / (scale * (std + 1e-5)) with scale 1 (TEMOS/SINC) or 2
-// (MotionFix, "2 sigma", REFERENCE.md section 2).
+// Feature normalisation statistics: compute, save, load (ours and the reference files in
+// data/stats), apply. Standardisation is (x - mean) / (scale * (std + 1e-5)) with scale 1
+// (TEMOS/SINC) or 2 (MotionFix, "2 sigma", REFERENCE.md section 2).
 #pragma once
 
 #include <string>
@@ -24,7 +24,8 @@ struct FeatureStats {
 
 // Per-column mean and unbiased standard deviation over every row of every matrix. All matrices
 // need the same column count; InvalidArgument otherwise or when there are no rows.
-Result<FeatureStats> ComputeStats(const std::vector<const FeatureMatrix*>& matrices, NormScale scale);
+Result<FeatureStats> ComputeStats(const std::vector<const FeatureMatrix*>& matrices,
+                                  NormScale scale);
 
 // In place; FailedPrecondition when the dimensions differ.
 Status Normalize(FeatureMatrix* features, const FeatureStats& stats);

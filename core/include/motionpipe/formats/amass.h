@@ -1,6 +1,6 @@
-// AMASS npz (REFERENCE.md section 1): `poses` [T, 156] (SMPL-H) or [T, 165] (SMPL-X) axis-angle with
-// the root in 0:3 and the 21 body joints in 3:66, `trans` [T, 3], `betas`, `mocap_framerate` (SMPL-X
-// files: `mocap_frame_rate`), `gender`. z-up, metres.
+// AMASS npz (REFERENCE.md section 1): `poses` [T, 156] (SMPL-H) or [T, 165] (SMPL-X) axis-angle
+// with the root in 0:3 and the 21 body joints in 3:66, `trans` [T, 3], `betas`, `mocap_framerate`
+// (SMPL-X files: `mocap_frame_rate`), `gender`. z-up, metres.
 #pragma once
 
 #include <string>

@@ -63,9 +63,9 @@ Result<JointMap> ParseJointMap(const std::string& text, const std::string& origi
 Result<JointMap> ChooseJointMap(const BvhFile& bvh, const std::string& origin);
 
 struct BvhImportOptions {
-  double fps = 30;                // resample to this rate (0 keeps the file's)
-  std::string map_path;           // a joint-map file; empty = choose a built-in map
-  bool place_on_floor = true;     // shift vertically so the feet touch z = 0
+  double fps = 30;             // resample to this rate (0 keeps the file's)
+  std::string map_path;        // a joint-map file; empty = choose a built-in map
+  bool place_on_floor = true;  // shift vertically so the feet touch z = 0
   // Root trajectory scaled by SMPL leg length / source leg length (stride follows the body, the
   // usual retargeting choice). When false the trajectory keeps its true size in metres, using
   // `unit_scale` (metres per file unit) or the map's known scale.
@@ -74,21 +74,25 @@ struct BvhImportOptions {
 };
 
 // Retargets to SMPL-22 (see bvh.cc for the method). The clip's source names the file and map.
-Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin, const BvhImportOptions& options,
+Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
+                       const BvhImportOptions& options,
                        const Skeleton& skeleton = Skeleton::Smpl22());
 Result<Clip> ImportBvhFile(const std::string& path, const BvhImportOptions& options);
 
 struct BvhExportOptions {
-  double units_per_metre = 100;  // file units per metre: centimetres (import in Blender at scale 0.01)
+  double units_per_metre =
+      100;  // file units per metre: centimetres (import in Blender at scale 0.01)
 };
 
 // SMPL-22 hierarchy with our rest offsets, y-up, root with 6 channels and every joint ZYX.
 std::string ExportBvh(const Motion& motion, const Skeleton& skeleton = Skeleton::Smpl22(),
                       const BvhExportOptions& options = {});
-Status ExportBvhFile(const std::string& path, const Motion& motion, const BvhExportOptions& options = {});
+Status ExportBvhFile(const std::string& path, const Motion& motion,
+                     const BvhExportOptions& options = {});
 
 // Source joints' global rotations and positions (file units, y-up) for one frame; for tests and
 // tools that compare retargeted motion with its source.
-void BvhForwardKinematics(const BvhFile& bvh, int64_t frame, std::vector<Mat3>* global, std::vector<Vec3>* positions);
+void BvhForwardKinematics(const BvhFile& bvh, int64_t frame, std::vector<Mat3>* global,
+                          std::vector<Vec3>* positions);
 
 }  // namespace motionpipe

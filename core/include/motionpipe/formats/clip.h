@@ -1,5 +1,6 @@
 // motionpipe's clip file: one .npz holding N >= 1 clips, concatenated along frames so that numpy
-// users index them with `offsets`. The layout (every stage reads and writes it; README "Clip layout"):
+// users index them with `offsets`. The layout (every stage reads and writes it; README "Clip
+// layout"):
 //
 //   format        <U  ()          "motionpipe.clips/1"
 //   ids           <U  (N,)        clip identifiers
@@ -9,14 +10,14 @@
 //   poses         f4  (F, 22, 3)  local joint rotations, axis-angle, SMPL-22 order, joint 0 global
 //   trans         f4  (F, 3)      pelvis translation, metres, z-up
 //   joints        f4  (F, 22, 3)  optional: joint positions (forward kinematics), metres, z-up
-//   text_offsets  i8  (N+1,)      clip i's descriptions are texts[text_offsets[i]:text_offsets[i+1]]
-//   texts         <U  (M,)
-//   seg_offsets   i8  (N+1,)      clip i's segments are seg_*[seg_offsets[i]:seg_offsets[i+1]]
-//   seg_start     i4  (S,)        first frame of the segment (clip-relative)
-//   seg_end       i4  (S,)        one past the last frame
+//   text_offsets  i8  (N+1,)      clip i's descriptions are
+//   texts[text_offsets[i]:text_offsets[i+1]] texts         <U  (M,) seg_offsets   i8  (N+1,) clip
+//   i's segments are seg_*[seg_offsets[i]:seg_offsets[i+1]] seg_start     i4  (S,)        first
+//   frame of the segment (clip-relative) seg_end       i4  (S,)        one past the last frame
 //   seg_text      <U  (S,)        the action's label
-//   seg_parts     b1  (S, 6)      body parts used, order [global, torso, left arm, right arm, left leg, right leg]
-//   seg_action    <U  (S,)        optional: canonical action name (procedural corpus ground truth)
+//   seg_parts     b1  (S, 6)      body parts used, order [global, torso, left arm, right arm, left
+//   leg, right leg] seg_action    <U  (S,)        optional: canonical action name (procedural
+//   corpus ground truth)
 #pragma once
 
 #include <cstdint>

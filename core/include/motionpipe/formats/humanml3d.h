@@ -1,5 +1,5 @@
-// HumanML3D joint files (new_joints/*.npy): float [T, 22, 3], y-up, metres, 20 fps. Used as an input
-// to the metrics (positions only; no rotations can be recovered exactly from them).
+// HumanML3D joint files (new_joints/*.npy): float [T, 22, 3], y-up, metres, 20 fps. Used as an
+// input to the metrics (positions only; no rotations can be recovered exactly from them).
 #pragma once
 
 #include <string>

@@ -42,9 +42,10 @@ struct Triplet {
 Npz TripletsToNpz(const std::vector<Triplet>& triplets);
 // Every shape and offset is checked; a triplet whose motions are invalid fails with its id.
 Result<std::vector<Triplet>> TripletsFromNpz(const Npz& npz, const std::string& origin);
-// Uncompressed by default (numpy's savez): ReadTripletColumns then maps the file and uses the arrays
-// in place, several times faster than inflating them.
-Status WriteTriplets(const std::string& path, const std::vector<Triplet>& triplets, bool compress = false);
+// Uncompressed by default (numpy's savez): ReadTripletColumns then maps the file and uses the
+// arrays in place, several times faster than inflating them.
+Status WriteTriplets(const std::string& path, const std::vector<Triplet>& triplets,
+                     bool compress = false);
 Result<std::vector<Triplet>> ReadTriplets(const std::string& path);
 
 }  // namespace motionpipe
@@ -59,12 +60,12 @@ struct TripletColumns {
   // One side's arrays; the pointers stay valid as long as any copy of the columns lives (the
   // arrays are shared, not copied: a float32 file is read without converting or copying its data).
   struct Side {
-    std::vector<int64_t> offsets;        // rows + 1, from 0
-    int joints = 0;                      // rotations per frame in `poses` (22; more for SMPL-H/X bodies)
-    const float* poses = nullptr;        // [F, joints, 3] axis-angle
-    const float* trans = nullptr;        // [F, 3]
-    int position_joints = 0;             // 0 when the file has no joint positions (or they were not read)
-    const float* positions = nullptr;    // [F, position_joints, 3]
+    std::vector<int64_t> offsets;  // rows + 1, from 0
+    int joints = 0;                // rotations per frame in `poses` (22; more for SMPL-H/X bodies)
+    const float* poses = nullptr;  // [F, joints, 3] axis-angle
+    const float* trans = nullptr;  // [F, 3]
+    int position_joints = 0;       // 0 when the file has no joint positions (or they were not read)
+    const float* positions = nullptr;  // [F, position_joints, 3]
     std::vector<std::shared_ptr<const void>> storage;
   };
   std::string origin;
@@ -78,14 +79,15 @@ struct TripletColumns {
 
 struct TripletColumnOptions {
   int64_t row_begin = 0;
-  int64_t row_end = -1;    // -1: to the end
-  bool motions = true;     // poses and trans
-  bool positions = true;   // the stored joint positions, when present
+  int64_t row_end = -1;   // -1: to the end
+  bool motions = true;    // poses and trans
+  bool positions = true;  // the stored joint positions, when present
 };
 
 // Reads rows [row_begin, row_end) of a triplets file; arrays that are not asked for are never
 // inflated. Errors name the file and the array.
-Result<TripletColumns> ReadTripletColumns(const std::string& path, const TripletColumnOptions& options = {});
+Result<TripletColumns> ReadTripletColumns(const std::string& path,
+                                          const TripletColumnOptions& options = {});
 
 // The number of triplets in a file (reads only its ids).
 Result<int64_t> CountTriplets(const std::string& path);

@@ -12,7 +12,20 @@
 
 namespace motionpipe {
 
-enum class DType { kBool, kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kInt64, kUInt64, kFloat32, kFloat64, kUnicode };
+enum class DType {
+  kBool,
+  kInt8,
+  kUInt8,
+  kInt16,
+  kUInt16,
+  kInt32,
+  kUInt32,
+  kInt64,
+  kUInt64,
+  kFloat32,
+  kFloat64,
+  kUnicode
+};
 
 // numpy's name for the dtype ("float32", "<U12" for unicode).
 std::string DTypeName(DType dtype, int64_t item_size);
@@ -50,11 +63,11 @@ struct NpyView {
   DType dtype = DType::kFloat32;
   int64_t item_size = 4;
   std::vector<int64_t> shape;
-  int64_t count = 0;          // elements
+  int64_t count = 0;  // elements
   bool fortran = false;
   bool big_endian = false;
-  size_t data_offset = 0;     // from the start of the .npy bytes
-  std::string_view data;      // count * item_size bytes, as stored
+  size_t data_offset = 0;  // from the start of the .npy bytes
+  std::string_view data;   // count * item_size bytes, as stored
   // True when the data can be read as a C-order little-endian array in place.
   bool Native() const { return !big_endian && (!fortran || shape.size() < 2); }
 };

@@ -31,14 +31,15 @@ class Npz {
 
 // `arrays` names the arrays to load (without ".npy"); empty loads all. Arrays not loaded are
 // never inflated, so reading a few small arrays of a large archive is cheap.
-Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin, const std::vector<std::string>& arrays = {});
+Result<Npz> ParseNpz(std::string_view bytes, const std::string& origin,
+                     const std::vector<std::string>& arrays = {});
 std::string SerializeNpz(const Npz& npz, bool compress);
 Result<Npz> ReadNpz(const std::string& path, const std::vector<std::string>& arrays = {});
 Status WriteNpz(const std::string& path, const Npz& npz, bool compress = true);
 
 // Typed accessors with shape checks, for readers of our layouts. `dims` uses -1 for "any".
 // The error names `origin`, the array and the expected and found shapes.
-Result<const NpyArray*> GetShaped(const Npz& npz, const std::string& name, const std::vector<int64_t>& dims,
-                                  const std::string& origin);
+Result<const NpyArray*> GetShaped(const Npz& npz, const std::string& name,
+                                  const std::vector<int64_t>& dims, const std::string& origin);
 
 }  // namespace motionpipe

@@ -20,10 +20,10 @@ struct ZipMember {
 // A member located in an archive held in memory, not yet extracted.
 struct ZipEntry {
   std::string name;
-  uint16_t method = 0;        // 0 stored, 8 deflated
+  uint16_t method = 0;  // 0 stored, 8 deflated
   uint32_t crc = 0;
-  uint64_t size = 0;          // uncompressed
-  std::string_view payload;   // the stored or deflated bytes, inside the archive
+  uint64_t size = 0;         // uncompressed
+  std::string_view payload;  // the stored or deflated bytes, inside the archive
 };
 
 // The archive's directory, every entry checked for consistency (nothing is inflated).
@@ -37,13 +37,15 @@ Status CheckZipCrc(const ZipEntry& entry, std::string_view data, const std::stri
 using MemberFilter = std::function<bool(const std::string& name)>;
 
 // The members of an archive held in memory, in directory order. The whole directory is checked;
-// only the members `want` accepts are inflated (in parallel, OpenMP). DataLoss names `origin` and the
-// damaged part.
-Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin, const MemberFilter& want = {});
+// only the members `want` accepts are inflated (in parallel, OpenMP). DataLoss names `origin` and
+// the damaged part.
+Result<std::vector<ZipMember>> ReadZip(std::string_view archive, const std::string& origin,
+                                       const MemberFilter& want = {});
 
-// Builds an archive in memory. Members are compressed in Finish(), in parallel (OpenMP), each on its
-// own, so the bytes do not depend on the thread count. Stored members' data start on 64-byte
-// boundaries (padding in a local extra field), so a reader can map the file and use arrays in place.
+// Builds an archive in memory. Members are compressed in Finish(), in parallel (OpenMP), each on
+// its own, so the bytes do not depend on the thread count. Stored members' data start on 64-byte
+// boundaries (padding in a local extra field), so a reader can map the file and use arrays in
+// place.
 class ZipWriter {
  public:
   // `deflate` chooses compression for this member.

@@ -75,9 +75,9 @@ double HeadingZYX(const Mat3& r);
 // Rz(-heading) R: the same rotation with its heading removed.
 Mat3 RemoveHeading(const Mat3& r);
 
-// Euler angles for BVH: `order` is three distinct axis letters ("ZYX", "ZXY", ...), and the matrix is
-// R = R_order[0](a0) R_order[1](a1) R_order[2](a2) (intrinsic rotations applied in listed order).
-// Angles in radians. Returns false from EulerOrderValid for anything else.
+// Euler angles for BVH: `order` is three distinct axis letters ("ZYX", "ZXY", ...), and the matrix
+// is R = R_order[0](a0) R_order[1](a1) R_order[2](a2) (intrinsic rotations applied in listed
+// order). Angles in radians. Returns false from EulerOrderValid for anything else.
 bool EulerOrderValid(const std::string& order);
 Mat3 EulerToMatrix(const std::string& order, const std::array<double, 3>& angles);
 std::array<double, 3> MatrixToEuler(const std::string& order, const Mat3& r);

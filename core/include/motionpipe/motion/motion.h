@@ -47,7 +47,8 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end);
 // floor(i * src/dst)). Interpolate slerps rotations and lerps translation, for rates that do not
 // divide.
 enum class ResampleMethod { kByIndex, kInterpolate };
-Motion Resample(const Motion& motion, double target_fps, ResampleMethod method = ResampleMethod::kByIndex);
+Motion Resample(const Motion& motion, double target_fps,
+                ResampleMethod method = ResampleMethod::kByIndex);
 
 // Bounds on a resampling request, so that a mistyped rate (--fps 1e9) is an error, not an
 // allocation of gigabytes: at most 1,000 fps (mocap systems record up to a few hundred) and at most

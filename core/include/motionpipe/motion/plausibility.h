@@ -1,6 +1,7 @@
-// Physical plausibility of a motion from its joint positions (and, when given, its local rotations):
-// what the corpus checks on every clip, the synth stage uses to drop bad compositions, and the
-// evaluation stage reports in place of a pretrained MotionCritic (none is available offline).
+// Physical plausibility of a motion from its joint positions (and, when given, its local
+// rotations): what the corpus checks on every clip, the synth stage uses to drop bad compositions,
+// and the evaluation stage reports in place of a pretrained MotionCritic (none is available
+// offline).
 #pragma once
 
 #include <cstdint>
@@ -13,15 +14,15 @@
 namespace motionpipe {
 
 struct PlausibilityOptions {
-  double floor = 0;               // z of the floor (joint level) in metres
-  double contact_height = 0.05;   // a foot joint below floor + this is in contact
-  double skate_speed = 0.15;      // m/s: a contact foot moving faster than this is skating
-  double float_height = 0.05;     // a frame whose lowest joint is above floor + this floats
+  double floor = 0;              // z of the floor (joint level) in metres
+  double contact_height = 0.05;  // a foot joint below floor + this is in contact
+  double skate_speed = 0.15;     // m/s: a contact foot moving faster than this is skating
+  double float_height = 0.05;    // a frame whose lowest joint is above floor + this floats
 };
 
 struct PlausibilityReport {
   int64_t frames = 0;
-  double foot_skate_mean = 0;    // m/s: mean horizontal speed of foot joints in contact (both frames)
+  double foot_skate_mean = 0;  // m/s: mean horizontal speed of foot joints in contact (both frames)
   double foot_skate_ratio = 0;   // fraction of contact foot-frames faster than skate_speed
   double penetration_max = 0;    // m: deepest any joint goes below the floor (>= 0)
   double penetration_mean = 0;   // m: mean over frames of the deepest penetration
@@ -34,8 +35,9 @@ struct PlausibilityReport {
 };
 
 // `joints` is [frames, 22, 3]; `local` (optional, [frames * 22]) enables the joint-limit check.
-PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* joints, int64_t frames, double fps,
-                                        const std::vector<Mat3>* local, const PlausibilityOptions& options = {});
+PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* joints,
+                                        int64_t frames, double fps, const std::vector<Mat3>* local,
+                                        const PlausibilityOptions& options = {});
 PlausibilityReport EvaluateMotionPlausibility(const Skeleton& skeleton, const Motion& motion,
                                               const PlausibilityOptions& options = {});
 

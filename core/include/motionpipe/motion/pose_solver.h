@@ -16,22 +16,22 @@ namespace motionpipe {
 Mat3 BodyAngles(const Vec3& angles);
 
 struct FootTarget {
-  Vec3 ankle;       // world position of the ankle joint
-  Vec3 toe_dir;     // unit world direction ankle -> foot joint (horizontal when the foot is flat)
-  Vec3 knee_pole;   // world direction the knee points to (forward)
+  Vec3 ankle;      // world position of the ankle joint
+  Vec3 toe_dir;    // unit world direction ankle -> foot joint (horizontal when the foot is flat)
+  Vec3 knee_pole;  // world direction the knee points to (forward)
 };
 
 struct HandTarget {
-  Vec3 wrist;        // world position of the wrist joint
-  Vec3 elbow_pole;   // world direction the elbow points to (down/back/out for a relaxed arm)
+  Vec3 wrist;               // world position of the wrist joint
+  Vec3 elbow_pole;          // world direction the elbow points to (down/back/out for a relaxed arm)
   double collar_raise = 0;  // radians: shoulder shrug
   Vec3 wrist_angles;        // local wrist rotation (body-angle triple)
 };
 
 struct PoseTargets {
-  Vec3 pelvis;        // world position of the pelvis joint
-  double facing = 0;  // radians: the body faces (cos, sin, 0)
-  Vec3 pelvis_angles; // body-frame tilt of the pelvis
+  Vec3 pelvis;                // world position of the pelvis joint
+  double facing = 0;          // radians: the body faces (cos, sin, 0)
+  Vec3 pelvis_angles;         // body-frame tilt of the pelvis
   std::array<Vec3, 3> spine;  // spine1, spine2, spine3 local angles
   Vec3 neck;
   Vec3 head;
@@ -42,7 +42,8 @@ struct PoseTargets {
 struct SolvedPose {
   std::array<Mat3, kNumJoints> local;
   Vec3 translation;
-  std::array<double, 2> leg_reach_error{};  // metres the ankle target was out of reach (0 = reached)
+  std::array<double, 2>
+      leg_reach_error{};  // metres the ankle target was out of reach (0 = reached)
   std::array<double, 2> arm_reach_error{};
 };
 
@@ -62,6 +63,7 @@ UpperBodyFrame ComputeUpperBody(const Skeleton& skeleton, const PoseTargets& tar
 
 // World position of the hip joints and shoulders for a pelvis placement: what planners need to keep
 // targets in reach without running the whole solver. `side` 0 = left, 1 = right.
-Vec3 HipPosition(const Skeleton& skeleton, const Vec3& pelvis, const Mat3& pelvis_orientation, int side);
+Vec3 HipPosition(const Skeleton& skeleton, const Vec3& pelvis, const Mat3& pelvis_orientation,
+                 int side);
 
 }  // namespace motionpipe

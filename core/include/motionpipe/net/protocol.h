@@ -4,20 +4,20 @@
 // dropped with a reason that callers count and log; it never crashes either side.
 #pragma once
 
-#include <zmq.hpp>
+#include <google/protobuf/message_lite.h>
 
 #include <chrono>
 #include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <google/protobuf/message_lite.h>
+#include <zmq.hpp>
 
 namespace motionpipe::net {
 
 constexpr uint8_t kProtocolVersion = 1;
-// A frame larger than this is refused before parsing (a task result with many outputs stays far below).
+// A frame larger than this is refused before parsing (a task result with many outputs stays far
+// below).
 constexpr size_t kMaxFrameBytes = 16u << 20;
 
 enum class MessageType : uint8_t {
@@ -49,11 +49,13 @@ DropReason DecodeFrames(std::vector<zmq::message_t>& frames, bool has_identity, 
 
 // Sends [identity?][header][body]. Returns false when the socket would block or the peer is gone
 // (ROUTER with ZMQ_ROUTER_MANDATORY), never throws for those.
-bool Send(zmq::socket_t& socket, const std::string* identity, MessageType type, const google::protobuf::MessageLite& body);
+bool Send(zmq::socket_t& socket, const std::string* identity, MessageType type,
+          const google::protobuf::MessageLite& body);
 // Receives all frames of one message without blocking; false when nothing is waiting.
 bool ReceiveFrames(zmq::socket_t& socket, std::vector<zmq::message_t>* frames);
 
-// zmq::poll that returns 0 instead of throwing when a signal interrupts it (SIGTERM starts a drain).
+// zmq::poll that returns 0 instead of throwing when a signal interrupts it (SIGTERM starts a
+// drain).
 int Poll(zmq::pollitem_t* items, size_t count, std::chrono::milliseconds timeout);
 
 // Parses `body` into `message`; false for undecodable bytes.

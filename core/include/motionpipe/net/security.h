@@ -2,13 +2,12 @@
 // only workers whose public key is on an allow-list (ARCHITECTURE.md, "Security").
 #pragma once
 
-#include <zmq.hpp>
-
 #include <atomic>
 #include <memory>
 #include <set>
 #include <string>
 #include <thread>
+#include <zmq.hpp>
 
 #include "motionpipe/base/status.h"
 
@@ -50,6 +49,7 @@ class ZapAuthenticator {
 
 // Makes `socket` a CURVE server (coordinator) or client (worker).
 void ConfigureCurveServer(zmq::socket_t& socket, const CurveKeyPair& server_keys);
-void ConfigureCurveClient(zmq::socket_t& socket, const CurveKeyPair& client_keys, const std::string& server_public_key);
+void ConfigureCurveClient(zmq::socket_t& socket, const CurveKeyPair& client_keys,
+                          const std::string& server_public_key);
 
 }  // namespace motionpipe::net

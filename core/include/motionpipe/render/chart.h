@@ -16,7 +16,9 @@ class Panel {
   Panel(Image* image, int x, int y, int width, int height);
 
   void SetTitle(const std::string& title) { title_ = title; }
-  void SetLabels(const std::string& x_label, const std::string& y_label) { x_label_ = x_label, y_label_ = y_label; }
+  void SetLabels(const std::string& x_label, const std::string& y_label) {
+    x_label_ = x_label, y_label_ = y_label;
+  }
   // Data ranges; log_x uses a base-10 logarithmic x axis (limits must be > 0).
   void SetLimits(double x_min, double x_max, double y_min, double y_max, bool log_x = false);
   // Categorical x tick labels at x = 0, 1, ... (bar charts).
@@ -24,7 +26,8 @@ class Panel {
 
   // Draws the frame, grid, ticks and labels; call before the series.
   void DrawAxes();
-  void LinePlot(const std::vector<double>& xs, const std::vector<double>& ys, Color c, double width = 2.0);
+  void LinePlot(const std::vector<double>& xs, const std::vector<double>& ys, Color c,
+                double width = 2.0);
   void Bar(double x_left, double x_right, double height, Color c, double alpha = 1.0);
   void VerticalLine(double x, Color c, double width = 1.5, double dash = 6);
   void HorizontalLine(double y, Color c, double width = 1.5, double dash = 6);

@@ -20,7 +20,7 @@ inline constexpr Color kBlack{0, 0, 0};
 inline constexpr Color kGrey{128, 128, 128};
 inline constexpr Color kLightGrey{220, 220, 220};
 // A colour-blind-safe categorical palette (Okabe-Ito).
-inline constexpr Color kPalette[] = {{0, 114, 178}, {230, 159, 0}, {0, 158, 115}, {204, 121, 167},
+inline constexpr Color kPalette[] = {{0, 114, 178},  {230, 159, 0}, {0, 158, 115},  {204, 121, 167},
                                      {86, 180, 233}, {213, 94, 0},  {240, 228, 66}, {0, 0, 0}};
 
 class Image {
@@ -35,19 +35,24 @@ class Image {
   void FillRect(double x0, double y0, double x1, double y1, Color c, double alpha = 1.0);
   void StrokeRect(double x0, double y0, double x1, double y1, Color c, double width = 1.0);
   // Anti-aliased segment of the given width (pixels); `dash` > 0 draws dashes of that length.
-  void Line(double x0, double y0, double x1, double y1, Color c, double width = 1.0, double dash = 0);
-  void Polyline(const std::vector<double>& xs, const std::vector<double>& ys, Color c, double width = 1.0);
+  void Line(double x0, double y0, double x1, double y1, Color c, double width = 1.0,
+            double dash = 0);
+  void Polyline(const std::vector<double>& xs, const std::vector<double>& ys, Color c,
+                double width = 1.0);
   void Disc(double cx, double cy, double radius, Color c, double alpha = 1.0);
 
   // Text in the built-in font, `scale` pixels per font pixel; (x, y) is the top-left corner.
   // `vertical` draws bottom-to-top (axis labels). Characters outside printable ASCII show as '?'.
-  void Text(double x, double y, std::string_view text, Color c, int scale = 2, bool vertical = false);
-  static int TextWidth(std::string_view text, int scale = 2) { return static_cast<int>(text.size()) * 6 * scale; }
+  void Text(double x, double y, std::string_view text, Color c, int scale = 2,
+            bool vertical = false);
+  static int TextWidth(std::string_view text, int scale = 2) {
+    return static_cast<int>(text.size()) * 6 * scale;
+  }
   static int TextHeight(int scale = 2) { return 7 * scale; }
 
   // PNG (8-bit RGB, zlib level 6). Deterministic bytes.
   std::string EncodePng() const;
-  Status WritePng(const std::string& path) const;  // atomic
+  Status WritePng(const std::string& path) const;                 // atomic
   const std::vector<uint8_t>& pixels() const { return pixels_; }  // RGB rows, top to bottom
 
  private:

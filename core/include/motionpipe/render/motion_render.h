@@ -1,7 +1,8 @@
-// Skeleton animations of motions (`motionpipe render`, the report's previews): each motion in its own
-// panel, seen from a camera that follows the pelvis at a fixed azimuth and elevation, over a floor
-// grid fixed in the world (so that walking shows), bones coloured by body part (left warm, right
-// cool), a caption per panel. Output as an animated GIF or a PNG film strip of evenly spaced frames.
+// Skeleton animations of motions (`motionpipe render`, the report's previews): each motion in its
+// own panel, seen from a camera that follows the pelvis at a fixed azimuth and elevation, over a
+// floor grid fixed in the world (so that walking shows), bones coloured by body part (left warm,
+// right cool), a caption per panel. Output as an animated GIF or a PNG film strip of evenly spaced
+// frames.
 #pragma once
 
 #include <string>
@@ -28,10 +29,12 @@ struct RenderOptions {
 };
 
 // One frame: every panel at time `seconds` (a panel past its end shows its last frame).
-Image RenderFrame(const std::vector<MotionPanel>& panels, double seconds, const RenderOptions& options);
+Image RenderFrame(const std::vector<MotionPanel>& panels, double seconds,
+                  const RenderOptions& options);
 
 // An animated GIF (looping) or, for a path ending in .png, a film strip (panels as rows). Atomic.
-Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>& panels, const RenderOptions& options = {});
+Status RenderMotionFile(const std::string& path, const std::vector<MotionPanel>& panels,
+                        const RenderOptions& options = {});
 
 // GIF89a bytes of frames of equal size, `delay_cs` hundredths of a second each, looping forever.
 // Colours are quantised to a 6x6x6 cube plus 40 greys.

@@ -1,5 +1,5 @@
-// The dataset-filtering job of SimMotionEdit (paper sec. 3.2.1 and 4.2): similarity curves, MotionSNR
-// and classes for every triplet of a set, sharded so that workers can split it.
+// The dataset-filtering job of SimMotionEdit (paper sec. 3.2.1 and 4.2): similarity curves,
+// MotionSNR and classes for every triplet of a set, sharded so that workers can split it.
 //
 // One shard writes into its directory:
 //   similarity.npz  format "motionpipe.similarity/1"; per kept triplet: ids, files, rows, splits,
@@ -9,13 +9,13 @@
 //   dropped.json    [{id, file, row, reason, detail, snr?}] for every dropped triplet
 //   stats.json      counts for the summary (kept, dropped by reason, SNR values, class frames,
 //                   agreement with known edited frames)
-// The summary (reduce) writes summary.json, summary.png (SNR histogram, class frames, example curves,
-// precision/recall at the class boundaries), dropped.json (all shards) and index.json (the shards).
+// The summary (reduce) writes summary.json, summary.png (SNR histogram, class frames, example
+// curves, precision/recall at the class boundaries), dropped.json (all shards) and index.json (the
+// shards).
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -41,9 +41,9 @@ struct ShardSlice {
   int64_t row_begin = 0, row_end = 0;
 };
 
-// The rows shard `index` of `shards` filters. With at least as many files as shards, each shard takes
-// whole consecutive files (balanced by triplet count), so no file is decompressed twice; otherwise
-// the concatenated rows are cut into equal ranges.
+// The rows shard `index` of `shards` filters. With at least as many files as shards, each shard
+// takes whole consecutive files (balanced by triplet count), so no file is decompressed twice;
+// otherwise the concatenated rows are cut into equal ranges.
 std::vector<ShardSlice> PlanShard(const std::vector<TripletFile>& files, int shards, int index);
 
 struct ShardReport {
@@ -52,14 +52,16 @@ struct ShardReport {
 };
 
 // Filters the slices with `threads` OpenMP threads and writes the shard files into `out_dir`
-// (created). Output bytes do not depend on the thread count. Bad triplets are dropped with a reason;
-// a file that cannot be read at all is an error naming it.
-Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices, const SimilarityOptions& options, int threads,
+// (created). Output bytes do not depend on the thread count. Bad triplets are dropped with a
+// reason; a file that cannot be read at all is an error naming it.
+Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices,
+                                const SimilarityOptions& options, int threads,
                                 const std::string& out_dir);
 
-// Merges shard directories (in order) into summary.json, summary.png, dropped.json and index.json in
-// `out_dir`; returns the summary.
-Result<nlohmann::json> SummarizeFilter(const std::vector<std::string>& shard_dirs, const std::string& out_dir);
+// Merges shard directories (in order) into summary.json, summary.png, dropped.json and index.json
+// in `out_dir`; returns the summary.
+Result<nlohmann::json> SummarizeFilter(const std::vector<std::string>& shard_dirs,
+                                       const std::string& out_dir);
 
 // A few human-readable lines about a summary (for the CLI and logs).
 std::string FormatFilterSummary(const nlohmann::json& summary);

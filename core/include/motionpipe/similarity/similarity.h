@@ -1,7 +1,8 @@
 // SimMotionEdit's motion similarity (paper sec. 3.2.1, REFERENCE 3.1): per source frame, how close
 // the edited (target) motion stays to the source, from which the auxiliary task's classes come.
 //
-//   eq. (4)  S_i^Rr = -min_j d_r(x^i, m^j), j in [max(c - W, 0), min(c + W, T_m)), c = floor(i T_m / T_x),
+//   eq. (4)  S_i^Rr = -min_j d_r(x^i, m^j), j in [max(c - W, 0), min(c + W, T_m)), c = floor(i T_m
+//   / T_x),
 //            d = mean absolute difference; rotation branch on the 6D body pose (joints 1..21),
 //            location branch S^Rl on joint positions without translation (FK with the pelvis at 0)
 //            each branch then smoothed by a moving average (zero padded, numpy's 'same')
@@ -13,9 +14,8 @@
 // A triplet is kept when both motions have at least min_frames frames and MotionSNR >= threshold.
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -47,17 +47,17 @@ struct SimilarityOptions {
 Result<SimilarityOptions> SimilarityPreset(const std::string& name);
 // Checks ranges; the message names `origin` and the key.
 Status ValidateOptions(const SimilarityOptions& options, const std::string& origin);
-// From a config object: optional "preset", then any of the keys window, smooth, w_rot, w_loc, kappa,
-// snr_threshold, min_frames, classes, locations ("auto" | "stored" | "fk"). Unknown keys are errors
-// unless listed in `ignore`.
+// From a config object: optional "preset", then any of the keys window, smooth, w_rot, w_loc,
+// kappa, snr_threshold, min_frames, classes, locations ("auto" | "stored" | "fk"). Unknown keys are
+// errors unless listed in `ignore`.
 Result<SimilarityOptions> OptionsFromJson(const nlohmann::json& config, const std::string& origin,
                                           const std::vector<std::string>& ignore = {});
 nlohmann::json OptionsToJson(const SimilarityOptions& options);
 const char* LocationSourceName(LocationSource source);
 
-// Per-frame branch vectors, padded with zeros to whole SIMD blocks: the rotation branch (6D of joints
-// 1..21, the first two rows of each matrix; entry k of every joint together, [21 k, 21 k + 21)) in
-// [0, 126), then the location branch (22 joints x 3, the pelvis at the origin) in
+// Per-frame branch vectors, padded with zeros to whole SIMD blocks: the rotation branch (6D of
+// joints 1..21, the first two rows of each matrix; entry k of every joint together, [21 k, 21 k +
+// 21)) in [0, 126), then the location branch (22 joints x 3, the pelvis at the origin) in
 // [kLocOffset, kLocOffset + 66).
 inline constexpr int kRotDims = 126;
 inline constexpr int kLocDims = 66;
@@ -67,11 +67,11 @@ inline constexpr int kFrameStride = 200;
 // A motion as the filter sees it: views into a triplets file's columns.
 struct MotionView {
   int64_t frames = 0;
-  int joints = 0;                   // rotations per frame in `poses` (the first 22 are used)
-  const float* poses = nullptr;     // [frames, joints, 3] axis-angle
-  const float* trans = nullptr;     // [frames, 3]
-  int position_joints = 0;          // 0 when absent
-  const float* positions = nullptr; // [frames, position_joints, 3]
+  int joints = 0;                    // rotations per frame in `poses` (the first 22 are used)
+  const float* poses = nullptr;      // [frames, joints, 3] axis-angle
+  const float* trans = nullptr;      // [frames, 3]
+  int position_joints = 0;           // 0 when absent
+  const float* positions = nullptr;  // [frames, position_joints, 3]
 };
 
 // Row `row` of one side of a triplets file's columns.
@@ -82,31 +82,41 @@ MotionView SideView(const TripletColumns::Side& side, int64_t row);
 void BranchFeatures(const MotionView& motion, bool use_stored, std::vector<float>* out);
 
 // Eq. (4) for both branches at once: raw_rot[i] = S_i^Rr, raw_loc[i] = S_i^Rl.
-void RawSimilarity(const float* source, int64_t source_frames, const float* target, int64_t target_frames, int window,
-                   double* raw_rot, double* raw_loc);
-// numpy.convolve(x, ones(m) / m, 'same') for len(x) >= m: out[i] = mean of x[i - m + 1 + (m-1)/2 .. i + (m-1)/2],
-// values outside x counting as 0. Shorter inputs keep their length (numpy would return m values).
+void RawSimilarity(const float* source, int64_t source_frames, const float* target,
+                   int64_t target_frames, int window, double* raw_rot, double* raw_loc);
+// numpy.convolve(x, ones(m) / m, 'same') for len(x) >= m: out[i] = mean of x[i - m + 1 + (m-1)/2 ..
+// i + (m-1)/2], values outside x counting as 0. Shorter inputs keep their length (numpy would
+// return m values).
 std::vector<double> MovingAverage(const std::vector<double>& x, int m);
-// Eq. (9) on a similarity curve (distances are -S). +inf when the smallest distances are all 0 but the
-// largest are not; NaN when every distance is 0 (identical motions: no signal).
+// Eq. (9) on a similarity curve (distances are -S). +inf when the smallest distances are all 0 but
+// the largest are not; NaN when every distance is 0 (identical motions: no signal).
 double MotionSnr(const std::vector<double>& similarity, int kappa);
 // Eq. (6); false (and `out` untouched) when the curve is flat.
 bool MinMaxNormalize(const std::vector<double>& curve, std::vector<double>* out);
 // Eq. (10).
 uint8_t Quantize(double normalized, int classes);
 
-enum class DropReason { kNone, kBadShape, kNonFinite, kEmpty, kOneFrame, kTooShort, kNoSignal, kLowSnr };
+enum class DropReason {
+  kNone,
+  kBadShape,
+  kNonFinite,
+  kEmpty,
+  kOneFrame,
+  kTooShort,
+  kNoSignal,
+  kLowSnr
+};
 const char* DropReasonName(DropReason reason);
 
 struct SimilarityResult {
   DropReason dropped = DropReason::kNone;
-  std::string detail;               // why, for the dropped list
-  double snr = 0;                   // eq. (9); NaN when not computed
-  std::vector<double> raw_rot;      // eq. (4), rotation branch, before smoothing
-  std::vector<double> raw_loc;      // eq. (4), location branch, before smoothing
-  std::vector<double> combined;     // eq. (5) after smoothing: S^R
-  std::vector<double> normalized;   // eq. (6): S^N
-  std::vector<uint8_t> classes;     // eq. (10); empty in regression mode
+  std::string detail;              // why, for the dropped list
+  double snr = 0;                  // eq. (9); NaN when not computed
+  std::vector<double> raw_rot;     // eq. (4), rotation branch, before smoothing
+  std::vector<double> raw_loc;     // eq. (4), location branch, before smoothing
+  std::vector<double> combined;    // eq. (5) after smoothing: S^R
+  std::vector<double> normalized;  // eq. (6): S^N
+  std::vector<uint8_t> classes;    // eq. (10); empty in regression mode
   bool kept() const { return dropped == DropReason::kNone; }
 };
 
@@ -117,7 +127,7 @@ struct Workspace {
 
 // The whole computation for one triplet, with every check: bad input is a drop with a reason, never
 // an exception.
-SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& target, const SimilarityOptions& options,
-                                   Workspace* workspace);
+SimilarityResult ComputeSimilarity(const MotionView& source, const MotionView& target,
+                                   const SimilarityOptions& options, Workspace* workspace);
 
 }  // namespace motionpipe::similarity

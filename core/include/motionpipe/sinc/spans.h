@@ -44,26 +44,30 @@ struct SpanTable {
   SpanTable& operator=(const SpanTable&) = delete;
 
   int64_t size() const { return static_cast<int64_t>(ids.size()); }
-  int64_t frames(int64_t i) const { return offsets[static_cast<size_t>(i) + 1] - offsets[static_cast<size_t>(i)]; }
+  int64_t frames(int64_t i) const {
+    return offsets[static_cast<size_t>(i) + 1] - offsets[static_cast<size_t>(i)];
+  }
   bool single(int64_t i) const { return text_b[static_cast<size_t>(i)].empty(); }
   // A copy of span i's motion.
   Motion MotionOf(int64_t i) const;
   // Appends a span (building a table in memory).
-  void Add(const std::string& id, const std::string& split, const std::string& source, const Motion& motion,
-           const std::string& a, const std::string& b);
+  void Add(const std::string& id, const std::string& split, const std::string& source,
+           const Motion& motion, const std::string& a, const std::string& b);
 };
 
 struct SpanExtraction {
   double fps = 30;
-  BabelSpanOptions sweep;      // 15..600 frames, up to 4 actions (only 1 and 2 are kept)
-  bool keep_pairs = true;      // also keep two-action spans (Real-Pairs)
+  BabelSpanOptions sweep;  // 15..600 frames, up to 4 actions (only 1 and 2 are kept)
+  bool keep_pairs = true;  // also keep two-action spans (Real-Pairs)
 };
 
-// Spans of BABEL files (split = the file's stem: train, val, test) whose `feat_p` are resolved under
-// `amass_root`. Sequences whose AMASS file is missing or unreadable are skipped and counted in
-// `skipped` (with the first problem in `first_problem`); a BABEL file that cannot be parsed is an error.
-Result<SpanTable> ExtractBabelSpans(const std::vector<std::string>& babel_files, const std::string& amass_root,
-                                    const SpanExtraction& options, int64_t* skipped = nullptr,
+// Spans of BABEL files (split = the file's stem: train, val, test) whose `feat_p` are resolved
+// under `amass_root`. Sequences whose AMASS file is missing or unreadable are skipped and counted
+// in `skipped` (with the first problem in `first_problem`); a BABEL file that cannot be parsed is
+// an error.
+Result<SpanTable> ExtractBabelSpans(const std::vector<std::string>& babel_files,
+                                    const std::string& amass_root, const SpanExtraction& options,
+                                    int64_t* skipped = nullptr,
                                     std::string* first_problem = nullptr);
 
 Status WriteSpans(const std::string& path, const SpanTable& table);

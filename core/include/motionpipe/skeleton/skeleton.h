@@ -1,8 +1,9 @@
 // The SMPL 22-joint body (SMPL/SMPL-H without hands) used by AMASS, BABEL, MotionFix and SINC, and
 // forward kinematics on it. Facts come from data/skeleton/smpl22.json (embedded in the binary).
 //
-// Frames: rest offsets live in SMPL's y-up body frame (x = the body's left, z = forward); motions live
-// in the z-up world of AMASS (metres), so a standing body has a global orientation of about Rx(+90 deg).
+// Frames: rest offsets live in SMPL's y-up body frame (x = the body's left, z = forward); motions
+// live in the z-up world of AMASS (metres), so a standing body has a global orientation of about
+// Rx(+90 deg).
 #pragma once
 
 #include <array>
@@ -23,7 +24,9 @@ enum class BodyPart : int { kGlobal = 0, kTorso, kLeftArm, kRightArm, kLeftLeg, 
 
 // A set of body parts as a bit mask (bit i = BodyPart i).
 using PartSet = uint8_t;
-constexpr PartSet PartBit(BodyPart part) { return static_cast<PartSet>(1u << static_cast<int>(part)); }
+constexpr PartSet PartBit(BodyPart part) {
+  return static_cast<PartSet>(1u << static_cast<int>(part));
+}
 const std::array<std::string, kNumBodyParts>& BodyPartNames();
 // "global+left arm" style; "none" for the empty set.
 std::string PartSetToString(PartSet parts);
@@ -31,8 +34,10 @@ int PartCount(PartSet parts);
 
 // Which rest directions the offsets use.
 enum class RestPose {
-  // SMPL's T-pose: the file's directions, except where HumanML3D's IK conventions differ from SMPL's
-  // rest geometry: the arm chain (shoulder, elbow, wrist offsets) points sideways (+x left, -x right),
+  // SMPL's T-pose: the file's directions, except where HumanML3D's IK conventions differ from
+  // SMPL's
+  // rest geometry: the arm chain (shoulder, elbow, wrist offsets) points sideways (+x left, -x
+  // right),
   // because AMASS/MotionFix pose parameters are rotations relative to SMPL's T-pose, and the head
   // sits above the neck (+y) instead of in front of it. Lengths are always the file's. The default.
   kSmplTPose,
