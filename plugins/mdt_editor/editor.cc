@@ -65,8 +65,12 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
   o.preconditioning = d.value("preconditioning", o.preconditioning);
-  if (o.preconditioning != "x0" && o.preconditioning != "edm")
-    throw std::invalid_argument("diffusion.preconditioning must be x0 or edm");
+  if (o.preconditioning != "x0" && o.preconditioning != "edm" && o.preconditioning != "source")
+    throw std::invalid_argument("diffusion.preconditioning must be x0, edm or source");
+  if (o.preconditioning == "source" && !o.uses_source())
+    throw std::invalid_argument(
+        "diffusion.preconditioning source needs a variant that sees the "
+        "source (mdt or tmed)");
   o.sigma_data = d.value("sigma_data", o.sigma_data);
   if (!(o.sigma_data > 0)) throw std::invalid_argument("diffusion.sigma_data must be positive");
   o.guidance_motion = d.value("guidance_motion", o.guidance_motion);
@@ -155,6 +159,12 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
     separator_ = register_parameter("separator", torch::randn({o.dim}) * 0.02);
   }
   segments_ = register_parameter("segments", torch::randn({kSegments, o.dim}) * 0.02);
+  if (o.preconditioning == "source") {
+    // The untrained network adds nothing to the aligned source: its edit is the copy.
+    torch::NoGradGuard no_grad;
+    out_->weight.zero_();
+    out_->bias.zero_();
+  }
   if (o.variant == "mdt") {
     condition_ = register_module("condition", nn::Encoder(nn::TransformerOptions{
                                                   o.dim, o.heads, o.ff, o.cond_layers, o.dropout}));
@@ -215,8 +225,23 @@ Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& 
   if (o_.preconditioning == "edm") {
     const auto [skip, out] = schedule_.Preconditioning(t, o_.sigma_data);
     p.x0 = skip * xt + out * p.x0;
+  } else if (o_.preconditioning == "source") {
+    auto base = AlignSource(c.source, c.source_padding, target_padding);
+    if (c.drop_source.defined())
+      base = base * (1 - c.drop_source.view({1, -1, 1}).to(base.dtype()));
+    p.x0 = base + p.x0;
   }
   return p;
+}
+
+torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& source_padding,
+                          const torch::Tensor& target_padding) {
+  const int64_t tt = target_padding.size(1), n = source.size(1);
+  const auto ls = source_padding.logical_not().sum(1).clamp_min(1).view({1, -1});  // [1, N]
+  const auto lt = target_padding.logical_not().sum(1).clamp_min(1).view({1, -1});
+  const auto i = torch::arange(tt, torch::kInt64).view({-1, 1});               // [Tt, 1]
+  const auto index = torch::minimum(torch::div(i * ls, lt, "floor"), ls - 1);  // [Tt, N]
+  return source.gather(0, index.unsqueeze(2).expand({tt, n, source.size(2)}));
 }
 
 namespace {

@@ -49,6 +49,14 @@ struct EditorOptions {
   // 0.0002). The loss is the same x0 MSE either way. Measured at d = 128 (issue 15), "edm" is
   // worse: the skip passes x_t's noise, which the 128-wide trunk cannot cancel at middle steps, and
   // the sampled edits are rough (second differences 200x the target's), so "x0" stays the default.
+  //
+  // "source": x0 = the source aligned to the target's length (AlignSource) + F, where the source
+  // is seen (F alone where it is dropped), and F starts at 0: the untrained editor copies its
+  // source and training learns only what the edit changes. Not in the paper: the residual of an
+  // edit on its source is the natural prior for editing (the source is the conditional mean of a
+  // target before the text is read), and at demo budgets (a few thousand steps against the paper's
+  // ~80 k) the plain head never learns to copy (its DDIM edits are as far from their sources as
+  // from anything).
   std::string preconditioning = "x0";
   double sigma_data = 0.5;  // the normalised features' spread: (x - mean) / (2 std)
   double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
@@ -72,6 +80,12 @@ struct Condition {
   torch::Tensor source_padding;  // [N, Ts] true = padding
   torch::Tensor drop_text, drop_source;
 };
+
+// The source [Ts, N, C] resampled to each target's length [Tt, N, C]: target frame i of an
+// L_t-frame target takes source frame floor(i L_s / L_t), the centre of the similarity curve's
+// window (REFERENCE 3.1). Lengths come from the paddings (true = padding).
+torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& source_padding,
+                          const torch::Tensor& target_padding);
 
 struct Prediction {
   torch::Tensor x0;          // [Tt, N, 207]

@@ -300,6 +300,50 @@ TEST(Editor, TheEdmPreconditioningPassesANearlyCleanTargetThrough) {
   }
 }
 
+// Issue 15: the "source" parameterisation x0 = aligned source + F. The source is resampled to the
+// target's length by floor(i L_s / L_t); the untrained editor returns exactly that (F starts at 0),
+// and nothing of the source where it is dropped (classifier-free guidance's unconditional branch).
+TEST(Editor, TheSourcePreconditioningStartsAsACopyOfTheAlignedSource) {
+  // A 4-frame source against an 8-frame target (stretched) and a 6-frame source against a 3-frame
+  // target (shrunk); the sources' values are their frame numbers.
+  auto source = torch::arange(6, torch::kFloat32).view({6, 1, 1}).expand({6, 2, 2}).clone();
+  auto source_padding = torch::zeros({2, 6}, torch::kBool);
+  source_padding[0].narrow(0, 4, 2).fill_(true);
+  auto target_padding = torch::zeros({2, 8}, torch::kBool);
+  target_padding[1].narrow(0, 3, 5).fill_(true);
+  const auto aligned = AlignSource(source, source_padding, target_padding);
+  ASSERT_EQ(aligned.sizes(), (std::vector<int64_t>{8, 2, 2}));
+  const std::vector<float> stretched = {0, 0, 1, 1, 2, 2, 3, 3}, shrunk = {0, 2, 4};
+  for (int64_t i = 0; i < 8; ++i) EXPECT_EQ(aligned[i][0][1].item<float>(), stretched[i]) << i;
+  for (int64_t i = 0; i < 3; ++i) EXPECT_EQ(aligned[i][1][0].item<float>(), shrunk[i]) << i;
+
+  for (const std::string variant : {"mdt", "tmed"}) {
+    torch::manual_seed(7);
+    EditorOptions o = Tiny(variant, "none");
+    o.preconditioning = "source";
+    EditorNet net(o);
+    const TinyTriplets data;
+    net->text_encoder()->Fit(data.texts);
+    net->eval();
+    torch::NoGradGuard no_grad;
+    const auto xt = torch::randn_like(data.target);
+    const auto t = torch::tensor({49, 20, 0}, torch::kInt64);
+    Condition c{data.texts, data.source, data.source_padding, {}, {}};
+    auto x0 = net->forward(xt, t, data.target_padding, c).x0;
+    const auto expected = AlignSource(data.source, data.source_padding, data.target_padding);
+    EXPECT_LT((x0 - expected).abs().max().item<double>(), 1e-6) << variant;
+    // Example 2's target is 9 frames of a 12-frame source: frame 8 takes source frame 10.
+    EXPECT_LT((x0[8][2] - data.source[10][2]).abs().max().item<double>(), 1e-6) << variant;
+    c.drop_source = torch::tensor({0, 1, 0}).to(torch::kBool);
+    x0 = net->forward(xt, t, data.target_padding, c).x0;
+    EXPECT_EQ(x0.select(1, 1).abs().max().item<double>(), 0.0) << variant;
+    EXPECT_LT((x0.select(1, 0) - data.source.select(1, 0)).abs().max().item<double>(), 1e-6);
+  }
+  EditorOptions mdm = Tiny("mdm", "none");
+  mdm.preconditioning = "source";
+  EXPECT_THROW(EditorOptions::FromJson(mdm.ToJson()), std::invalid_argument);
+}
+
 TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
   torch::manual_seed(3);
   EditorNet net(Tiny("mdt"));
