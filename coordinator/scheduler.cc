@@ -85,8 +85,9 @@ Result<int64_t> Scheduler::CreateJob(const PipelineSpec& spec) {
   MP_ASSIGN_OR_RETURN(const int64_t id, journal_->CreateJob(stored));
   job.id = id;
   job.output_dir = root + "/" + spec.name + "-" + std::to_string(id);
-  fs::create_directories(job.output_dir, ec);
-  if (ec) return IoError(job.output_dir + ": cannot create the job directory: " + ec.message());
+  // Durable, as every commit's directories are: a power loss must not take the job's directory.
+  if (const Status made = MakeDirsDurable(job.output_dir); !made.ok())
+    return IoError(job.output_dir + ": cannot create the job directory: " + made.message());
   auto& stored_job = jobs_[id] = std::move(job);
   for (size_t s = 0; s < stored_job.stages.size(); ++s) {
     for (size_t t = 0; t < stored_job.stages[s].tasks.size(); ++t)
@@ -529,6 +530,15 @@ void Scheduler::Commit(Job* job, size_t stage_index, int task_index, const Attem
       }
     } else {
       fs::create_directories(fs::path(final_dir).parent_path(), ec);
+      if (!stage.dir_synced) {
+        // The stage's directory (made by the first worker to stage an attempt in it) gets its
+        // entry in the job's directory synced before anything in it is committed.
+        if (const Status synced = SyncDir(job->output_dir); !synced.ok()) {
+          TaskError(job, stage_index, task_index, "commit not durable: " + synced.message(), false);
+          return;
+        }
+        stage.dir_synced = true;
+      }
       fs::rename(staging, final_dir, ec);
       if (ec) {
         TaskError(job, stage_index, task_index, "cannot commit " + staging + ": " + ec.message(),

@@ -145,6 +145,7 @@ class Scheduler {
     std::deque<double> commit_times;  // recent commits, for throughput and ETA
     std::vector<std::string> failures;
     bool started = false;
+    bool dir_synced = false;  // its directory's entry in the job's is durable (first commit)
     bool gang() const { return spec.world_size > 1; }
   };
   struct Job {

@@ -32,6 +32,22 @@ TEST(File, AtomicWriteReplacesAndLeavesNoTemporaries) {
   EXPECT_FALSE(WriteFileAtomic(dir + "/no/such/dir/file", "x").ok());
 }
 
+// Whether the parents' entries reach the disk is the power-loss test's (engine.disk_faults); here:
+// the directories appear, an existing path is fine, and a path through a file is an error naming
+// it.
+TEST(File, MakeDirsDurableCreatesTheMissingChain) {
+  const std::string root = ::testing::TempDir() + "/durable";
+  std::filesystem::remove_all(root);
+  ASSERT_TRUE(MakeDirsDurable(root + "/a/b/c").ok());
+  EXPECT_TRUE(std::filesystem::is_directory(root + "/a/b/c"));
+  EXPECT_TRUE(MakeDirsDurable(root + "/a/b").ok());
+  ASSERT_TRUE(WriteFileAtomic(root + "/file", "x").ok());
+  const Status through_file = MakeDirsDurable(root + "/file/d");
+  EXPECT_FALSE(through_file.ok());
+  EXPECT_NE(through_file.message().find(root + "/file/d"), std::string::npos)
+      << through_file.message();
+}
+
 TEST(FileLock, OneHolderAtATimeNamedByPid) {
   const std::string dir = ::testing::TempDir() + "/lock";
   ASSERT_TRUE(MakeDirs(dir).ok());

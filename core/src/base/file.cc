@@ -127,6 +127,20 @@ Status MakeDirs(const std::string& path) {
   return Status::Ok();
 }
 
+Status MakeDirsDurable(const std::string& path) {
+  std::error_code ec;
+  std::vector<std::filesystem::path> missing;
+  for (std::filesystem::path p = std::filesystem::absolute(path, ec).lexically_normal();
+       !p.empty() && !std::filesystem::exists(p, ec); p = p.parent_path()) {
+    missing.push_back(p);
+    if (p == p.parent_path()) break;
+  }
+  MP_RETURN_IF_ERROR(MakeDirs(path));
+  for (auto p = missing.rbegin(); p != missing.rend(); ++p)
+    MP_RETURN_IF_ERROR(SyncDir(p->parent_path().string()));  // outermost first
+  return Status::Ok();
+}
+
 // FIPS 180-4 SHA-256.
 namespace {
 constexpr std::array<uint32_t, 64> kSha256K = {

@@ -65,6 +65,10 @@ Status SyncDir(const std::string& dir);
 // Creates `path` and its parents when missing.
 Status MakeDirs(const std::string& path);
 
+// MakeDirs, and each directory it creates has its entry fsynced in its parent, so that the new
+// directories survive a power loss (LevelDB syncs a new directory's parent the same way).
+Status MakeDirsDurable(const std::string& path);
+
 // Lower-case hex SHA-256 of `bytes` (for output manifests).
 std::string Sha256Hex(std::string_view bytes);
 
