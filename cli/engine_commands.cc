@@ -101,13 +101,10 @@ int Run(const RunOptions& o) {
   auto spec = coordinator::ParsePipeline(*text, o.overrides, o.pipeline, kinds);
   if (!spec.ok()) return Fail(spec.status());
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
-  // Each worker runs `credit` tasks at once: the default gives every task its share of the cores.
-  // (bench/eval_bench.py, one worker on 2 cores: 2 threads per task with 2 tasks at once took 399 s
-  // for what 1 thread per task did in 257 s: the spinning BLAS pools oversubscribe the machine.)
-  const int credit = o.credit > 0 ? o.credit : 2;
-  const int threads = o.threads > 0
-                          ? o.threads
-                          : std::max(1, static_cast<int>(cores) / std::max(1, o.workers * credit));
+  // A worker runs one task at a time (credit is how many it holds: the running one and those
+  // prefetched behind it), so the default gives each worker's task its share of the cores.
+  const int threads =
+      o.threads > 0 ? o.threads : std::max(1, static_cast<int>(cores) / std::max(1, o.workers));
   if (threads * o.workers > static_cast<int>(cores)) {
     MP_LOG(kWarn, "run") << o.workers << " workers x " << threads << " threads oversubscribe "
                          << cores << " cores";
@@ -290,7 +287,7 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
         ->capture_default_str()
         ->check(CLI::Range(1, 256));
     cmd->add_option("--threads", o.threads,
-                    "Threads per task (default: cores / (workers x credit), at least 1)");
+                    "Threads per task (default: cores / workers, at least 1)");
     cmd->add_option("--credit", o.credit, "Tasks leased to a worker at once (default 2)");
     cmd->add_option("--journal", o.journal,
                     "Journal file (default: <output_root>/.motionpipe/journal.sqlite)");

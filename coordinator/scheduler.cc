@@ -359,28 +359,76 @@ void Scheduler::StopGang(Job* job, size_t stage_index, int failed_rank, const st
   }
 }
 
+bool Scheduler::AssignOne(Worker* worker) {
+  for (auto& [id, job] : jobs_) {
+    if (job.state != "running") continue;
+    for (size_t s = 0; s < job.stages.size(); ++s) {
+      Stage& stage = job.stages[s];
+      if (stage.gang() || stage.ready.empty() || !worker->kinds.count(stage.spec.kind) ||
+          !StageRunnable(job, s))
+        continue;
+      if (const auto task = TakeReady(&job, s)) {
+        Assign(worker, &job, s, *task);
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
 void Scheduler::Dispatch() {
   DispatchGangs();
+  // Idle workers first, one task each, so that a task handed back for an idle worker goes to it
+  // and not back to the busy worker that held it; then every worker up to its credit.
+  for (auto& [identity, worker] : workers_) {
+    if (!worker.draining && worker.attempts.empty()) AssignOne(&worker);
+  }
   for (auto& [identity, worker] : workers_) {
     const int credit = std::max(1, worker.ready.credit());
-    while (!worker.draining && static_cast<int>(worker.attempts.size()) < credit) {
-      bool assigned = false;
-      for (auto& [id, job] : jobs_) {
-        if (job.state != "running") continue;
-        for (size_t s = 0; s < job.stages.size() && !assigned; ++s) {
-          Stage& stage = job.stages[s];
-          if (stage.gang() || stage.ready.empty() || !worker.kinds.count(stage.spec.kind) ||
-              !StageRunnable(job, s))
-            continue;
-          if (const auto task = TakeReady(&job, s)) {
-            Assign(&worker, &job, s, *task);
-            assigned = true;
-          }
-        }
-        if (assigned) break;
-      }
-      if (!assigned) break;
+    while (!worker.draining && static_cast<int>(worker.attempts.size()) < credit &&
+           AssignOne(&worker)) {
     }
+  }
+  ReclaimForIdleWorkers();
+}
+
+void Scheduler::ReclaimForIdleWorkers() {
+  const double now = clock_->Now();
+  int pending = 0;  // reclaims asked for and not yet answered
+  for (const auto& [id, attempt] : attempts_) pending += attempt.reclaiming;
+  for (auto& [identity, idle] : workers_) {
+    if (idle.draining || !idle.attempts.empty()) continue;
+    if (pending > 0) {  // an earlier reclaim is on its way to an idle worker
+      --pending;
+      continue;
+    }
+    // A worker runs its tasks one at a time in lease order: every attempt of a worker but its
+    // oldest is queued. Take the newest one that has waited long enough.
+    Attempt* best = nullptr;
+    for (auto& [other_identity, busy] : workers_) {
+      if (other_identity == identity || busy.attempts.size() < 2) continue;
+      const int64_t running = *busy.attempts.begin();
+      for (const int64_t id : busy.attempts) {
+        Attempt& a = attempts_.at(id);
+        if (id == running || a.reclaiming || a.expired ||
+            now - a.started < options_.reclaim_after_seconds)
+          continue;
+        const Job* job = FindJob(a.job);
+        if (!job || job->state != "running") continue;
+        const Stage& stage = job->stages[a.stage];
+        if (stage.gang() || !idle.kinds.count(stage.spec.kind)) continue;
+        if (!best || a.id > best->id) best = &a;
+      }
+    }
+    if (!best) continue;
+    best->reclaiming = true;
+    Outgoing out;
+    out.identity = best->identity;
+    out.cancel.emplace();
+    out.cancel->set_attempt_id(best->id);
+    out.cancel->set_only_if_queued(true);
+    out.cancel->set_reason("reclaimed for idle worker " + identity);
+    outgoing_.push_back(std::move(out));
   }
 }
 

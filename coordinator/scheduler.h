@@ -54,6 +54,10 @@ class FakeClock : public Clock {
 struct SchedulerOptions {
   double heartbeat_seconds = 1.0;
   int liveness = 3;  // missed heartbeats before a worker is lost
+  // A task leased to a busy worker (queued behind its running one) for this long is reclaimed for
+  // a worker that is idle: prefetching pays for millisecond tasks and must not cost worker-hours
+  // when the tasks are long (issue 17's head-of-line blocking).
+  double reclaim_after_seconds = 1.0;
 };
 
 // A message the server must send to a worker (identified by its routing identity).
@@ -126,6 +130,7 @@ class Scheduler {
     double started;
     double deadline;
     bool expired = false;
+    bool reclaiming = false;  // asked back (only if still queued) for an idle worker
   };
   struct Task {
     TaskState state = TaskState::kPending;
@@ -176,6 +181,11 @@ class Scheduler {
   void Assign(Worker* worker, Job* job, size_t stage, int task, const std::string& rendezvous = "");
   // Gangs: all ranks start together on distinct workers; a failing rank stops its gang.
   void DispatchGangs();
+  // Asks busy workers to hand back tasks queued behind their running one, for idle workers.
+  void ReclaimForIdleWorkers();
+  // The first runnable ready task of any running job that `worker` can run, assigned; false if
+  // none.
+  bool AssignOne(Worker* worker);
   void StopGang(Job* job, size_t stage, int failed_rank, const std::string& why);
   void Commit(Job* job, size_t stage, int task, const Attempt& attempt,
               const wire::TaskResult& result);

@@ -123,6 +123,7 @@ class WorkerProcess {
   void HandleMessage(const net::Envelope& envelope);
   void FlushResults();
   void HandBackQueued();
+  bool ReclaimQueued(int64_t attempt_id);
 
   const WorkerOptions& options_;
   ExecutorRegistry* registry_;
@@ -290,6 +291,16 @@ void WorkerProcess::HandleMessage(const net::Envelope& envelope) {
     case MessageType::kCancel: {
       wire::Cancel cancel;
       if (!net::ParseBody(envelope.body, &cancel)) return;
+      if (cancel.only_if_queued()) {
+        if (ReclaimQueued(cancel.attempt_id())) {
+          wire::TaskResult back;
+          back.set_attempt_id(cancel.attempt_id());
+          back.set_outcome(wire::TaskResult::HANDED_BACK);
+          back.set_message("reclaimed for an idle worker");
+          Send(MessageType::kTaskResult, back);
+        }
+        break;
+      }
       std::lock_guard<std::mutex> lock(channel_.mutex);
       if (const auto it = channel_.cancels.find(cancel.attempt_id()); it != channel_.cancels.end())
         it->second->store(1);
@@ -319,6 +330,19 @@ void WorkerProcess::FlushResults() {
     metrics_->queued.Set(static_cast<double>(channel_.queue.size()));
   }
   for (const wire::TaskResult& result : results) Send(MessageType::kTaskResult, result);
+}
+
+// Takes a queued (not started) attempt out of the queue; false if it is running or unknown.
+bool WorkerProcess::ReclaimQueued(int64_t attempt_id) {
+  std::lock_guard<std::mutex> lock(channel_.mutex);
+  for (auto it = channel_.queue.begin(); it != channel_.queue.end(); ++it) {
+    if (it->attempt_id != attempt_id) continue;
+    channel_.queue.erase(it);
+    channel_.cancels.erase(attempt_id);
+    metrics_->queued.Set(static_cast<double>(channel_.queue.size()));
+    return true;
+  }
+  return false;
 }
 
 // Queued (not started) tasks go back to the coordinator without using their retry budget.

@@ -54,6 +54,21 @@ class TwoHosts(EngineTest):
         missing = self.cli("wait", "999", "--control", self.control, check=False)
         self.assertEqual(missing.returncode, 1)
 
+    def test_long_tasks_queued_on_a_busy_worker_go_to_an_idle_one(self):
+        # Issue 17's head-of-line blocking: worker a (credit 2) leases both long tasks before b
+        # arrives; the one queued behind a's running task is reclaimed for b, and both run at once.
+        self.coordinator()
+        self.worker("a", credit=2)
+        job = self.submit(self.write_pipeline("l.yaml", "name: long\noutput_root: OUT\nstages: {s: {kind: sleep, params: {tasks: 2, ms: 6000}}}\n"))
+        self.wait_until(lambda: any(w["id"] == "a" and w.get("running", 0) == 2 for w in self.status().get("workers", [])), 20, "a to lease both tasks")
+        self.worker("b", credit=2)
+        self.wait_until(lambda: all(w.get("running", 0) == 1 for w in self.status().get("workers", [])) and len(self.status().get("workers", [])) == 2,
+                        10, "one task on each worker")
+        code, out = self.wait_job(job, timeout=60)
+        self.assertEqual(code, 0, out)
+        done = {w["id"]: int(w.get("tasks_done", 0)) for w in self.status()["workers"]}
+        self.assertEqual(done, {"a": 2, "b": 1})  # a's results: its task and the hand-back
+
     def test_a_draining_worker_finishes_or_hands_back(self):
         self.coordinator()
         long = self.write_pipeline("l.yaml", "name: long\noutput_root: OUT\nstages: {s: {kind: sleep, params: {tasks: 4, ms: 1500}}}\n")

@@ -655,6 +655,51 @@ TEST_F(SchedulerTest, HandedBackTasksReturnWithoutPenalty) {
   (void)job;
 }
 
+// Issue 17: with credit 2 a second long training sat queued behind a first on one worker while
+// another worker idled. A task queued on a busy worker for reclaim_after_seconds is asked back
+// (Cancel with only_if_queued) for an idle worker, and the idle worker gets it, not its old holder.
+TEST_F(SchedulerTest, ATaskQueuedOnABusyWorkerIsReclaimedForAnIdleOne) {
+  auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  ASSERT_TRUE(job.ok());
+  scheduler_->OnReady("w1", ReadyFor("w1", 4));
+  scheduler_->Dispatch();
+  const auto a = Assigned("w1");
+  ASSERT_EQ(a.size(), 4u);  // every write, one running and three queued
+  scheduler_->OnReady("w2", ReadyFor("w2", 2));
+  const auto reclaims = [&] {
+    std::vector<wire::Cancel> out;
+    for (auto& o : scheduler_->TakeOutgoing()) {
+      if (o.cancel) {
+        EXPECT_EQ(o.identity, "w1");
+        out.push_back(*o.cancel);
+      }
+    }
+    return out;
+  };
+  scheduler_->Dispatch();
+  EXPECT_TRUE(reclaims().empty());  // queued for less than a second: prefetching still pays
+  clock_.Advance(2);
+  scheduler_->Dispatch();
+  auto asked = reclaims();
+  ASSERT_EQ(asked.size(), 1u);  // one for the one idle worker
+  EXPECT_TRUE(asked[0].only_if_queued());
+  EXPECT_EQ(asked[0].attempt_id(), a[3].attempt_id());  // the newest, never the running one
+  scheduler_->Dispatch();
+  EXPECT_TRUE(reclaims().empty());  // asked once, not again while the answer is on its way
+  scheduler_->OnResult("w1", Outcome(a[3], wire::TaskResult::HANDED_BACK, "reclaimed"));
+  scheduler_->Dispatch();
+  const auto b = Assigned("w2");
+  ASSERT_EQ(b.size(), 1u);
+  EXPECT_EQ(b[0].task().index(), a[3].task().index());
+  EXPECT_EQ(b[0].task().attempt(), 0);  // no retry budget used
+  // w1 finishes its running task; w2 is busy, so nothing more is reclaimed for it.
+  scheduler_->OnResult("w1", Ok(a[0]));
+  clock_.Advance(2);
+  scheduler_->Dispatch();
+  EXPECT_TRUE(reclaims().empty());
+  EXPECT_EQ(StageOf(*job, "write").committed(), 1);
+}
+
 TEST_F(SchedulerTest, ResumeAfterRestartNeverRerunsCommittedTasks) {
   auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
   scheduler_->OnReady("w1", ReadyFor("w1", 2));
