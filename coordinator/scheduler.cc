@@ -393,6 +393,10 @@ void Scheduler::Dispatch() {
 }
 
 void Scheduler::ReclaimForIdleWorkers() {
+  bool any_idle = false;
+  for (const auto& [identity, worker] : workers_)
+    any_idle = any_idle || (!worker.draining && worker.attempts.empty());
+  if (!any_idle) return;  // the common case, kept O(workers)
   const double now = clock_->Now();
   int pending = 0;  // reclaims asked for and not yet answered
   for (const auto& [id, attempt] : attempts_) pending += attempt.reclaiming;
