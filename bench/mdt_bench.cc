@@ -1,7 +1,10 @@
 // SimMotionEdit's MDT (plugins/mdt_editor): training samples/s at the demo's size and at the
 // paper's against the same architecture in PyTorch Python (bench/reference/mdt_ref.py, Debian's
 // python3-torch) on the same batch with the same threads, in one run; then editing latency per
-// motion with three-way guidance for DDPM-300 and DDIM-50 at batch 1 and 32.
+// motion with three-way guidance for DDPM-300 and DDIM-50 at batch 1 and 32. The training rate is
+// also given in GFLOP/s (the step's matrix products counted, TrainingStepFlops) beside the sgemm
+// rate of LibTorch on the same threads, measured in the same run (issue 15: goal 60% of it at
+// paper size).
 //   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //   [--no-reference]
 //             [--no-latency]
@@ -57,6 +60,45 @@ std::vector<T> Values(const torch::Tensor& t) {
   return std::vector<T>(c.data_ptr<T>(), c.data_ptr<T>() + c.numel());
 }
 
+// Multiply-adds of one transformer layer over a batch of `n` sequences of `length` tokens: the
+// four d x d projections and the two feed-forward matrices per token, and QK^T and AV per sequence.
+double LayerMacs(double n, double length, double dim, double ff) {
+  return n * (length * (4 * dim * dim + 2 * dim * ff) + 2 * length * length * dim);
+}
+
+// FLOPs of one training step of the MDT, counted from its matrix products (everything else is a
+// few percent at these sizes): forward 2 x multiply-adds, backward twice the forward (gradients of
+// inputs and of weights). The text encoder is the text_encoder options' size.
+double TrainingStepFlops(const Size& size, double batch, double frames, double text_tokens,
+                         const nn::TextEncoderOptions& text) {
+  const double d = static_cast<double>(size.dim), ff = static_cast<double>(size.ff);
+  double macs = 0;
+  macs +=
+      LayerMacs(batch, text_tokens, static_cast<double>(text.dim), static_cast<double>(text.ff)) *
+      static_cast<double>(text.layers);
+  macs += batch * text_tokens * static_cast<double>(text.dim) * d;  // text projection
+  macs += batch * frames * kEditFeatureDim * d * 3;                 // source in, target in, out
+  macs += LayerMacs(batch, frames + 1, d, ff) * static_cast<double>(size.cond_layers);
+  macs += LayerMacs(batch, 2 * frames + 1, d, ff) * static_cast<double>(size.layers);
+  macs += batch * frames * (d * ff + ff * ff + ff * 3);  // the similarity head
+  return 3 * 2 * macs;
+}
+
+// The machine's sgemm rate through LibTorch on the current threads: square products of the
+// trunk's width times a long token axis, the shape of the step's largest products.
+double SgemmGflops(int64_t dim) {
+  const auto a = torch::randn({4096, dim}), b = torch::randn({dim, dim * 2});
+  for (int k = 0; k < 3; ++k) (void)torch::mm(a, b);
+  int64_t reps = 0;
+  const auto started = Clock::now();
+  while (Since(started) < 1.0) {
+    (void)torch::mm(a, b);
+    ++reps;
+  }
+  return 2.0 * 4096 * static_cast<double>(dim) * static_cast<double>(dim * 2) *
+         static_cast<double>(reps) / Since(started) / 1e9;
+}
+
 EditorNet Build(const Size& size) {
   const json config = {
       {"variant", "mdt"},
@@ -110,7 +152,8 @@ int main(int argc, char** argv) {
       "source and target up to %lld frames, %lld thread(s)\n",
       static_cast<long long>(batch), static_cast<long long>(frames),
       static_cast<long long>(threads));
-  std::printf("%-6s %10s %12s %12s %8s\n", "size", "params", "C++ samp/s", "Py samp/s", "ratio");
+  std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s\n", "size", "params", "C++ samp/s",
+              "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak");
   // The batch: lengths in [frames/2, frames], features ~ N(0, 1), classes in {0, 1, 2}.
   std::mt19937 rng(7);
   const auto lengths = [&](int64_t n) {
@@ -164,9 +207,9 @@ int main(int argc, char** argv) {
     if (reference) {
       const std::string dir = "/tmp/motionpipe_mdt_bench";
       fs::create_directories(dir);
-      const auto tokens = net->text_encoder()->TokenIds(texts);
-      bench::SaveNpy(dir + "/tokens.npy",
-                     NpyArray::Int64({tokens.size(0), tokens.size(1)}, Values<int64_t>(tokens)));
+      const auto token_ids = net->text_encoder()->TokenIds(texts);
+      bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({token_ids.size(0), token_ids.size(1)},
+                                                          Values<int64_t>(token_ids)));
       bench::SaveNpy(dir + "/source.npy",
                      NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(source)));
       bench::SaveNpy(dir + "/target.npy",
@@ -188,8 +231,15 @@ int main(int argc, char** argv) {
       const std::string out = Run(command.str());
       python = json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
     }
-    std::printf("%-6s %10lld %12.2f %12.2f %8.2f\n", size.name.c_str(),
-                static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0);
+    const auto tokens = net->text_encoder()->TokenIds(texts);
+    const double flops =
+        TrainingStepFlops(size, static_cast<double>(batch), static_cast<double>(frames),
+                          static_cast<double>(tokens.size(1)), net->options().text);
+    const double achieved = flops * cpp / static_cast<double>(batch) / 1e9,
+                 peak = SgemmGflops(size.dim);
+    std::printf("%-6s %10lld %12.2f %12.2f %8.2f %11.1f %11.1f %8.0f%%\n", size.name.c_str(),
+                static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0,
+                achieved, peak, 100 * achieved / peak);
     std::fflush(stdout);
   }
 

@@ -72,6 +72,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
         "diffusion.preconditioning source needs a variant that sees the "
         "source (mdt or tmed)");
   o.sigma_data = d.value("sigma_data", o.sigma_data);
+  o.learned_skip = d.value("learned_skip", o.learned_skip);
   if (!(o.sigma_data > 0)) throw std::invalid_argument("diffusion.sigma_data must be positive");
   o.guidance_motion = d.value("guidance_motion", o.guidance_motion);
   o.guidance_text = d.value("guidance_text", o.variant == "mdm" ? 2.5 : o.guidance_text);
@@ -119,6 +120,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"guidance_motion", guidance_motion},
             {"guidance_text", guidance_text},
             {"preconditioning", preconditioning},
+            {"learned_skip", learned_skip},
             {"sigma_data", sigma_data},
             {"snr_shift", snr_shift}}}};
 }
@@ -159,8 +161,14 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
     separator_ = register_parameter("separator", torch::randn({o.dim}) * 0.02);
   }
   segments_ = register_parameter("segments", torch::randn({kSegments, o.dim}) * 0.02);
-  if (o.preconditioning == "source") {
-    // The untrained network adds nothing to the aligned source: its edit is the copy.
+  if (o.learned_skip) {
+    if (o.preconditioning == "edm")
+      throw std::invalid_argument("diffusion.learned_skip replaces edm's fixed skip: not both");
+    skip_ = register_parameter("skip", torch::zeros({o.diffusion_steps, kEditFeatureDim}));
+  }
+  if (o.preconditioning == "source" || o.learned_skip) {
+    // The untrained network adds nothing to the aligned source (its edit is the copy) or to the
+    // skip's Wiener estimate.
     torch::NoGradGuard no_grad;
     out_->weight.zero_();
     out_->bias.zero_();
@@ -225,11 +233,30 @@ Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& 
   if (o_.preconditioning == "edm") {
     const auto [skip, out] = schedule_.Preconditioning(t, o_.sigma_data);
     p.x0 = skip * xt + out * p.x0;
-  } else if (o_.preconditioning == "source") {
-    auto base = AlignSource(c.source, c.source_padding, target_padding);
+    return p;
+  }
+  torch::Tensor base;  // the estimate's prior mean: the aligned source, or 0
+  if (o_.preconditioning == "source") {
+    base = AlignSource(c.source, c.source_padding, target_padding);
     if (c.drop_source.defined())
       base = base * (1 - c.drop_source.view({1, -1, 1}).to(base.dtype()));
     p.x0 = base + p.x0;
+  }
+  if (skip_.defined()) {
+    // x0 += s(t) (x_t - sqrt(abar_t) base), a gain per step and feature column on what x_t says
+    // beyond the prior mean: a diagonal Wiener filter. It starts at the optimum for Gaussian data
+    // of spread sigma_data about the prior mean, s = sqrt(abar) sd^2 / (abar sd^2 + 1 - abar)
+    // (about 1 near t = 0, so the clean target passes by the width-d trunk, 0 at t = T), plus a
+    // learned correction from 0, so the loss sets how much of x_t to trust where the trunk
+    // cannot remove x_t's noise.
+    const auto abar = torch::tensor(schedule_.alpha_bar(), torch::kFloat64)
+                          .index_select(0, t.to(torch::kInt64));  // [N]
+    const double sd2 = o_.sigma_data * o_.sigma_data;
+    const auto wiener = (abar.sqrt() * sd2 / (abar * sd2 + 1 - abar)).to(xt.dtype());
+    const auto root = abar.sqrt().to(xt.dtype()).view({1, -1, 1});
+    const auto gain = (skip_.index_select(0, t.to(torch::kInt64)) + wiener.view({-1, 1}))
+                          .unsqueeze(0);  // [1, N, 207]
+    p.x0 = p.x0 + gain * (base.defined() ? xt - root * base : xt);
   }
   return p;
 }

@@ -344,6 +344,53 @@ TEST(Editor, TheSourcePreconditioningStartsAsACopyOfTheAlignedSource) {
   EXPECT_THROW(EditorOptions::FromJson(mdm.ToJson()), std::invalid_argument);
 }
 
+// Issue 15: the learned skip starts at the Wiener gain (about 1 at t = 0, so a nearly clean target
+// passes through where the plain head starts far from it) and is a parameter the loss trains.
+TEST(Editor, TheLearnedSkipPassesANearlyCleanTargetAndLearns) {
+  for (const std::string preconditioning : {"x0", "source"}) {
+    torch::manual_seed(8);
+    EditorOptions o = Tiny("mdt", "none");
+    o.preconditioning = preconditioning;
+    o.learned_skip = true;
+    o.diffusion_steps = 300;
+    EditorNet net(o);
+    const TinyTriplets data;
+    net->text_encoder()->Fit(data.texts);
+    const CosineSchedule schedule(o.diffusion_steps);
+    const auto target = 0.5 * data.target;
+    Condition c{data.texts, data.source, data.source_padding, {}, {}};
+    const auto t0 = torch::zeros({3}, torch::kInt64);
+    net->eval();
+    {
+      torch::NoGradGuard no_grad;
+      const auto xt = schedule.QSample(target, t0, torch::randn_like(target));
+      const double mse = GroupedMaskedMse(net->forward(xt, t0, data.target_padding, c).x0, target,
+                                          data.target_padding)
+                             .item<double>();
+      EXPECT_LT(mse, 5e-3) << preconditioning;
+    }
+    // At t = 150 the gain is trained: a few steps move the parameter row of that step only.
+    net->train();
+    torch::optim::AdamW optimizer(net->parameters(), torch::optim::AdamWOptions(1e-2));
+    const auto t = torch::full({3}, 150, torch::kInt64);
+    for (int step = 0; step < 5; ++step) {
+      const auto xt = schedule.QSample(target, t, torch::randn_like(target));
+      const auto loss = GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0, target,
+                                         data.target_padding);
+      optimizer.zero_grad();
+      loss.backward();
+      optimizer.step();
+    }
+    const auto skip = net->named_parameters()["skip"];
+    EXPECT_GT(skip[150].abs().max().item<double>(), 1e-3) << preconditioning;
+    EXPECT_LT(skip[20].abs().max().item<double>(), 1e-9) << preconditioning;  // untouched (decay 0)
+  }
+  EditorOptions edm = Tiny("mdt", "none");
+  edm.preconditioning = "edm";
+  edm.learned_skip = true;
+  EXPECT_THROW(EditorNet{edm}, std::invalid_argument);
+}
+
 TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
   torch::manual_seed(3);
   EditorNet net(Tiny("mdt"));
