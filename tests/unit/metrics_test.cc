@@ -40,19 +40,19 @@ Embeddings Random(int64_t n, int64_t d, uint64_t seed, double shift = 0) {
 
 TEST(Retrieval, IdenticalEmbeddingsAreFoundFirstAndBatchesDropTheRemainder) {
   const Embeddings x = Random(70, 8, 1);
-  const RetrievalScores all = Retrieval(x, x, 0, 1);
+  const RetrievalScores all = *Retrieval(x, x, 0, 1);
   EXPECT_EQ(all.queries, 70);
   EXPECT_DOUBLE_EQ(all.r1, 100.0);
   EXPECT_DOUBLE_EQ(all.avg_rank, 1.0);
-  const RetrievalScores batched = Retrieval(x, x, 32, 7);
+  const RetrievalScores batched = *Retrieval(x, x, 32, 7);
   EXPECT_EQ(batched.queries, 64);  // 2 batches of 32, 6 dropped
   EXPECT_DOUBLE_EQ(batched.r1, 100.0);
   // Unrelated embeddings: mean rank near (32 + 1) / 2 in batches of 32, the same under the same
   // seed.
   const Embeddings y = Random(640, 8, 2);
-  const RetrievalScores chance = Retrieval(Random(640, 8, 3), y, 32, 5);
+  const RetrievalScores chance = *Retrieval(Random(640, 8, 3), y, 32, 5);
   EXPECT_NEAR(chance.avg_rank, 16.5, 1.5);
-  EXPECT_DOUBLE_EQ(Retrieval(Random(640, 8, 3), y, 32, 5).avg_rank, chance.avg_rank);
+  EXPECT_DOUBLE_EQ(Retrieval(Random(640, 8, 3), y, 32, 5).value().avg_rank, chance.avg_rank);
 }
 
 TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {
@@ -63,7 +63,7 @@ TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {
     truth.insert(truth.end(), {0, 0, 0, 0, 0, 1});
     shifted.insert(shifted.end(), {3, 4, 0, 3, 4, 1});
   }
-  PositionErrors ape = AveragePositionalError(shifted, truth, 2);
+  PositionErrors ape = *AveragePositionalError(shifted, truth, 2);
   EXPECT_NEAR(ape.root, 5, 1e-9);
   EXPECT_NEAR(ape.trajectory, 5, 1e-9);
   EXPECT_NEAR(ape.mean_global, 5, 1e-9);
@@ -71,14 +71,14 @@ TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {
   // A vertical-only offset does not count in the trajectory.
   std::vector<float> raised = truth;
   for (size_t k = 2; k < raised.size(); k += 3) raised[k] += 2;
-  ape = AveragePositionalError(raised, truth, 2);
+  ape = *AveragePositionalError(raised, truth, 2);
   EXPECT_NEAR(ape.root, 2, 1e-9);
   EXPECT_NEAR(ape.trajectory, 0, 1e-9);
   // AVE: a constant offset has the same variance (0); a root moving 0, 1, 2 along x has variance 1
   // in x (unbiased), the still truth 0 -> root AVE 1; joint 1 moves with it: local 0, global 1.
-  EXPECT_NEAR(AverageVarianceError(shifted, truth, 2).mean_global, 0, 1e-9);
+  EXPECT_NEAR(AverageVarianceError(shifted, truth, 2).value().mean_global, 0, 1e-9);
   std::vector<float> moving = {0, 0, 0, 0, 0, 1, 1, 0, 0, 1, 0, 1, 2, 0, 0, 2, 0, 1};
-  const PositionErrors ave = AverageVarianceError(moving, truth, 2);
+  const PositionErrors ave = *AverageVarianceError(moving, truth, 2);
   EXPECT_NEAR(ave.root, 1, 1e-9);
   EXPECT_NEAR(ave.trajectory, 1, 1e-9);
   EXPECT_NEAR(ave.mean_global, 1, 1e-9);
@@ -86,7 +86,7 @@ TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {
   // Different lengths are cropped to the shorter.
   std::vector<float> longer = truth;
   longer.insert(longer.end(), {9, 9, 9, 9, 9, 9});
-  EXPECT_NEAR(AveragePositionalError(longer, truth, 2).root, 0, 1e-9);
+  EXPECT_NEAR(AveragePositionalError(longer, truth, 2).value().root, 0, 1e-9);
 }
 
 TEST(PositionErrors, LocalErrorsRemoveEachFramesHeading) {
@@ -95,9 +95,9 @@ TEST(PositionErrors, LocalErrorsRemoveEachFramesHeading) {
   // differ by the turn, heading-aligned ones do not.
   std::vector<float> truth = {0, 0, 1, 0.1f, 0, 1, -0.1f, 0, 1};
   std::vector<float> turned = {2, 0, 1, 2, 0.1f, 1, 2, -0.1f, 1};
-  const PositionErrors plain = AveragePositionalError(turned, truth, 3);
+  const PositionErrors plain = *AveragePositionalError(turned, truth, 3);
   EXPECT_NEAR(plain.mean_local, std::hypot(0.1, 0.1), 1e-6);  // each hip off by the 90-degree turn
-  const PositionErrors aligned = AveragePositionalError(turned, truth, 3, HeadingJoints{1, 2});
+  const PositionErrors aligned = *AveragePositionalError(turned, truth, 3, HeadingJoints{1, 2});
   EXPECT_NEAR(aligned.mean_local, 0, 1e-6);
   EXPECT_NEAR(aligned.root, 2, 1e-6);  // the global terms are unchanged
   EXPECT_NEAR(aligned.mean_global, (2 + std::hypot(2 - 0.1, 0.1) + std::hypot(2 + 0.1, 0.1)) / 3,
@@ -111,20 +111,20 @@ TEST(PositionErrors, CanonicalMotionsCompareWhereverTheyStarted) {
                              0, 0.5f, 1, 0.1f, 0.5f, 1, -0.1f, 0.5f, 1};
   std::vector<float> there = {5,    5, 1, 5,    5.1f, 1, 5,    4.9f, 1,
                               4.5f, 5, 1, 4.5f, 5.1f, 1, 4.5f, 4.9f, 1};
-  EXPECT_GT(AveragePositionalError(there, here, 3).root, 5);
+  EXPECT_GT(AveragePositionalError(there, here, 3).value().root, 5);
   Canonicalize(&here, 3, HeadingJoints{1, 2});
   Canonicalize(&there, 3, HeadingJoints{1, 2});
   for (size_t k = 0; k < here.size(); ++k) EXPECT_NEAR(here[k], there[k], 1e-5) << k;
-  EXPECT_NEAR(AveragePositionalError(there, here, 3).mean_global, 0, 1e-5);
+  EXPECT_NEAR(AveragePositionalError(there, here, 3).value().mean_global, 0, 1e-5);
 }
 
 TEST(Fid, IsZeroForIdenticalSetsAndTheClosedFormOtherwise) {
   const Embeddings x = Random(400, 6, 4);
-  EXPECT_NEAR(FrechetDistance(x, x), 0, 1e-6);
+  EXPECT_NEAR(*FrechetDistance(x, x), 0, 1e-6);
   // A shifted copy: only the mean term, |shift|^2 = 6 * 0.5^2.
   Embeddings shifted = x;
   for (auto& v : shifted.values) v += 0.5;
-  EXPECT_NEAR(FrechetDistance(x, shifted), 1.5, 1e-6);
+  EXPECT_NEAR(*FrechetDistance(x, shifted), 1.5, 1e-6);
   // A scaled copy (covariance times 4): Tr(C + 4C - 2 * 2C) = Tr(C), and the mean term |mu|^2 (1 -
   // 2)^2.
   Embeddings scaled = x;
@@ -138,7 +138,7 @@ TEST(Fid, IsZeroForIdenticalSetsAndTheClosedFormOtherwise) {
     trace += s / 399;
     mean_sq += m * m;
   }
-  EXPECT_NEAR(FrechetDistance(x, scaled), trace + mean_sq, 1e-6);
+  EXPECT_NEAR(*FrechetDistance(x, scaled), trace + mean_sq, 1e-6);
 }
 
 TEST(Fid, SymmetricEigenReconstructsTheMatrix) {
@@ -155,6 +155,22 @@ TEST(Fid, SymmetricEigenReconstructsTheMatrix) {
     }
   }
   EXPECT_NEAR(values[0] + values[1] + values[2], 12, 1e-10);
+}
+
+// Issue 16: core returns Status; metrics that do not fit their inputs say so instead of throwing.
+TEST(Metrics, InputsThatDoNotFitAreInvalidArgumentNotExceptions) {
+  const Embeddings four{4, 2, std::vector<double>(8, 1.0)},
+      three{3, 2, std::vector<double>(6, 1.0)}, wide{4, 3, std::vector<double>(12, 1.0)};
+  const auto retrieval = Retrieval(four, three, 0, 1);
+  ASSERT_FALSE(retrieval.ok());
+  EXPECT_EQ(retrieval.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(retrieval.status().message().find("4 queries against 3"), std::string::npos);
+  EXPECT_FALSE(Retrieval(four, wide, 0, 1).ok());  // different embedding sizes
+  EXPECT_FALSE(FrechetDistance(four, wide).ok());
+  const Embeddings one{1, 2, {1.0, 2.0}};
+  EXPECT_FALSE(FrechetDistance(one, one).ok());
+  EXPECT_FALSE(AveragePositionalError({}, std::vector<float>(6, 0.f), 2).ok());
+  EXPECT_FALSE(AverageVarianceError(std::vector<float>(6, 0.f), {}, 2).ok());
 }
 
 TEST(Diversity, MeasuresDistancesBetweenRowsAndWithinGroups) {

@@ -25,6 +25,7 @@
 #include <numeric>
 #include <optional>
 #include <set>
+#include <tuple>
 
 #include "../executor.h"
 #include "../generators.h"
@@ -445,13 +446,13 @@ TaskReport WriteMetrics(const TaskContext& ctx, const json& metrics) {
 // Retrieval of edits `g` among the targets and among the sources (batches and all), and how far the
 // edits move towards their targets: generated-to-target minus generated-to-source R@1 (the copy of
 // the source scores about -(target-to-source R@1), the target itself about +that).
-json EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t, const eval::Embeddings& s,
-                   int64_t batch, uint64_t seed) {
+Result<json> EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t,
+                           const eval::Embeddings& s, int64_t batch, uint64_t seed) {
   json out;
   for (const char* protocol : {"batches", "all"}) {
     const int64_t b = std::string(protocol) == "batches" ? batch : 0;
-    const auto to_target = eval::Retrieval(g, t, b, seed),
-               to_source = eval::Retrieval(g, s, b, seed);
+    MP_ASSIGN_OR_RETURN(const auto to_target, eval::Retrieval(g, t, b, seed));
+    MP_ASSIGN_OR_RETURN(const auto to_source, eval::Retrieval(g, s, b, seed));
     out["generated_to_target"][protocol] = ScoresJson(to_target);
     out["generated_to_source"][protocol] = ScoresJson(to_source);
     out["towards_target"][protocol] = {{"R@1", to_target.r1 - to_source.r1}};
@@ -527,7 +528,14 @@ class EvalEditStage : public StageExecutor {
     const auto g = ToEmbeddings(*g_rows), t = ToEmbeddings(*t_rows), s = ToEmbeddings(*s_rows);
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
-    json metrics = EditRetrieval(g, t, s, batch, seed);
+    auto retrieval = EditRetrieval(g, t, s, batch, seed),
+         copy = EditRetrieval(s, t, s, batch, seed), target = EditRetrieval(t, t, s, batch, seed);
+    auto target_to_source = eval::Retrieval(t, s, batch, seed);
+    for (const Status& status :
+         {retrieval.status(), copy.status(), target.status(), target_to_source.status()}) {
+      if (!status.ok()) return TaskReport::Error("eval_edit: " + status.message());
+    }
+    json metrics = *retrieval;
     metrics.update({{"method", method},
                     {"evaluator", evaluator},
                     {"motions", generated.size()},
@@ -537,9 +545,8 @@ class EvalEditStage : public StageExecutor {
       metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
     // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere)
     // and the target as the edit (the upper bound).
-    metrics["yardsticks"] = {{"copy", EditRetrieval(s, t, s, batch, seed)},
-                             {"target", EditRetrieval(t, t, s, batch, seed)}};
-    metrics["target_to_source"] = {{"batches", ScoresJson(eval::Retrieval(t, s, batch, seed))}};
+    metrics["yardsticks"] = {{"copy", *copy}, {"target", *target}};
+    metrics["target_to_source"] = {{"batches", ScoresJson(*target_to_source)}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
                                {"target", MeanPlausibility(targets)}};
     const json& g2t = metrics["generated_to_target"]["all"];
@@ -674,11 +681,12 @@ class GenerateStage : public StageExecutor {
 // What eval_generate measures of motions against their ground truth (SINC Tables 2-3), from their
 // TEMOS-evaluator features and TMR embeddings: the TEMOS score, APE/AVE, and TMR retrieval
 // text-to-generated and generated-to-truth (batches and all).
-json GenerationScores(const std::vector<Motion>& generated, const std::vector<Motion>& truth,
-                      const std::vector<std::vector<float>>& g_temos,
-                      const std::vector<std::vector<float>>& t_temos, const eval::Embeddings& gen,
-                      const eval::Embeddings& gt, const eval::Embeddings& txt, int64_t batch,
-                      uint64_t seed) {
+Result<json> GenerationScores(const std::vector<Motion>& generated,
+                              const std::vector<Motion>& truth,
+                              const std::vector<std::vector<float>>& g_temos,
+                              const std::vector<std::vector<float>>& t_temos,
+                              const eval::Embeddings& gen, const eval::Embeddings& gt,
+                              const eval::Embeddings& txt, int64_t batch, uint64_t seed) {
   // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
   double temos_score = 0;
   for (size_t i = 0; i < generated.size(); ++i)
@@ -691,8 +699,10 @@ json GenerationScores(const std::vector<Motion>& generated, const std::vector<Mo
          tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
     eval::Canonicalize(&gj, kNumJoints, eval::kSmpl22Hips);
     eval::Canonicalize(&tj, kNumJoints, eval::kSmpl22Hips);
-    const auto a = eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips),
-               v = eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips);
+    MP_ASSIGN_OR_RETURN(const auto a,
+                        eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips));
+    MP_ASSIGN_OR_RETURN(const auto v,
+                        eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips));
     ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local,
         ape.mean_global += a.mean_global;
     ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local,
@@ -706,10 +716,12 @@ json GenerationScores(const std::vector<Motion>& generated, const std::vector<Mo
   };
   json out = {
       {"temos_score", temos_score / n}, {"APE", errors_json(ape)}, {"AVE", errors_json(ave)}};
-  out["text_to_generated"] = {{"batches", ScoresJson(eval::Retrieval(txt, gen, batch, seed))},
-                              {"all", ScoresJson(eval::Retrieval(txt, gen, 0, seed))}};
-  out["generated_to_truth"] = {{"batches", ScoresJson(eval::Retrieval(gen, gt, batch, seed))},
-                               {"all", ScoresJson(eval::Retrieval(gen, gt, 0, seed))}};
+  for (const auto& [key, queries, gallery] :
+       {std::tuple{"text_to_generated", &txt, &gen}, std::tuple{"generated_to_truth", &gen, &gt}}) {
+    MP_ASSIGN_OR_RETURN(const auto batches, eval::Retrieval(*queries, *gallery, batch, seed));
+    MP_ASSIGN_OR_RETURN(const auto all, eval::Retrieval(*queries, *gallery, 0, seed));
+    out[key] = {{"batches", ScoresJson(batches)}, {"all", ScoresJson(all)}};
+  }
   return out;
 }
 
@@ -743,9 +755,11 @@ Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& tab
     MP_ASSIGN_OR_RETURN(auto t_rows, tmr.EncodeTexts(texts));
     const auto m = ToEmbeddings(m_rows), t = ToEmbeddings(t_rows);
     const int64_t b = std::min<int64_t>(batch, static_cast<int64_t>(spans.size()));
+    MP_ASSIGN_OR_RETURN(const auto text_to_motion, eval::Retrieval(t, m, b, seed));
+    MP_ASSIGN_OR_RETURN(const auto motion_to_text, eval::Retrieval(m, t, b, seed));
     out[kind] = {{"motions", spans.size()},
-                 {"text_to_motion", ScoresJson(eval::Retrieval(t, m, b, seed))},
-                 {"motion_to_text", ScoresJson(eval::Retrieval(m, t, b, seed))}};
+                 {"text_to_motion", ScoresJson(text_to_motion)},
+                 {"motion_to_text", ScoresJson(motion_to_text)}};
   }
   return out;
 }
@@ -818,8 +832,9 @@ class EvalGenerateStage : public StageExecutor {
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
     const auto gen = ToEmbeddings(*g_tmr), gt = ToEmbeddings(*t_tmr), txt = ToEmbeddings(*text_tmr);
-    json metrics =
-        GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
+    auto scores = GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
+    if (!scores.ok()) return TaskReport::Error("eval_generate: " + scores.status().message());
+    json metrics = *std::move(scores);
     metrics.update(
         {{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
     if (p.contains("yardstick"))
@@ -834,10 +849,16 @@ class EvalGenerateStage : public StageExecutor {
       shuffled_temos.push_back((*t_temos)[other[i]]);
       shuffled_tmr.push_back((*t_tmr)[other[i]]);
     }
-    metrics["yardsticks"] = {
-        {"truth", GenerationScores(truth, truth, *t_temos, *t_temos, gt, gt, txt, batch, seed)},
-        {"shuffled", GenerationScores(shuffled, truth, shuffled_temos, *t_temos,
-                                      ToEmbeddings(shuffled_tmr), gt, txt, batch, seed)}};
+    auto truth_scores =
+        GenerationScores(truth, truth, *t_temos, *t_temos, gt, gt, txt, batch, seed);
+    auto shuffled_scores = GenerationScores(shuffled, truth, shuffled_temos, *t_temos,
+                                            ToEmbeddings(shuffled_tmr), gt, txt, batch, seed);
+    if (!truth_scores.ok() || !shuffled_scores.ok()) {
+      return TaskReport::Error(
+          "eval_generate: " +
+          (truth_scores.ok() ? shuffled_scores.status() : truth_scores.status()).message());
+    }
+    metrics["yardsticks"] = {{"truth", *truth_scores}, {"shuffled", *shuffled_scores}};
     if (p.value("evaluator_quality", false)) {
       auto quality = EvaluatorQuality(**tmr, *table, batch, seed);
       if (!quality.ok()) return TaskReport::Error("eval_generate: " + quality.status().message());
@@ -847,8 +868,12 @@ class EvalGenerateStage : public StageExecutor {
     const int64_t pairs = p.value("diversity_pairs", int64_t{300});
     metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)},
                             {"truth", eval::Diversity(gt, pairs, seed)}};
-    metrics["fid"] = gen.n > gen.d ? json(eval::FrechetDistance(gt, gen))
-                                   : json(nullptr);  // needs more motions than dimensions
+    metrics["fid"] = nullptr;  // needs more motions than dimensions
+    if (gen.n > gen.d) {
+      auto fid = eval::FrechetDistance(gt, gen);
+      if (!fid.ok()) return TaskReport::Error("eval_generate: " + fid.status().message());
+      metrics["fid"] = *fid;
+    }
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
                                {"truth", MeanPlausibility(truth)}};
     if (auto failed =

@@ -5,12 +5,14 @@
 #include <cmath>
 #include <numeric>
 #include <random>
-#include <stdexcept>
 
 namespace motionpipe::eval {
 
-std::vector<double> CosineSimilarity(const Embeddings& a, const Embeddings& b) {
-  if (a.d != b.d) throw std::invalid_argument("cosine similarity: embeddings of different sizes");
+Result<std::vector<double>> CosineSimilarity(const Embeddings& a, const Embeddings& b) {
+  if (a.d != b.d) {
+    return InvalidArgument("cosine similarity: embeddings of different sizes (" +
+                           std::to_string(a.d) + " and " + std::to_string(b.d) + ")");
+  }
   const auto norms = [](const Embeddings& e) {
     std::vector<double> out(static_cast<size_t>(e.n));
     for (int64_t i = 0; i < e.n; ++i) {
@@ -67,10 +69,12 @@ RetrievalScores Summarise(const std::vector<double>& ranks) {
   return s;
 }
 
-RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch,
-                          uint64_t seed) {
-  if (queries.n != gallery.n)
-    throw std::invalid_argument("retrieval: queries and gallery differ in count");
+Result<RetrievalScores> Retrieval(const Embeddings& queries, const Embeddings& gallery,
+                                  int64_t batch, uint64_t seed) {
+  if (queries.n != gallery.n) {
+    return InvalidArgument("retrieval: " + std::to_string(queries.n) + " queries against " +
+                           std::to_string(gallery.n) + " gallery items");
+  }
   std::vector<int64_t> order(static_cast<size_t>(queries.n));
   std::iota(order.begin(), order.end(), 0);
   if (batch <= 0)
@@ -85,7 +89,8 @@ RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, 
       q.values.insert(q.values.end(), queries.row(i), queries.row(i) + queries.d);
       g.values.insert(g.values.end(), gallery.row(i), gallery.row(i) + gallery.d);
     }
-    const auto ranks = TrueMatchRanks(CosineSimilarity(q, g), batch);
+    MP_ASSIGN_OR_RETURN(const auto similarity, CosineSimilarity(q, g));
+    const auto ranks = TrueMatchRanks(similarity, batch);
     all.insert(all.end(), ranks.begin(), ranks.end());
   }
   return Summarise(all);
@@ -130,11 +135,11 @@ std::vector<float> Local(const std::vector<float>& x, int64_t frames, int joints
   return out;
 }
 
-int64_t Frames(const std::vector<float>& a, const std::vector<float>& b, int joints) {
+Result<int64_t> Frames(const std::vector<float>& a, const std::vector<float>& b, int joints) {
   const int64_t fa = static_cast<int64_t>(a.size()) / (joints * 3),
                 fb = static_cast<int64_t>(b.size()) / (joints * 3);
   const int64_t frames = std::min(fa, fb);
-  if (frames < 1) throw std::invalid_argument("APE/AVE: empty motion");
+  if (frames < 1) return InvalidArgument("APE/AVE: an empty motion");
   return frames;
 }
 
@@ -185,10 +190,10 @@ void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& he
   }
 }
 
-PositionErrors AveragePositionalError(const std::vector<float>& generated,
-                                      const std::vector<float>& truth, int joints,
-                                      const HeadingJoints& heading) {
-  const int64_t frames = Frames(generated, truth, joints);
+Result<PositionErrors> AveragePositionalError(const std::vector<float>& generated,
+                                              const std::vector<float>& truth, int joints,
+                                              const HeadingJoints& heading) {
+  MP_ASSIGN_OR_RETURN(const int64_t frames, Frames(generated, truth, joints));
   const auto lg = Local(generated, frames, joints, heading),
              lt = Local(truth, frames, joints, heading);
   PositionErrors e;
@@ -209,10 +214,10 @@ PositionErrors AveragePositionalError(const std::vector<float>& generated,
   return e;
 }
 
-PositionErrors AverageVarianceError(const std::vector<float>& generated,
-                                    const std::vector<float>& truth, int joints,
-                                    const HeadingJoints& heading) {
-  const int64_t frames = Frames(generated, truth, joints);
+Result<PositionErrors> AverageVarianceError(const std::vector<float>& generated,
+                                            const std::vector<float>& truth, int joints,
+                                            const HeadingJoints& heading) {
+  MP_ASSIGN_OR_RETURN(const int64_t frames, Frames(generated, truth, joints));
   const auto lg = Local(generated, frames, joints, heading),
              lt = Local(truth, frames, joints, heading);
   PositionErrors e;
@@ -273,8 +278,8 @@ void SymmetricEigen(std::vector<double> a, int64_t n, std::vector<double>* value
 
 namespace {
 
-void MeanAndCovariance(const Embeddings& x, std::vector<double>* mean, std::vector<double>* cov) {
-  if (x.n < 2) throw std::invalid_argument("FID: need at least 2 embeddings per set");
+Status MeanAndCovariance(const Embeddings& x, std::vector<double>* mean, std::vector<double>* cov) {
+  if (x.n < 2) return InvalidArgument("FID: need at least 2 embeddings per set");
   mean->assign(static_cast<size_t>(x.d), 0.0);
   for (int64_t i = 0; i < x.n; ++i) {
     for (int64_t k = 0; k < x.d; ++k) (*mean)[static_cast<size_t>(k)] += x.row(i)[k];
@@ -290,16 +295,17 @@ void MeanAndCovariance(const Embeddings& x, std::vector<double>* mean, std::vect
     }
   }
   for (auto& c : *cov) c /= static_cast<double>(x.n - 1);
+  return Status::Ok();
 }
 
 }  // namespace
 
-double FrechetDistance(const Embeddings& a, const Embeddings& b) {
-  if (a.d != b.d) throw std::invalid_argument("FID: embeddings of different sizes");
+Result<double> FrechetDistance(const Embeddings& a, const Embeddings& b) {
+  if (a.d != b.d) return InvalidArgument("FID: embeddings of different sizes");
   const int64_t d = a.d;
   std::vector<double> ma, ca, mb, cb;
-  MeanAndCovariance(a, &ma, &ca);
-  MeanAndCovariance(b, &mb, &cb);
+  MP_RETURN_IF_ERROR(MeanAndCovariance(a, &ma, &ca));
+  MP_RETURN_IF_ERROR(MeanAndCovariance(b, &mb, &cb));
   double mean_term = 0, trace = 0;
   for (int64_t k = 0; k < d; ++k) {
     mean_term += (ma[static_cast<size_t>(k)] - mb[static_cast<size_t>(k)]) *

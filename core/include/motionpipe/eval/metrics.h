@@ -6,10 +6,14 @@
 //               trajectory (horizontal root), mean local (joints relative to the root), mean
 //               global;
 //   FID         Frechet distance between two embedding sets; diversity and multimodality.
+// Inputs that do not fit (sizes that differ, empty motions) are InvalidArgument, as everywhere in
+// core.
 #pragma once
 
 #include <cstdint>
 #include <vector>
+
+#include "motionpipe/base/status.h"
 
 namespace motionpipe::eval {
 
@@ -21,7 +25,7 @@ struct Embeddings {
 };
 
 // Cosine similarity matrix [a.n x b.n], row-major.
-std::vector<double> CosineSimilarity(const Embeddings& a, const Embeddings& b);
+Result<std::vector<double>> CosineSimilarity(const Embeddings& a, const Embeddings& b);
 
 // Rank (1-based) of the true match i for each query i of a square similarity matrix: 1 + the
 // number of candidates scoring higher + half the number tying with it (ties averaged).
@@ -37,8 +41,8 @@ RetrievalScores Summarise(const std::vector<double>& ranks);
 // Query i of `queries` should retrieve row i of `gallery`. batch <= 0: one batch of everything.
 // Otherwise a seeded shuffle split into batches of `batch` (the remainder dropped), ranks within
 // each batch, scores over all the batches' queries.
-RetrievalScores Retrieval(const Embeddings& queries, const Embeddings& gallery, int64_t batch,
-                          uint64_t seed);
+Result<RetrievalScores> Retrieval(const Embeddings& queries, const Embeddings& gallery,
+                                  int64_t batch, uint64_t seed);
 
 struct PositionErrors {
   double root = 0, trajectory = 0, mean_local = 0, mean_global = 0;
@@ -57,15 +61,15 @@ void Canonicalize(std::vector<float>* joints, int count, const HeadingJoints& he
 // root) (REFERENCE 4.6): root joint, ground-plane trajectory, mean global (all joints) and mean
 // local (joints relative to the root, each frame's heading removed when `heading` names the hips).
 // Both motions are cropped to the shorter length.
-PositionErrors AveragePositionalError(const std::vector<float>& generated,
-                                      const std::vector<float>& truth, int joints,
-                                      const HeadingJoints& heading = {});
-PositionErrors AverageVarianceError(const std::vector<float>& generated,
-                                    const std::vector<float>& truth, int joints,
-                                    const HeadingJoints& heading = {});
+Result<PositionErrors> AveragePositionalError(const std::vector<float>& generated,
+                                              const std::vector<float>& truth, int joints,
+                                              const HeadingJoints& heading = {});
+Result<PositionErrors> AverageVarianceError(const std::vector<float>& generated,
+                                            const std::vector<float>& truth, int joints,
+                                            const HeadingJoints& heading = {});
 
 // Frechet distance between Gaussians fitted to two embedding sets (unbiased covariances).
-double FrechetDistance(const Embeddings& a, const Embeddings& b);
+Result<double> FrechetDistance(const Embeddings& a, const Embeddings& b);
 // Mean Euclidean distance between `pairs` seeded random pairs of distinct rows.
 double Diversity(const Embeddings& x, int64_t pairs, uint64_t seed);
 // Mean distance between generations of the same condition: groups[g] lists rows of x.
