@@ -1,5 +1,6 @@
 #include "editor.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "motionpipe/features/motionfix207.h"
@@ -13,9 +14,35 @@ torch::Tensor AnyPadding(int64_t n, int64_t length) {
   return torch::zeros({n, length}, torch::kBool);
 }
 
+// A key this version does not know is an error naming it: a misspelt or newer option must not be
+// ignored silently (an experiment once trained without the option it was written to measure).
+void RequireKnownKeys(const nlohmann::json& j, const std::string& where,
+                      const std::vector<std::string>& known) {
+  if (!j.is_object()) return;
+  for (const auto& [key, value] : j.items()) {
+    if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+    std::string list;
+    for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+    throw std::invalid_argument(where + key + ": unknown key (known: " + list + ")");
+  }
+}
+
 }  // namespace
 
 EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
+  RequireKnownKeys(j, "",
+                   {"variant", "model", "aux", "features", "adaln_text", "diffusion", "loss",
+                    "text_encoder_from", "freeze_text_encoder"});
+  RequireKnownKeys(
+      j.value("model", nlohmann::json::object()), "model.",
+      {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout", "text_encoder"});
+  RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
+                   {"mode", "classes", "weight", "class_weights"});
+  RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
+  RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.", {"velocity"});
+  RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
+                   {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
+                    "guidance_text", "preconditioning", "sigma_data", "snr_shift", "learned_skip"});
   EditorOptions o;
   o.variant = j.value("variant", o.variant);
   if (o.variant != "mdt" && o.variant != "tmed" && o.variant != "mdm") {

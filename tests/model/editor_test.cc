@@ -339,6 +339,16 @@ TEST(Editor, TheSourcePreconditioningStartsAsACopyOfTheAlignedSource) {
     EXPECT_EQ(x0.select(1, 1).abs().max().item<double>(), 0.0) << variant;
     EXPECT_LT((x0.select(1, 0) - data.source.select(1, 0)).abs().max().item<double>(), 1e-6);
   }
+  // An option this version does not know is an error naming it, not silently ignored.
+  nlohmann::json misspelt = Tiny("mdt", "none").ToJson();
+  misspelt["diffusion"]["learned_skp"] = true;
+  try {
+    EditorOptions::FromJson(misspelt);
+    ADD_FAILURE() << "a misspelt key was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("diffusion.learned_skp: unknown key"), std::string::npos)
+        << e.what();
+  }
   EditorOptions mdm = Tiny("mdm", "none");
   mdm.preconditioning = "source";
   EXPECT_THROW(EditorOptions::FromJson(mdm.ToJson()), std::invalid_argument);
