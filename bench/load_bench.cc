@@ -85,9 +85,9 @@ class Coordinator {
   // Submits a job of `tasks` no-op tasks; its id, and the seconds the submit took.
   std::pair<int64_t, double> Submit(const std::string& name, int tasks) {
     motionpipe::wire::ControlRequest submit;
-    submit.mutable_submit()->set_pipeline_yaml("name: " + name + "\noutput_root: " + dir_ +
-                                               "\nstages: {noop: {kind: noop, params: {tasks: " +
-                                               std::to_string(tasks) + "}}}\n");
+    submit.mutable_submit()->set_pipeline_yaml(
+        "name: " + name + "\noutput_root: " + dir_ +
+        "\nstages: {noop: {kind: noop, params: {tasks: " + std::to_string(tasks) + "}}}\n");
     const auto start = Clock::now();
     auto reply = motionpipe::cli::Control(control_, submit);
     const double seconds = Seconds(start);
@@ -109,8 +109,9 @@ class Coordinator {
     return {reply.ok() ? *reply : motionpipe::wire::ControlReply(), seconds};
   }
   void StartWorker(const std::string& binary, int credit) {
-    pids_.push_back(Spawn({binary, "worker", "--coordinator", workers_, "--credit",
-                           std::to_string(credit), "--name", "load-" + std::to_string(pids_.size())}));
+    pids_.push_back(
+        Spawn({binary, "worker", "--coordinator", workers_, "--credit", std::to_string(credit),
+               "--name", "load-" + std::to_string(pids_.size())}));
     while (Status().first.workers_size() < static_cast<int>(pids_.size()))
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -190,13 +191,14 @@ int main(int argc, char** argv) {
   const double tasks = static_cast<double>(jobs) * per_job;
   std::printf("memory: %.0f MB for %.0f queued tasks, %.0f bytes per task\n",
               (after - before) / 1e6, tasks, (after - before) / tasks);
-  std::printf("submit of a %d-task job: median %.3f s, max %.3f s; a 10-task job when loaded: %.4f s\n",
-              per_job, Median(submits), *std::max_element(submits.begin(), submits.end()),
-              late_submit);
+  std::printf(
+      "submit of a %d-task job: median %.3f s, max %.3f s; a 10-task job when loaded: %.4f s\n",
+      per_job, Median(submits), *std::max_element(submits.begin(), submits.end()), late_submit);
   std::printf("status of every job: median %.4f s; of one job: median %.4f s\n", Median(all),
               Median(one));
-  std::printf("dispatch, 1 worker, credit 256: %.0f tasks/s alone, %.0f tasks/s with %.0f queued "
-              "(ratio %.2f)\n",
-              alone, loaded, tasks, loaded / alone);
+  std::printf(
+      "dispatch, 1 worker, credit 256: %.0f tasks/s alone, %.0f tasks/s with %.0f queued "
+      "(ratio %.2f)\n",
+      alone, loaded, tasks, loaded / alone);
   return 0;
 }
