@@ -3,11 +3,13 @@
 #pragma once
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "motionpipe/formats/npy.h"
 
@@ -17,6 +19,17 @@ using Clock = std::chrono::steady_clock;
 
 inline double Since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Starts `args` (args[0] a path) as a child process; its pid (the child exits 127 if exec fails).
+inline pid_t Spawn(const std::vector<std::string>& args) {
+  const pid_t pid = ::fork();
+  if (pid != 0) return pid;
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  ::execv(args[0].c_str(), argv.data());
+  std::_Exit(127);
 }
 
 inline std::string Run(const std::string& command) {

@@ -15,22 +15,13 @@
 #include <vector>
 
 #include "../cli/control_client.h"
+#include "bench_util.h"
 #include "motionpipe/base/log.h"
 #include "server.h"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-pid_t Spawn(const std::vector<std::string>& args) {
-  const pid_t pid = ::fork();
-  if (pid != 0) return pid;
-  std::vector<char*> argv;
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  ::execv(args[0].c_str(), argv.data());
-  std::_Exit(127);
-}
 
 struct Figures {
   double tasks_per_second;
@@ -60,8 +51,9 @@ Figures RunMotionpipe(const std::string& binary, int workers, int credit, int ta
   while (!ready) std::this_thread::sleep_for(std::chrono::milliseconds(2));
   std::vector<pid_t> pids;
   for (int k = 0; k < workers; ++k) {
-    pids.push_back(Spawn({binary, "worker", "--coordinator", worker_endpoint, "--credit",
-                          std::to_string(credit), "--name", "bench-" + std::to_string(k)}));
+    pids.push_back(
+        motionpipe::bench::Spawn({binary, "worker", "--coordinator", worker_endpoint, "--credit",
+                                  std::to_string(credit), "--name", "bench-" + std::to_string(k)}));
   }
   motionpipe::wire::ControlRequest status;
   status.mutable_status();

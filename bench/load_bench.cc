@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "../cli/control_client.h"
+#include "bench_util.h"
 #include "motionpipe/base/log.h"
 #include "server.h"
 
@@ -44,16 +45,6 @@ double ResidentBytes() {
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0 : v[v.size() / 2];
-}
-
-pid_t Spawn(const std::vector<std::string>& args) {
-  const pid_t pid = ::fork();
-  if (pid != 0) return pid;
-  std::vector<char*> argv;
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  ::execv(args[0].c_str(), argv.data());
-  std::_Exit(127);
 }
 
 class Coordinator {
@@ -109,9 +100,9 @@ class Coordinator {
     return {reply.ok() ? *reply : motionpipe::wire::ControlReply(), seconds};
   }
   void StartWorker(const std::string& binary, int credit) {
-    pids_.push_back(
-        Spawn({binary, "worker", "--coordinator", workers_, "--credit", std::to_string(credit),
-               "--name", "load-" + std::to_string(pids_.size())}));
+    pids_.push_back(motionpipe::bench::Spawn({binary, "worker", "--coordinator", workers_,
+                                              "--credit", std::to_string(credit), "--name",
+                                              "load-" + std::to_string(pids_.size())}));
     while (Status().first.workers_size() < static_cast<int>(pids_.size()))
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
