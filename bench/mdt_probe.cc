@@ -128,19 +128,22 @@ int main(int argc, char** argv) {
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
     if (t >= options.diffusion_steps) continue;
     const auto steps = torch::full({n}, t, torch::kInt64);
-    const auto noise = torch::randn(target.sizes());
-    const auto xt = schedule.QSample(target, steps, noise);
-    const double model =
-        Mse(net->forward(xt, steps, padding, c).x0, target, padding).mean().item<double>();
+    // The diffusion's coordinates (diffusion.components); estimates are scored as 207-d frames.
+    const auto z0 = net->Encode(target);
+    const auto noise = torch::randn(z0.sizes());
+    const auto xt = schedule.QSample(z0, steps, noise);
+    const auto estimate = [&](const Condition& condition) {
+      return net->Decode(net->forward(xt, steps, padding, condition).x0);
+    };
+    const double model = Mse(estimate(c), target, padding).mean().item<double>();
     Condition no_text = c, no_source = c;
     no_text.drop_text = torch::ones({n}, torch::kBool);
     no_source.drop_source = torch::ones({n}, torch::kBool);
-    const double without_text =
-        Mse(net->forward(xt, steps, padding, no_text).x0, target, padding).mean().item<double>();
-    const double without_source =
-        Mse(net->forward(xt, steps, padding, no_source).x0, target, padding).mean().item<double>();
+    const double without_text = Mse(estimate(no_text), target, padding).mean().item<double>();
+    const double without_source = Mse(estimate(no_source), target, padding).mean().item<double>();
     const double scaled =
-        Mse(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)]), target, padding)
+        Mse(net->Decode(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)])), target,
+            padding)
             .mean()
             .item<double>();
     std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model,
@@ -178,14 +181,16 @@ int main(int argc, char** argv) {
     const Denoise traced = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = denoise(xt, t);
       if (trace) {
+        const auto frame = net->Decode(x0);
         std::printf("  t %3lld: %.4f %.4f\n", static_cast<long long>(t),
-                    Mse(x0, target, padding).mean().item<double>(),
-                    Mse(x0, source, padding).mean().item<double>());
+                    Mse(frame, target, padding).mean().item<double>(),
+                    Mse(frame, source, padding).mean().item<double>());
       }
       return x0;
     };
     auto generator = at::make_generator<at::CPUGeneratorImpl>(7);
-    const auto x = SampleDdim(schedule, target.sizes(), ddim, traced, generator, nullptr);
+    const auto x = net->Decode(
+        SampleDdim(schedule, net->Encode(target).sizes(), ddim, traced, generator, nullptr));
     std::printf(
         "DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f "
         "target %.5f source %.5f\n",

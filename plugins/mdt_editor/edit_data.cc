@@ -226,6 +226,35 @@ std::pair<torch::Tensor, torch::Tensor> EditDataset::ComputeStats(int64_t limit)
   return {mean, stddev};
 }
 
+torch::Tensor EditDataset::FrameCovariance(const torch::Tensor& mean, const torch::Tensor& stddev,
+                                           int64_t limit) const {
+  auto scatter = torch::zeros({kMotionFixFeatureDim, kMotionFixFeatureDim}, torch::kFloat64);
+  auto sum = torch::zeros({kMotionFixFeatureDim}, torch::kFloat64);
+  int64_t count = 0;
+  const auto n = static_cast<int64_t>(items_.size());
+  const int64_t take = std::min(n, limit);
+  const auto scale = 2.0 * (stddev.to(torch::kFloat64) + 1e-5);
+  for (int64_t k = 0; k < take; ++k) {
+    const Item& item = items_[static_cast<size_t>(k * n / take)];
+    for (bool source : {true, false}) {
+      const FeatureMatrix f = Features(item, source);
+      const auto x =
+          (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}, torch::kFloat32)
+               .to(torch::kFloat64) -
+           mean.to(torch::kFloat64)) /
+          scale;
+      scatter += torch::matmul(x.t(), x);
+      sum += x.sum(0);
+      count += f.rows;
+    }
+  }
+  if (count < 2) throw std::runtime_error("FrameCovariance: fewer than 2 training frames");
+  const auto m = sum / static_cast<double>(count);
+  return ((scatter - static_cast<double>(count) * torch::outer(m, m)) /
+          static_cast<double>(count - 1))
+      .to(torch::kFloat32);
+}
+
 std::vector<std::string> EditDataset::AllTexts() const {
   std::vector<std::string> texts;
   for (const Item& item : items_)

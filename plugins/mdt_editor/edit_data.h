@@ -42,6 +42,10 @@ class EditDataset : public plugin::Dataset {
   // Mean and std (scale 2 sigma) over up to `limit` training motions (sources and targets); a
   // column constant over them gets std 1.
   std::pair<torch::Tensor, torch::Tensor> ComputeStats(int64_t limit = 400) const;
+  // The covariance [207, 207] of the frames normalised with these statistics ((x - mean) /
+  // (2 std)), over the same motions as ComputeStats.
+  torch::Tensor FrameCovariance(const torch::Tensor& mean, const torch::Tensor& stddev,
+                                int64_t limit = 400) const;
   void SetStats(torch::Tensor mean, torch::Tensor std) {
     mean_ = std::move(mean), std_ = std::move(std);
   }

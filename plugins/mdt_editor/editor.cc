@@ -40,9 +40,10 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
   RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.", {"velocity"});
-  RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
-                   {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
-                    "guidance_text", "preconditioning", "sigma_data", "snr_shift", "learned_skip"});
+  RequireKnownKeys(
+      j.value("diffusion", nlohmann::json::object()), "diffusion.",
+      {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion", "guidance_text",
+       "preconditioning", "sigma_data", "snr_shift", "learned_skip", "components"});
   EditorOptions o;
   o.variant = j.value("variant", o.variant);
   if (o.variant != "mdt" && o.variant != "tmed" && o.variant != "mdm") {
@@ -101,6 +102,9 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.sigma_data = d.value("sigma_data", o.sigma_data);
   o.learned_skip = d.value("learned_skip", o.learned_skip);
   if (!(o.sigma_data > 0)) throw std::invalid_argument("diffusion.sigma_data must be positive");
+  o.components = d.value("components", o.components);
+  if (o.components < 0 || o.components > kEditFeatureDim)
+    throw std::invalid_argument("diffusion.components must be in [0, 207] (0: the 207 columns)");
   o.guidance_motion = d.value("guidance_motion", o.guidance_motion);
   o.guidance_text = d.value("guidance_text", o.variant == "mdm" ? 2.5 : o.guidance_text);
   if (o.drop_text + o.drop_source + o.drop_both > 1)
@@ -148,6 +152,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"guidance_text", guidance_text},
             {"preconditioning", preconditioning},
             {"learned_skip", learned_skip},
+            {"components", components},
             {"sigma_data", sigma_data},
             {"snr_shift", snr_shift}}}};
 }
@@ -178,8 +183,13 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
   const nn::TransformerOptions layer{o.dim, o.heads, o.ff, o.layers, o.dropout};
   text_encoder_ = register_module("text_encoder", nn::TextEncoder(o.text));
   text_proj_ = register_module("text_proj", torch::nn::Linear(o.text.dim, o.dim));
-  target_in_ = register_module("target_in", torch::nn::Linear(kEditFeatureDim, o.dim));
-  out_ = register_module("out", torch::nn::Linear(o.dim, kEditFeatureDim));
+  if (o.components > 0) {
+    // The identity's first columns until FitFrameBasis (or a checkpoint) sets the code.
+    basis_ = register_buffer("frame_basis", torch::eye(kEditFeatureDim).narrow(1, 0, o.components));
+    basis_scale_ = register_buffer("frame_scale", torch::ones({o.components}));
+  }
+  target_in_ = register_module("target_in", torch::nn::Linear(diffusion_dim(), o.dim));
+  out_ = register_module("out", torch::nn::Linear(o.dim, diffusion_dim()));
   time_mlp_ = register_module(
       "time_mlp", torch::nn::Sequential(torch::nn::Linear(256, o.dim), torch::nn::SiLU(),
                                         torch::nn::Linear(o.dim, o.dim)));
@@ -191,7 +201,7 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
   if (o.learned_skip) {
     if (o.preconditioning == "edm")
       throw std::invalid_argument("diffusion.learned_skip replaces edm's fixed skip: not both");
-    skip_ = register_parameter("skip", torch::zeros({o.diffusion_steps, kEditFeatureDim}));
+    skip_ = register_parameter("skip", torch::zeros({o.diffusion_steps, diffusion_dim()}));
   }
   if (o.preconditioning == "source" || o.learned_skip) {
     // The untrained network adds nothing to the aligned source (its edit is the copy) or to the
@@ -264,7 +274,7 @@ Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& 
   }
   torch::Tensor base;  // the estimate's prior mean: the aligned source, or 0
   if (o_.preconditioning == "source") {
-    base = AlignSource(c.source, c.source_padding, target_padding);
+    base = Encode(AlignSource(c.source, c.source_padding, target_padding));
     if (c.drop_source.defined())
       base = base * (1 - c.drop_source.view({1, -1, 1}).to(base.dtype()));
     p.x0 = base + p.x0;
@@ -282,10 +292,59 @@ Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& 
     const auto wiener = (abar.sqrt() * sd2 / (abar * sd2 + 1 - abar)).to(xt.dtype());
     const auto root = abar.sqrt().to(xt.dtype()).view({1, -1, 1});
     const auto gain = (skip_.index_select(0, t.to(torch::kInt64)) + wiener.view({-1, 1}))
-                          .unsqueeze(0);  // [1, N, 207]
+                          .unsqueeze(0);  // [1, N, diffusion_dim()]
     p.x0 = p.x0 + gain * (base.defined() ? xt - root * base : xt);
   }
   return p;
+}
+
+int64_t EditorNetImpl::diffusion_dim() const {
+  return o_.components > 0 ? o_.components : kEditFeatureDim;
+}
+
+torch::Tensor EditorNetImpl::Encode(const torch::Tensor& x) const {
+  if (!basis_.defined()) return x;
+  return torch::matmul(x, basis_) / basis_scale_;
+}
+
+torch::Tensor EditorNetImpl::Decode(const torch::Tensor& z) const {
+  if (!basis_.defined()) return z;
+  return torch::matmul(z * basis_scale_, basis_.t());
+}
+
+double EditorNetImpl::FitFrameBasis(const torch::Tensor& covariance) {
+  if (!basis_.defined()) throw std::logic_error("FitFrameBasis: diffusion.components is 0");
+  double explained = 0;
+  auto [basis, scale] = PrincipalFrameBasis(covariance, o_.components, o_.sigma_data, &explained);
+  torch::NoGradGuard no_grad;
+  basis_.copy_(basis);
+  basis_scale_.copy_(scale);
+  return explained;
+}
+
+std::pair<torch::Tensor, torch::Tensor> PrincipalFrameBasis(const torch::Tensor& covariance,
+                                                            int64_t components, double sigma_data,
+                                                            double* explained) {
+  const int64_t c = covariance.size(0);
+  if (covariance.dim() != 2 || covariance.size(1) != c || components < 1 || components > c)
+    throw std::invalid_argument("PrincipalFrameBasis: a square covariance and 1 <= k <= C");
+  // Symmetric eigendecomposition in double; eigenvalues ascending.
+  const auto [values, vectors] = torch::linalg_eigh(covariance.to(torch::kFloat64));
+  const auto top = torch::arange(c - 1, c - 1 - components, -1, torch::kInt64);
+  auto basis = vectors.index_select(1, top);                     // [C, k]
+  const auto lambda = values.index_select(0, top).clamp_min(0);  // [k]
+  // Fix each axis's sign: its entry of largest magnitude is positive.
+  const auto peak = basis.abs().argmax(0);                                 // [k]
+  const auto sign = basis.gather(0, peak.unsqueeze(0)).sign().squeeze(0);  // [k]
+  basis = basis * torch::where(sign == 0, torch::ones_like(sign), sign);
+  // A direction with no spread keeps scale 1: dividing by 0 would blow its (zero) coordinate up.
+  const auto spread = lambda.sqrt() / sigma_data;
+  const auto scale = torch::where(spread > 1e-6, spread, torch::ones_like(spread));
+  if (explained) {
+    const double total = values.clamp_min(0).sum().item<double>();
+    *explained = total > 0 ? lambda.sum().item<double>() / total : 1.0;
+  }
+  return {basis.to(torch::kFloat32).contiguous(), scale.to(torch::kFloat32).contiguous()};
 }
 
 torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& source_padding,

@@ -65,6 +65,15 @@ struct EditorOptions {
   // how much of x_t to trust at each step (not in the paper).
   bool learned_skip = false;
   double sigma_data = 0.5;  // the normalised features' spread: (x - mean) / (2 std)
+  // > 0: the diffusion runs on the first `components` principal components of the normalised
+  // 207-d frames (fitted on the training motions with the feature statistics), each scaled to
+  // spread sigma_data, instead of on the 207 columns; the network reads and writes those
+  // coordinates and the x0 loss is still taken on the decoded 207-d frame. Not in the paper: the
+  // 207 columns are redundant (6D rotations, joint positions derived from them, 55 columns the
+  // corpus never moves), and at demo width (d = 128) the trunk can neither rebuild nor denoise a
+  // 207-d frame (issue 15); a linear whitening code, as latent diffusion's but fitted, not
+  // trained. 0: the 207 columns (the reference).
+  int64_t components = 0;
   double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
   double guidance_motion = 2, guidance_text = 2;                  // g_m, g_t
   nn::TextEncoderOptions text;
@@ -94,7 +103,7 @@ torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& sour
                           const torch::Tensor& target_padding);
 
 struct Prediction {
-  torch::Tensor x0;          // [Tt, N, 207]
+  torch::Tensor x0;          // [Tt, N, diffusion_dim()]: 207 columns or `components` coordinates
   torch::Tensor similarity;  // mdt: [N, Ts, K] logits (or [N, Ts] regression); else undefined
 };
 
@@ -117,12 +126,20 @@ TORCH_MODULE(DiTBlock);
 class EditorNetImpl : public torch::nn::Module {
  public:
   explicit EditorNetImpl(const EditorOptions& o);
-  // xt [Tt, N, 207] at steps t [N], target_padding [N, Tt]. The x0 estimate, after the
-  // preconditioning of the options.
+  // xt [Tt, N, diffusion_dim()] at steps t [N], target_padding [N, Tt]. The x0 estimate in the
+  // same coordinates, after the preconditioning of the options.
   Prediction forward(const torch::Tensor& xt, const torch::Tensor& t,
                      const torch::Tensor& target_padding, const Condition& c);
   nn::TextEncoder text_encoder() const { return text_encoder_; }
   const EditorOptions& options() const { return o_; }
+  // The coordinates the diffusion runs on (options.components): 207 normalised feature columns
+  // [..., 207] <-> [..., diffusion_dim()]; the identity when components is 0.
+  int64_t diffusion_dim() const;
+  torch::Tensor Encode(const torch::Tensor& x) const;
+  torch::Tensor Decode(const torch::Tensor& z) const;
+  // Sets the frame code from the covariance [207, 207] of normalised training frames
+  // (PrincipalFrameBasis); returns the share of the variance the kept components explain.
+  double FitFrameBasis(const torch::Tensor& covariance);
   // The two terms of the MDT's adaLN condition (DiT: timestep embedding + class embedding): the
   // timestep embedding [N, d] and the text token's contribution [N, d] (text_cond of the text
   // token).
@@ -146,7 +163,8 @@ class EditorNetImpl : public torch::nn::Module {
 
   EditorOptions o_;
   CosineSchedule schedule_;
-  torch::Tensor skip_;  // learned_skip: [steps, 207]
+  torch::Tensor skip_;                 // learned_skip: [steps, diffusion_dim()]
+  torch::Tensor basis_, basis_scale_;  // components > 0: [207, k] orthonormal, [k] spreads / sd
   nn::TextEncoder text_encoder_{nullptr};
   torch::nn::Linear text_proj_{nullptr}, source_in_{nullptr}, target_in_{nullptr}, out_{nullptr};
   torch::nn::Sequential time_mlp_{nullptr}, sim_head_{nullptr};
@@ -156,6 +174,15 @@ class EditorNetImpl : public torch::nn::Module {
   torch::Tensor separator_, segments_;
 };
 TORCH_MODULE(EditorNet);
+
+// The principal axes of frames with this covariance [C, C]: the `components` eigenvectors of the
+// largest eigenvalues as columns [C, k] (each with its largest entry positive, so the basis does
+// not depend on the solver's signs), and their spreads sqrt(lambda) / sigma_data [k], so that
+// z = x B / scale has spread sigma_data along each axis. `explained` receives the kept share of
+// the total variance.
+std::pair<torch::Tensor, torch::Tensor> PrincipalFrameBasis(const torch::Tensor& covariance,
+                                                            int64_t components, double sigma_data,
+                                                            double* explained);
 
 // Masked MSE on x0 averaged per feature group (the 207-d layout's five), then over the groups, per
 // example, then over the examples. prediction/target [T, N, 207], padding [N, T].

@@ -62,6 +62,15 @@ class EditorModel : public plugin::Model {
         auto [mean, stddev] = dataset->ComputeStats();
         mean_.copy_(mean);
         std_.copy_(stddev);
+        if (options_.components > 0) {
+          const double explained = net_->FitFrameBasis(dataset->FrameCovariance(mean, stddev));
+          if (context.rank == 0) {
+            std::fprintf(stderr,
+                         "mdt_editor: diffusion on %lld principal components of the 207-d frame "
+                         "(%.2f%% of its variance)\n",
+                         static_cast<long long>(options_.components), 100 * explained);
+          }
+        }
         stats_ready_ = true;
       }
     }
@@ -93,10 +102,10 @@ class EditorModel : public plugin::Model {
       drop_source[static_cast<size_t>(i)] =
           both || (u >= options_.drop_both + options_.drop_text &&
                    u < options_.drop_both + options_.drop_text + options_.drop_source);
-      noise.push_back(torch::randn({frames, kEditFeatureDim}, generator));
+      noise.push_back(torch::randn({frames, net_->diffusion_dim()}, generator));
     }
     const auto t = torch::tensor(steps, torch::kInt64);
-    const auto xt = schedule_.QSample(target, t, torch::stack(noise, 1));
+    const auto xt = schedule_.QSample(net_->Encode(target), t, torch::stack(noise, 1));
     Condition c;
     c.texts = batch.texts;
     c.drop_text =
@@ -107,7 +116,8 @@ class EditorModel : public plugin::Model {
       c.drop_source = torch::tensor(std::vector<int64_t>(drop_source.begin(), drop_source.end()))
                           .to(torch::kBool);
     }
-    const Prediction p = net_->forward(xt, t, batch.tensors.at("target_padding"), c);
+    Prediction p = net_->forward(xt, t, batch.tensors.at("target_padding"), c);
+    p.x0 = net_->Decode(p.x0);  // the loss is on the 207-d frame whatever the diffusion's space
     std::map<std::string, torch::Tensor> out;
     out["x0"] = GroupedMaskedMse(p.x0, target, batch.tensors.at("target_padding"));
     auto loss = out["x0"];
@@ -300,13 +310,14 @@ class EditorGenerator : public plugin::Generator {
         }
       }
       const auto kept_source = source.narrow(0, 0, tt);
-      project = [keep, kept_source](const torch::Tensor& x0) {
-        return torch::where(keep, kept_source, x0);
+      const auto net = model_->net();
+      project = [keep, kept_source, net](const torch::Tensor& x0) {
+        return net->Encode(torch::where(keep, kept_source, net->Decode(x0)));
       };
     }
     const auto& r0 = requests[0];
     auto generator = at::make_generator<at::CPUGeneratorImpl>(r0.seed);
-    const std::vector<int64_t> shape = {tt, n, kEditFeatureDim};
+    const std::vector<int64_t> shape = {tt, n, model_->net()->diffusion_dim()};
     torch::Tensor x;
     if (r0.sampler.empty() || r0.sampler == "ddpm") {
       x = SampleDdpm(model_->schedule(), shape, denoise, generator, project);
@@ -316,7 +327,7 @@ class EditorGenerator : public plugin::Generator {
     } else {
       return InvalidArgument("sampler must be ddpm or ddim (got '" + r0.sampler + "')");
     }
-    x = (x * scale + model_->mean()).contiguous();
+    x = (model_->net()->Decode(x) * scale + model_->mean()).contiguous();
     std::vector<Motion> out;
     for (int64_t i = 0; i < n; ++i) {
       const int64_t frames = lengths[static_cast<size_t>(i)];

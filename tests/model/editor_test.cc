@@ -401,6 +401,62 @@ TEST(Editor, TheLearnedSkipPassesANearlyCleanTargetAndLearns) {
   EXPECT_THROW(EditorNet{edm}, std::invalid_argument);
 }
 
+// Issue 15: diffusion.components runs the diffusion on the principal components of the frame. On
+// frames of known rank the code is exact, orthonormal, of spread sigma_data per axis and
+// sign-fixed; the net reads and writes k coordinates, and with the source prior the untrained
+// editor still copies its (projected) source.
+TEST(Editor, PrincipalComponentsCodeTheFrameExactlyAtItsRank) {
+  torch::manual_seed(11);
+  // 4,000 frames of rank 5 in 207 columns, spreads 2, 1, 0.5, 0.25, 0.1 along random axes.
+  const auto axes = std::get<0>(torch::linalg_qr(torch::randn({kEditFeatureDim, 5})));
+  const auto spreads = torch::tensor({2.0, 1.0, 0.5, 0.25, 0.1}, torch::kFloat32);
+  const auto frames = torch::matmul(torch::randn({4000, 5}) * spreads, axes.t());
+  const auto centred = frames - frames.mean(0);
+  const auto covariance = torch::matmul(centred.t(), centred) / 3999.0;
+  double explained = 0;
+  auto [basis, scale] = PrincipalFrameBasis(covariance, 5, 0.5, &explained);
+  ASSERT_EQ(basis.sizes(), (std::vector<int64_t>{kEditFeatureDim, 5}));
+  EXPECT_NEAR(explained, 1.0, 1e-4);
+  EXPECT_LT((torch::matmul(basis.t(), basis) - torch::eye(5)).abs().max().item<double>(), 1e-4);
+  const auto z = torch::matmul(centred, basis) / scale;
+  EXPECT_LT((z.std(0) - 0.5).abs().max().item<double>(), 0.01);
+  EXPECT_LT((torch::matmul(z * scale, basis.t()) - centred).abs().max().item<double>(), 1e-4);
+  // Each axis's entry of largest magnitude is positive.
+  EXPECT_TRUE((basis.gather(0, basis.abs().argmax(0).unsqueeze(0)) > 0).all().item<bool>());
+  // Fewer components keep the largest spreads: (4 + 1) / (4 + 1 + 0.25 + 0.0625 + 0.01).
+  PrincipalFrameBasis(covariance, 2, 0.5, &explained);
+  EXPECT_NEAR(explained, 5.0 / 5.3225, 0.01);
+
+  EditorOptions o = Tiny("mdt", "none");
+  o.preconditioning = "source";
+  o.components = 5;
+  EditorNet net(o);
+  EXPECT_EQ(net->diffusion_dim(), 5);
+  EXPECT_NEAR(net->FitFrameBasis(covariance), 1.0, 1e-4);
+  const TinyTriplets data;
+  net->text_encoder()->Fit(data.texts);
+  net->eval();
+  torch::NoGradGuard no_grad;
+  // Sources in the frames' span: the code round-trips them.
+  const auto source = torch::matmul(torch::randn({12, 3, 5}) * spreads, axes.t());
+  EXPECT_LT((net->Decode(net->Encode(source)) - source).abs().max().item<double>(), 1e-4);
+  Condition c{data.texts, source, data.source_padding, {}, {}};
+  const auto xt = torch::randn({12, 3, 5});
+  const auto x0 =
+      net->forward(xt, torch::tensor({49, 20, 0}, torch::kInt64), data.target_padding, c).x0;
+  ASSERT_EQ(x0.sizes(), (std::vector<int64_t>{12, 3, 5}));
+  const auto aligned = AlignSource(source, data.source_padding, data.target_padding);
+  EXPECT_LT((net->Decode(x0) - aligned).abs().max().item<double>(), 1e-4);
+  // The range is checked.
+  nlohmann::json too_many = o.ToJson();
+  too_many["diffusion"]["components"] = kEditFeatureDim + 1;
+  EXPECT_THROW(EditorOptions::FromJson(too_many), std::invalid_argument);
+  EditorOptions plain = Tiny("mdt", "none");
+  EditorNet identity(plain);
+  EXPECT_THROW(identity->FitFrameBasis(covariance), std::logic_error);
+  EXPECT_TRUE(torch::equal(identity->Encode(source), source));
+}
+
 TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
   torch::manual_seed(3);
   EditorNet net(Tiny("mdt"));
