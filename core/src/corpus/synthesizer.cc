@@ -814,492 +814,633 @@ Vec3 ToeDirection(double yaw, double pitch) {
   return {std::cos(yaw) * std::cos(pitch), std::sin(yaw) * std::cos(pitch), std::sin(pitch)};
 }
 
-}  // namespace
+// The passes of Synthesize over one clip and the per-frame state they hand on: each pass fills its
+// arrays from the earlier passes' (layers -> pelvis path -> footsteps -> pelvis placement ->
+// poses).
+class ClipSynthesizer {
+ public:
+  ClipSynthesizer(const ClipScript& script, const Skeleton& skeleton);
+  Synthesis Run();
 
-Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
-  Synthesis result;
-  const int64_t frames = script.num_frames();
-  const double fps = script.fps;
-  const double dt = 1.0 / fps;
-  const ActorStyle& style = script.style;
-  const auto& len = skeleton.bone_lengths();
-  const double leg[2] = {len[4] + len[7], len[5] + len[8]};
-  const double foot_length[2] = {len[10], len[11]};
-  Context ctx{&style, 0.975 * std::min(leg[0], leg[1]), 0.0, 0.0, 0.5 * (len[10] + len[11])};
-  ctx.seat_height = 0.47;
-  ctx.seat_back = 0.33;
-
+ private:
   // Pass 1: base and overlay layers per frame.
-  std::vector<BaseFrame> base(static_cast<size_t>(frames));
-  std::vector<OverlayFrame> over(static_cast<size_t>(frames));
-  std::vector<size_t> base_index(static_cast<size_t>(frames));
-  for (int64_t f = 0; f < frames; ++f) {
-    const double t = static_cast<double>(f) * dt;
-    const size_t k = script.BaseAt(t);
-    const ActionInstance& a = script.base[k];
-    BaseFrame frame = EvaluateBase(a, t - a.start, ctx);
+  void EvaluateLayers();
+  // Pass 2: the pelvis path on the ground (locomotion slows while the upper body is busy).
+  void PlanPelvisPath();
+  // Pass 3: footsteps.
+  void PlanFootsteps();
+  // The gait oscillator at frame f; true when a gait starts there.
+  bool AdvanceGait(int64_t f);
+  void StepFoot(int64_t f, int s, bool fresh_gait);
+  // Leaving scripted or flight modes: the foot lands where the mode left it.
+  void LeaveScriptedOrFlight(int64_t f, int s);
+  // A scripted or flying foot is placed by its mode (true); gait and support feet are not.
+  bool PlaceByMode(int64_t f, int s);
+  // Gait lift-off: this foot's phase crosses the end of its stance.
+  void LiftOff(int64_t f, int s, bool fresh_gait);
+  void SwingFoot(int64_t f, int s);
+  void PlantedFoot(int64_t f, int s);
+  // Corrective steps between actions and while side-stepping or turning.
+  void CorrectiveStep(int64_t f);
+  // Pass 4: pelvis placement, then the feet in flight.
+  void PlacePelvis();
+  // Pass 5: upper body and the pose solver.
+  void SolvePoses(Synthesis* result) const;
+  PoseTargets TrunkTargets(int64_t f) const;
+  void PlaceHand(int64_t f, int s, const UpperBodyFrame& chest, PoseTargets* targets) const;
+  void PlaceFoot(int64_t f, int s, PoseTargets* targets) const;
+  // Ground truth: one segment per annotated action instance.
+  void AddSegments(Synthesis* result) const;
+
+  int64_t FrameAt(double t) const {
+    return std::clamp<int64_t>(static_cast<int64_t>(std::llround(t * fps_)), 0, frames_ - 1);
+  }
+  // Where a foot wants to be at frame f: beside the path, facing its way.
+  Vec3 Desired(int side, int64_t f) const {
+    const auto fi = static_cast<size_t>(std::clamp<int64_t>(f, 0, frames_ - 1));
+    return path_[fi] + (SideSign(side) * base_[fi].stance_width) * LeftOf(facing_[fi]);
+  }
+  double DesiredYaw(int side, int64_t f) const {
+    return facing_[static_cast<size_t>(std::clamp<int64_t>(f, 0, frames_ - 1))] +
+           SideSign(side) * style_.toe_out;
+  }
+
+  const ClipScript& script_;
+  const Skeleton& skeleton_;
+  const ActorStyle& style_;
+  const int64_t frames_;
+  const double fps_, dt_;
+  const SmoothNoise head_noise_x_, head_noise_y_, spine_noise_;  // the trunk's idle motion
+  double leg_[2], foot_length_[2];
+  Context ctx_;
+  // Pass 1.
+  std::vector<BaseFrame> base_;
+  std::vector<OverlayFrame> over_;
+  std::vector<size_t> base_index_;
+  // Pass 2: frames + 1 entries.
+  std::vector<Vec3> path_, velocity_;
+  std::vector<double> facing_;
+  // Pass 3.
+  std::vector<std::array<FootPose, 2>> feet_;
+  FootState state_[2];
+  double gait_phase_ = 0;
+  bool gait_active_ = false;
+  int gait_first_ = kLeft;  // the foot that lifts first when a gait starts
+  double last_landing_ = -1;
+  std::vector<double> gait_phase_at_, gait_amount_;
+  // Pass 4.
+  std::vector<Vec3> pelvis_, pelvis_angles_;
+  std::vector<double> height_;
+};
+
+ClipSynthesizer::ClipSynthesizer(const ClipScript& script, const Skeleton& skeleton)
+    : script_(script),
+      skeleton_(skeleton),
+      style_(script.style),
+      frames_(script.num_frames()),
+      fps_(script.fps),
+      dt_(1.0 / script.fps),
+      head_noise_x_(MixSeed(script.style.noise_seed, 3), 0.2),
+      head_noise_y_(MixSeed(script.style.noise_seed, 4), 0.15),
+      spine_noise_(MixSeed(script.style.noise_seed, 5), 0.12) {
+  const auto& len = skeleton.bone_lengths();
+  leg_[0] = len[4] + len[7];
+  leg_[1] = len[5] + len[8];
+  foot_length_[0] = len[10];
+  foot_length_[1] = len[11];
+  ctx_ = Context{&style_, 0.975 * std::min(leg_[0], leg_[1]), 0.0, 0.0, 0.5 * (len[10] + len[11])};
+  ctx_.seat_height = 0.47;
+  ctx_.seat_back = 0.33;
+}
+
+Synthesis ClipSynthesizer::Run() {
+  EvaluateLayers();
+  PlanPelvisPath();
+  PlanFootsteps();
+  PlacePelvis();
+  Synthesis result;
+  SolvePoses(&result);
+  AddSegments(&result);
+  return result;
+}
+
+void ClipSynthesizer::EvaluateLayers() {
+  base_.resize(static_cast<size_t>(frames_));
+  over_.resize(static_cast<size_t>(frames_));
+  base_index_.resize(static_cast<size_t>(frames_));
+  for (int64_t f = 0; f < frames_; ++f) {
+    const double t = static_cast<double>(f) * dt_;
+    const size_t k = script_.BaseAt(t);
+    const ActionInstance& a = script_.base[k];
+    BaseFrame frame = EvaluateBase(a, t - a.start, ctx_);
     const double since = t - a.start;
     if (k > 0 && since < kFadeSeconds) {
-      const ActionInstance& prev = script.base[k - 1];
-      frame = Blend(EvaluateBase(prev, prev.duration(), ctx), frame, Smooth(since / kFadeSeconds));
-    } else if (k == 0 && script.start_seated && a.id != A::kStandUp) {
-      frame.height = ctx.seat_height;
+      const ActionInstance& prev = script_.base[k - 1];
+      frame = Blend(EvaluateBase(prev, prev.duration(), ctx_), frame, Smooth(since / kFadeSeconds));
+    } else if (k == 0 && script_.start_seated && a.id != A::kStandUp) {
+      frame.height = ctx_.seat_height;
     }
-    base[static_cast<size_t>(f)] = frame;
-    base_index[static_cast<size_t>(f)] = k;
-    for (const ActionInstance& o : script.overlays) {
+    base_[static_cast<size_t>(f)] = frame;
+    base_index_[static_cast<size_t>(f)] = k;
+    for (const ActionInstance& o : script_.overlays) {
       if (t >= o.start && t < o.end)
-        EvaluateOverlay(o, t - o.start, style, &over[static_cast<size_t>(f)]);
+        EvaluateOverlay(o, t - o.start, style_, &over_[static_cast<size_t>(f)]);
     }
   }
+}
 
-  // Pass 2: the pelvis path on the ground (locomotion slows while the upper body is busy).
-  std::vector<Vec3> path(static_cast<size_t>(frames + 1)),
-      velocity(static_cast<size_t>(frames + 1));
-  std::vector<double> facing(static_cast<size_t>(frames + 1));
-  path[0] = {script.start_x, script.start_y, 0};
-  facing[0] = script.start_facing;
-  for (int64_t f = 0; f < frames; ++f) {
-    const BaseFrame& b = base[static_cast<size_t>(f)];
-    const double slow = std::clamp(1.0 - over[static_cast<size_t>(f)].slow, 0.55, 1.0);
-    const Vec3 v = slow * (b.speed_forward * Forward(facing[static_cast<size_t>(f)]) +
-                           b.speed_left * LeftOf(facing[static_cast<size_t>(f)]));
-    velocity[static_cast<size_t>(f)] = v;
-    path[static_cast<size_t>(f + 1)] = path[static_cast<size_t>(f)] + dt * v;
-    facing[static_cast<size_t>(f + 1)] = facing[static_cast<size_t>(f)] + dt * b.facing_rate;
+void ClipSynthesizer::PlanPelvisPath() {
+  path_.resize(static_cast<size_t>(frames_ + 1));
+  velocity_.resize(static_cast<size_t>(frames_ + 1));
+  facing_.resize(static_cast<size_t>(frames_ + 1));
+  path_[0] = {script_.start_x, script_.start_y, 0};
+  facing_[0] = script_.start_facing;
+  for (int64_t f = 0; f < frames_; ++f) {
+    const BaseFrame& b = base_[static_cast<size_t>(f)];
+    const double slow = std::clamp(1.0 - over_[static_cast<size_t>(f)].slow, 0.55, 1.0);
+    const Vec3 v = slow * (b.speed_forward * Forward(facing_[static_cast<size_t>(f)]) +
+                           b.speed_left * LeftOf(facing_[static_cast<size_t>(f)]));
+    velocity_[static_cast<size_t>(f)] = v;
+    path_[static_cast<size_t>(f + 1)] = path_[static_cast<size_t>(f)] + dt_ * v;
+    facing_[static_cast<size_t>(f + 1)] = facing_[static_cast<size_t>(f)] + dt_ * b.facing_rate;
   }
-  velocity[static_cast<size_t>(frames)] = velocity[static_cast<size_t>(frames - 1)];
-  const auto frame_at = [&](double t) {
-    return std::clamp<int64_t>(static_cast<int64_t>(std::llround(t * fps)), 0, frames - 1);
-  };
-  const auto desired = [&](int side, int64_t f) {
-    const auto fi = static_cast<size_t>(std::clamp<int64_t>(f, 0, frames - 1));
-    return path[fi] + (SideSign(side) * base[fi].stance_width) * LeftOf(facing[fi]);
-  };
-  const auto desired_yaw = [&](int side, int64_t f) {
-    return facing[static_cast<size_t>(std::clamp<int64_t>(f, 0, frames - 1))] +
-           SideSign(side) * style.toe_out;
-  };
+  velocity_[static_cast<size_t>(frames_)] = velocity_[static_cast<size_t>(frames_ - 1)];
+}
 
-  // Pass 3: footsteps.
-  std::vector<std::array<FootPose, 2>> feet(static_cast<size_t>(frames));
-  FootState state[2];
+void ClipSynthesizer::PlanFootsteps() {
+  feet_.resize(static_cast<size_t>(frames_));
   for (int s = 0; s < 2; ++s) {
-    state[s].plant = desired(s, 0);
-    state[s].yaw = desired_yaw(s, 0);
+    state_[s].plant = Desired(s, 0);
+    state_[s].yaw = DesiredYaw(s, 0);
   }
-  double gait_phase = 0;
-  bool gait_active = false;
-  int gait_first = kLeft;  // the foot that lifts first when a gait starts
-  double last_landing = -1;
-  std::vector<double> gait_phase_at(static_cast<size_t>(frames)),
-      gait_amount(static_cast<size_t>(frames));
-  for (int64_t f = 0; f < frames; ++f) {
-    const double t = static_cast<double>(f) * dt;
-    const BaseFrame& b = base[static_cast<size_t>(f)];
-    // The gait oscillator: left stance for phase in [0, duty), right shifted by half a cycle.
-    bool fresh_gait = false;
-    if (b.gait) {
-      if (!gait_active) {
-        // Lift the foot that is further behind in the direction of travel first.
-        const Vec3 dir = Norm(velocity[static_cast<size_t>(f)]) > 1e-6
-                             ? velocity[static_cast<size_t>(f)]
-                             : Forward(facing[static_cast<size_t>(f)]);
-        gait_first = Dot(state[kLeft].plant - state[kRight].plant, dir) <= 0 ? kLeft : kRight;
-        gait_phase = gait_first == kLeft ? b.duty : b.duty - 0.5;
-        if (gait_phase < 0) gait_phase += 1;
-        fresh_gait = true;
-      } else {
-        gait_phase = std::fmod(gait_phase + dt / b.cycle, 1.0);
-      }
-    }
-    gait_active = b.gait;
-    gait_phase_at[static_cast<size_t>(f)] = gait_phase;
-    gait_amount[static_cast<size_t>(f)] =
-        b.gait
-            ? std::clamp(Norm(velocity[static_cast<size_t>(f)]) / 1.1, b.lead == 0 ? 0.6 : 0.0, 1.0)
-            : 0.0;
+  gait_phase_at_.resize(static_cast<size_t>(frames_));
+  gait_amount_.resize(static_cast<size_t>(frames_));
+  for (int64_t f = 0; f < frames_; ++f) {
+    const bool fresh_gait = AdvanceGait(f);
+    for (int s = 0; s < 2; ++s) StepFoot(f, s, fresh_gait);
+    CorrectiveStep(f);
+  }
+}
 
-    for (int s = 0; s < 2; ++s) {
-      FootState& st = state[s];
-      const FootRequest& req = b.feet[s];
-      FootPose& out = feet[static_cast<size_t>(f)][static_cast<size_t>(s)];
-      // Leaving scripted or flight modes: the foot lands where the mode left it.
-      if (st.scripted && req.mode != FootMode::kScripted) {
-        st.scripted = false;
-        const FootPose& prev =
-            feet[static_cast<size_t>(std::max<int64_t>(0, f - 1))][static_cast<size_t>(s)];
-        st.plant = {prev.ankle.x, prev.ankle.y, 0};
-        st.yaw = prev.yaw;
-        if (prev.ankle.z > 0.01) {  // still in the air: finish with a short step down
-          st.swinging = true;
-          st.from = prev.ankle;
-          st.from_yaw = prev.yaw;
-          st.from_pitch = prev.pitch;
-          st.to = desired(s, f + frame_at(0.25));
-          st.to_yaw = desired_yaw(s, f + frame_at(0.25));
-          st.to_pitch = 0;
-          st.t0 = t;
-          st.t1 = t + 0.25;
-          st.clearance = 0.02;
-        }
-      }
-      if (st.flying && req.mode != FootMode::kFlight) {
-        st.flying = false;
-        st.plant = st.to;
-        st.yaw = st.to_yaw;
-        last_landing = t;
-      }
-      switch (req.mode) {
-        case FootMode::kScripted: {
-          if (!st.scripted) {
-            st.scripted = true;
-            st.swinging = false;
-            st.anchor = st.plant;
-            st.anchor_yaw = st.yaw;
-          }
-          Vec3 reference = st.anchor;
-          double reference_yaw = st.anchor_yaw;
-          if (req.reference == ScriptReference::kPath) {
-            reference = desired(s, f);
-            reference_yaw = desired_yaw(s, f);
-          }
-          out.ankle = reference + req.offset.x * Forward(reference_yaw) +
-                      req.offset.y * LeftOf(reference_yaw) + Vec3{0, 0, req.offset.z};
-          out.yaw = reference_yaw;
-          out.pitch = req.pitch;
-          out.knee_down = req.knee_down;
-          continue;
-        }
-        case FootMode::kFlight: {
-          if (!st.flying) {
-            st.flying = true;
-            st.swinging = false;
-            st.from = st.plant;
-            st.from_yaw = st.yaw;
-            const int64_t land = frame_at(req.landing);
-            st.to = desired(s, land);
-            st.to_yaw = desired_yaw(s, land);
-          }
-          out.flight = true;
-          out.flight_s = Clamp01((t - req.takeoff) / std::max(1e-3, req.landing - req.takeoff));
-          out.flight_from = st.from;
-          out.flight_to = st.to;
-          out.takeoff_frame = frame_at(req.takeoff);
-          out.landing_frame = frame_at(req.landing);
-          out.tuck = req.tuck;
-          out.yaw = AngleLerp(st.from_yaw, st.to_yaw, Smooth(out.flight_s));
-          continue;
-        }
-        case FootMode::kGait:
-        case FootMode::kSupport:
-          break;
-      }
-      // Gait lift-off: this foot's phase crosses the end of its stance.
-      if (b.gait && !st.swinging) {
-        const double phase = std::fmod(gait_phase + (s == kRight ? 0.5 : 0.0), 1.0);
-        // From standing only the chosen foot lifts. Afterwards a planted foot lifts anywhere in its
-        // swing window once it has carried weight for a minimum stance (late after a corrective
-        // step or a change of gait), so no foot is left behind a body that speeds up.
-        const bool in_window = phase >= b.duty;
-        const double min_stance = 0.6 * b.duty * b.cycle;
-        // Safety net: a foot about to be left half a metre behind lifts now if the other is down.
-        const bool left_behind = Norm(desired(s, f + 3) - st.plant) > 0.5 &&
-                                 !state[1 - s].swinging && !state[1 - s].flying && t - st.t1 > 0.1;
-        const bool lifts =
-            fresh_gait ? s == gait_first : (in_window && t - st.t1 > min_stance) || left_behind;
-        st.last_phase = phase;
-        if (lifts) {
-          const double swing =
-              std::max(left_behind && !in_window ? 0.3 : 0.15, (1 - phase) * b.cycle);
-          const int64_t land =
-              f + std::max<int64_t>(1, static_cast<int64_t>(std::llround(swing * fps)));
-          // Land where the pelvis will be halfway through the coming stance (exact under
-          // acceleration), timed by the gait in force at landing (the next action's when the gait
-          // changes).
-          const BaseFrame& at_landing = base[static_cast<size_t>(std::min(land, frames - 1))];
-          const double stance =
-              at_landing.gait ? at_landing.duty * at_landing.cycle : b.duty * b.cycle;
-          const int64_t stance_end = land + static_cast<int64_t>(std::llround(stance * fps));
-          const Vec3 lead = (0.5 * b.lead) * (desired(s, stance_end) - desired(s, land));
-          st.swinging = true;
-          st.t0 = t;
-          st.t1 = t + swing;
-          st.from_pitch = b.heel_toe ? -0.5 : -0.35;
-          st.from_yaw = st.yaw;
-          // Toe-off: the foot pivots about its fixed toe.
-          const Vec3 toe = st.plant + foot_length[s] * ToeDirection(st.yaw, 0);
-          st.from = toe - foot_length[s] * ToeDirection(st.yaw, st.from_pitch);
-          st.to = desired(s, land) + lead;
-          st.to_yaw = desired_yaw(s, land);
-          st.to_pitch = b.heel_toe ? 0.25 : 0.0;
-          st.clearance = b.clearance;
-        }
-      } else if (b.gait) {
-        st.last_phase = std::fmod(gait_phase + (s == kRight ? 0.5 : 0.0), 1.0);
-      }
-      if (st.swinging) {
-        const double u = Clamp01((t - st.t0) / std::max(1e-6, st.t1 - st.t0));
-        // Lift first, travel, then set down: the foot leaves the floor before it moves forward.
-        const double w = Smooth((u - 0.12) / 0.8);
-        Vec3 ankle = Lerp(st.from, st.to, w);
-        ankle.z = Lerp(st.from.z, st.to.z, u) + st.clearance * std::pow(std::sin(kPi * u), 0.6);
-        out.ankle = ankle;
-        out.yaw = AngleLerp(st.from_yaw, st.to_yaw, w);
-        // The toe comes up early in the swing and the heel leads the landing.
-        out.pitch = Keys<double>(
-            {{0, st.from_pitch}, {0.3, 0.0}, {0.85, st.to_pitch}, {1, st.to_pitch}}, u);
-        out.bears_weight = u < 0.08 || u > 0.92;
-        if (u >= 1.0) {
-          st.swinging = false;
-          st.plant = st.to;
-          st.yaw = st.to_yaw;
-          last_landing = t;
-        }
-        continue;
-      }
-      // Planted: heel strike and toe-off roll during gait stance, tiptoe otherwise.
-      double pitch = -b.heel_raise;
-      if (b.gait && b.heel_toe) {
-        const double phase = std::fmod(gait_phase + (s == kRight ? 0.5 : 0.0), 1.0);
-        const double u = phase / b.duty;
-        if (u < 0.15) pitch = 0.25 * (1 - u / 0.15);
-        if (u > 0.6) pitch = -0.5 * Smooth((u - 0.6) / 0.4);
-      } else if (b.gait) {
-        const double phase = std::fmod(gait_phase + (s == kRight ? 0.5 : 0.0), 1.0);
-        const double u = phase / b.duty;
-        if (u > 0.5) pitch = -0.35 * Smooth((u - 0.5) / 0.5);
-      }
-      if (pitch >= 0) {  // heel down: pivot about the ankle
-        out.ankle = st.plant;
-      } else {  // heel up: pivot about the toe
-        const Vec3 toe = st.plant + foot_length[s] * ToeDirection(st.yaw, 0);
-        out.ankle = toe - foot_length[s] * ToeDirection(st.yaw, pitch);
-      }
-      out.yaw = st.yaw;
-      out.pitch = pitch;
+bool ClipSynthesizer::AdvanceGait(int64_t f) {
+  const BaseFrame& b = base_[static_cast<size_t>(f)];
+  // The gait oscillator: left stance for phase in [0, duty), right shifted by half a cycle.
+  bool fresh_gait = false;
+  if (b.gait) {
+    if (!gait_active_) {
+      // Lift the foot that is further behind in the direction of travel first.
+      const Vec3 dir = Norm(velocity_[static_cast<size_t>(f)]) > 1e-6
+                           ? velocity_[static_cast<size_t>(f)]
+                           : Forward(facing_[static_cast<size_t>(f)]);
+      gait_first_ = Dot(state_[kLeft].plant - state_[kRight].plant, dir) <= 0 ? kLeft : kRight;
+      gait_phase_ = gait_first_ == kLeft ? b.duty : b.duty - 0.5;
+      if (gait_phase_ < 0) gait_phase_ += 1;
+      fresh_gait = true;
+    } else {
+      gait_phase_ = std::fmod(gait_phase_ + dt_ / b.cycle, 1.0);
     }
+  }
+  gait_active_ = b.gait;
+  gait_phase_at_[static_cast<size_t>(f)] = gait_phase_;
+  gait_amount_[static_cast<size_t>(f)] =
+      b.gait
+          ? std::clamp(Norm(velocity_[static_cast<size_t>(f)]) / 1.1, b.lead == 0 ? 0.6 : 0.0, 1.0)
+          : 0.0;
+  return fresh_gait;
+}
 
-    // Corrective steps between actions and while side-stepping or turning: the foot furthest from
-    // where the body wants it steps, one foot at a time.
-    const bool both_support =
-        b.feet[0].mode == FootMode::kSupport && b.feet[1].mode == FootMode::kSupport && !b.gait;
-    if (both_support && !state[0].swinging && !state[1].swinging && !state[0].scripted &&
-        !state[1].scripted && !state[0].flying && !state[1].flying && t - last_landing > 0.08) {
-      const double step_time = 0.42;
-      // Look ahead only within this action: the next one plans its own footsteps.
-      const int64_t action_end = frame_at(script.base[base_index[static_cast<size_t>(f)]].end) - 1;
-      const int64_t land = std::min(f + frame_at(step_time), std::max(f, action_end));
-      double error[2];
-      for (int s = 0; s < 2; ++s) {
-        error[s] = Norm(desired(s, land) - state[s].plant) +
-                   0.3 * std::abs(std::remainder(desired_yaw(s, land) - state[s].yaw, 2 * kPi));
+void ClipSynthesizer::StepFoot(int64_t f, int s, bool fresh_gait) {
+  LeaveScriptedOrFlight(f, s);
+  if (PlaceByMode(f, s)) return;
+  LiftOff(f, s, fresh_gait);
+  if (state_[s].swinging) {
+    SwingFoot(f, s);
+    return;
+  }
+  PlantedFoot(f, s);
+}
+
+void ClipSynthesizer::LeaveScriptedOrFlight(int64_t f, int s) {
+  const double t = static_cast<double>(f) * dt_;
+  FootState& st = state_[s];
+  const FootRequest& req = base_[static_cast<size_t>(f)].feet[s];
+  if (st.scripted && req.mode != FootMode::kScripted) {
+    st.scripted = false;
+    const FootPose& prev =
+        feet_[static_cast<size_t>(std::max<int64_t>(0, f - 1))][static_cast<size_t>(s)];
+    st.plant = {prev.ankle.x, prev.ankle.y, 0};
+    st.yaw = prev.yaw;
+    if (prev.ankle.z > 0.01) {  // still in the air: finish with a short step down
+      st.swinging = true;
+      st.from = prev.ankle;
+      st.from_yaw = prev.yaw;
+      st.from_pitch = prev.pitch;
+      st.to = Desired(s, f + FrameAt(0.25));
+      st.to_yaw = DesiredYaw(s, f + FrameAt(0.25));
+      st.to_pitch = 0;
+      st.t0 = t;
+      st.t1 = t + 0.25;
+      st.clearance = 0.02;
+    }
+  }
+  if (st.flying && req.mode != FootMode::kFlight) {
+    st.flying = false;
+    st.plant = st.to;
+    st.yaw = st.to_yaw;
+    last_landing_ = t;
+  }
+}
+
+bool ClipSynthesizer::PlaceByMode(int64_t f, int s) {
+  const double t = static_cast<double>(f) * dt_;
+  FootState& st = state_[s];
+  const FootRequest& req = base_[static_cast<size_t>(f)].feet[s];
+  FootPose& out = feet_[static_cast<size_t>(f)][static_cast<size_t>(s)];
+  switch (req.mode) {
+    case FootMode::kScripted: {
+      if (!st.scripted) {
+        st.scripted = true;
+        st.swinging = false;
+        st.anchor = st.plant;
+        st.anchor_yaw = st.yaw;
       }
-      const Vec3 v = velocity[static_cast<size_t>(f)];
-      int pick = error[0] >= error[1] ? 0 : 1;
-      if (std::abs(error[0] - error[1]) < 0.02 && Norm(v) > 1e-6) {
-        pick = Dot(v, LeftOf(facing[static_cast<size_t>(f)])) >= 0
-                   ? kLeft
-                   : kRight;  // lead with the foot on the side of travel
+      Vec3 reference = st.anchor;
+      double reference_yaw = st.anchor_yaw;
+      if (req.reference == ScriptReference::kPath) {
+        reference = Desired(s, f);
+        reference_yaw = DesiredYaw(s, f);
       }
-      if (error[pick] > b.settle_threshold) {
-        FootState& st = state[pick];
-        st.swinging = true;
-        st.t0 = t;
-        st.t1 = t + step_time;
+      out.ankle = reference + req.offset.x * Forward(reference_yaw) +
+                  req.offset.y * LeftOf(reference_yaw) + Vec3{0, 0, req.offset.z};
+      out.yaw = reference_yaw;
+      out.pitch = req.pitch;
+      out.knee_down = req.knee_down;
+      return true;
+    }
+    case FootMode::kFlight: {
+      if (!st.flying) {
+        st.flying = true;
+        st.swinging = false;
         st.from = st.plant;
         st.from_yaw = st.yaw;
-        st.from_pitch = 0;
-        st.to = desired(pick, land) +
-                b.settle_lead * velocity[static_cast<size_t>(std::min(land, frames - 1))];
-        st.to_yaw = desired_yaw(pick, land);
-        st.to_pitch = 0;
-        st.clearance = 0.09;
+        const int64_t land = FrameAt(req.landing);
+        st.to = Desired(s, land);
+        st.to_yaw = DesiredYaw(s, land);
       }
+      out.flight = true;
+      out.flight_s = Clamp01((t - req.takeoff) / std::max(1e-3, req.landing - req.takeoff));
+      out.flight_from = st.from;
+      out.flight_to = st.to;
+      out.takeoff_frame = FrameAt(req.takeoff);
+      out.landing_frame = FrameAt(req.landing);
+      out.tuck = req.tuck;
+      out.yaw = AngleLerp(st.from_yaw, st.to_yaw, Smooth(out.flight_s));
+      return true;
     }
+    case FootMode::kGait:
+    case FootMode::kSupport:
+      break;
   }
+  return false;
+}
 
-  // Pass 4: pelvis placement. Horizontal: path + action offsets + idle and gait sway. Height: the
-  // action's nominal height, lowered wherever a planted foot would otherwise be out of reach.
-  const SmoothNoise sway_x(MixSeed(style.noise_seed, 1), 0.22),
-      sway_y(MixSeed(style.noise_seed, 2), 0.17);
-  const SmoothNoise head_noise_x(MixSeed(style.noise_seed, 3), 0.2),
-      head_noise_y(MixSeed(style.noise_seed, 4), 0.15);
-  const SmoothNoise spine_noise(MixSeed(style.noise_seed, 5), 0.12);
-  std::vector<Vec3> pelvis(static_cast<size_t>(frames));
-  std::vector<Vec3> pelvis_angles(static_cast<size_t>(frames));
-  std::vector<double> envelope(static_cast<size_t>(frames),
+void ClipSynthesizer::LiftOff(int64_t f, int s, bool fresh_gait) {
+  const double t = static_cast<double>(f) * dt_;
+  const BaseFrame& b = base_[static_cast<size_t>(f)];
+  FootState& st = state_[s];
+  if (b.gait && !st.swinging) {
+    const double phase = std::fmod(gait_phase_ + (s == kRight ? 0.5 : 0.0), 1.0);
+    // From standing only the chosen foot lifts. Afterwards a planted foot lifts anywhere in its
+    // swing window once it has carried weight for a minimum stance (late after a corrective
+    // step or a change of gait), so no foot is left behind a body that speeds up.
+    const bool in_window = phase >= b.duty;
+    const double min_stance = 0.6 * b.duty * b.cycle;
+    // Safety net: a foot about to be left half a metre behind lifts now if the other is down.
+    const bool left_behind = Norm(Desired(s, f + 3) - st.plant) > 0.5 && !state_[1 - s].swinging &&
+                             !state_[1 - s].flying && t - st.t1 > 0.1;
+    const bool lifts =
+        fresh_gait ? s == gait_first_ : (in_window && t - st.t1 > min_stance) || left_behind;
+    st.last_phase = phase;
+    if (lifts) {
+      const double swing = std::max(left_behind && !in_window ? 0.3 : 0.15, (1 - phase) * b.cycle);
+      const int64_t land =
+          f + std::max<int64_t>(1, static_cast<int64_t>(std::llround(swing * fps_)));
+      // Land where the pelvis will be halfway through the coming stance (exact under
+      // acceleration), timed by the gait in force at landing (the next action's when the gait
+      // changes).
+      const BaseFrame& at_landing = base_[static_cast<size_t>(std::min(land, frames_ - 1))];
+      const double stance = at_landing.gait ? at_landing.duty * at_landing.cycle : b.duty * b.cycle;
+      const int64_t stance_end = land + static_cast<int64_t>(std::llround(stance * fps_));
+      const Vec3 lead = (0.5 * b.lead) * (Desired(s, stance_end) - Desired(s, land));
+      st.swinging = true;
+      st.t0 = t;
+      st.t1 = t + swing;
+      st.from_pitch = b.heel_toe ? -0.5 : -0.35;
+      st.from_yaw = st.yaw;
+      // Toe-off: the foot pivots about its fixed toe.
+      const Vec3 toe = st.plant + foot_length_[s] * ToeDirection(st.yaw, 0);
+      st.from = toe - foot_length_[s] * ToeDirection(st.yaw, st.from_pitch);
+      st.to = Desired(s, land) + lead;
+      st.to_yaw = DesiredYaw(s, land);
+      st.to_pitch = b.heel_toe ? 0.25 : 0.0;
+      st.clearance = b.clearance;
+    }
+  } else if (b.gait) {
+    st.last_phase = std::fmod(gait_phase_ + (s == kRight ? 0.5 : 0.0), 1.0);
+  }
+}
+
+void ClipSynthesizer::SwingFoot(int64_t f, int s) {
+  const double t = static_cast<double>(f) * dt_;
+  FootState& st = state_[s];
+  FootPose& out = feet_[static_cast<size_t>(f)][static_cast<size_t>(s)];
+  const double u = Clamp01((t - st.t0) / std::max(1e-6, st.t1 - st.t0));
+  // Lift first, travel, then set down: the foot leaves the floor before it moves forward.
+  const double w = Smooth((u - 0.12) / 0.8);
+  Vec3 ankle = Lerp(st.from, st.to, w);
+  ankle.z = Lerp(st.from.z, st.to.z, u) + st.clearance * std::pow(std::sin(kPi * u), 0.6);
+  out.ankle = ankle;
+  out.yaw = AngleLerp(st.from_yaw, st.to_yaw, w);
+  // The toe comes up early in the swing and the heel leads the landing.
+  out.pitch =
+      Keys<double>({{0, st.from_pitch}, {0.3, 0.0}, {0.85, st.to_pitch}, {1, st.to_pitch}}, u);
+  out.bears_weight = u < 0.08 || u > 0.92;
+  if (u >= 1.0) {
+    st.swinging = false;
+    st.plant = st.to;
+    st.yaw = st.to_yaw;
+    last_landing_ = t;
+  }
+}
+
+void ClipSynthesizer::PlantedFoot(int64_t f, int s) {
+  const BaseFrame& b = base_[static_cast<size_t>(f)];
+  const FootState& st = state_[s];
+  FootPose& out = feet_[static_cast<size_t>(f)][static_cast<size_t>(s)];
+  // Planted: heel strike and toe-off roll during gait stance, tiptoe otherwise.
+  double pitch = -b.heel_raise;
+  if (b.gait && b.heel_toe) {
+    const double phase = std::fmod(gait_phase_ + (s == kRight ? 0.5 : 0.0), 1.0);
+    const double u = phase / b.duty;
+    if (u < 0.15) pitch = 0.25 * (1 - u / 0.15);
+    if (u > 0.6) pitch = -0.5 * Smooth((u - 0.6) / 0.4);
+  } else if (b.gait) {
+    const double phase = std::fmod(gait_phase_ + (s == kRight ? 0.5 : 0.0), 1.0);
+    const double u = phase / b.duty;
+    if (u > 0.5) pitch = -0.35 * Smooth((u - 0.5) / 0.5);
+  }
+  if (pitch >= 0) {  // heel down: pivot about the ankle
+    out.ankle = st.plant;
+  } else {  // heel up: pivot about the toe
+    const Vec3 toe = st.plant + foot_length_[s] * ToeDirection(st.yaw, 0);
+    out.ankle = toe - foot_length_[s] * ToeDirection(st.yaw, pitch);
+  }
+  out.yaw = st.yaw;
+  out.pitch = pitch;
+}
+
+void ClipSynthesizer::CorrectiveStep(int64_t f) {
+  const double t = static_cast<double>(f) * dt_;
+  const BaseFrame& b = base_[static_cast<size_t>(f)];
+  // The foot furthest from where the body wants it steps, one foot at a time.
+  const bool both_support =
+      b.feet[0].mode == FootMode::kSupport && b.feet[1].mode == FootMode::kSupport && !b.gait;
+  if (!both_support || state_[0].swinging || state_[1].swinging || state_[0].scripted ||
+      state_[1].scripted || state_[0].flying || state_[1].flying || t - last_landing_ <= 0.08)
+    return;
+  const double step_time = 0.42;
+  // Look ahead only within this action: the next one plans its own footsteps.
+  const int64_t action_end = FrameAt(script_.base[base_index_[static_cast<size_t>(f)]].end) - 1;
+  const int64_t land = std::min(f + FrameAt(step_time), std::max(f, action_end));
+  double error[2];
+  for (int s = 0; s < 2; ++s) {
+    error[s] = Norm(Desired(s, land) - state_[s].plant) +
+               0.3 * std::abs(std::remainder(DesiredYaw(s, land) - state_[s].yaw, 2 * kPi));
+  }
+  const Vec3 v = velocity_[static_cast<size_t>(f)];
+  int pick = error[0] >= error[1] ? 0 : 1;
+  if (std::abs(error[0] - error[1]) < 0.02 && Norm(v) > 1e-6) {
+    pick = Dot(v, LeftOf(facing_[static_cast<size_t>(f)])) >= 0
+               ? kLeft
+               : kRight;  // lead with the foot on the side of travel
+  }
+  if (error[pick] > b.settle_threshold) {
+    FootState& st = state_[pick];
+    st.swinging = true;
+    st.t0 = t;
+    st.t1 = t + step_time;
+    st.from = st.plant;
+    st.from_yaw = st.yaw;
+    st.from_pitch = 0;
+    st.to = Desired(pick, land) +
+            b.settle_lead * velocity_[static_cast<size_t>(std::min(land, frames_ - 1))];
+    st.to_yaw = DesiredYaw(pick, land);
+    st.to_pitch = 0;
+    st.clearance = 0.09;
+  }
+}
+
+void ClipSynthesizer::PlacePelvis() {
+  // Horizontal: path + action offsets + idle and gait sway. Height: the action's nominal height,
+  // lowered wherever a planted foot would otherwise be out of reach.
+  const SmoothNoise sway_x(MixSeed(style_.noise_seed, 1), 0.22),
+      sway_y(MixSeed(style_.noise_seed, 2), 0.17);
+  pelvis_.resize(static_cast<size_t>(frames_));
+  pelvis_angles_.resize(static_cast<size_t>(frames_));
+  std::vector<double> envelope(static_cast<size_t>(frames_),
                                std::numeric_limits<double>::infinity());
-  for (int64_t f = 0; f < frames; ++f) {
+  for (int64_t f = 0; f < frames_; ++f) {
     const auto fi = static_cast<size_t>(f);
-    const double t = static_cast<double>(f) * dt;
-    const BaseFrame& b = base[fi];
-    const double gait = gait_amount[fi];
-    const double wave = std::sin(2 * kPi * (gait_phase_at[fi] - 0.06));
-    const double idle = (1 - gait) * style.sway;
+    const double t = static_cast<double>(f) * dt_;
+    const BaseFrame& b = base_[fi];
+    const double gait = gait_amount_[fi];
+    const double wave = std::sin(2 * kPi * (gait_phase_at_[fi] - 0.06));
+    const double idle = (1 - gait) * style_.sway;
     const double lateral = b.offset_left + 0.022 * gait * wave + 0.012 * idle * sway_x(t);
     const double forward = b.offset_forward + 0.006 * idle * sway_y(t);
-    pelvis[fi] = path[fi] + forward * Forward(facing[fi]) + lateral * LeftOf(facing[fi]);
-    pelvis_angles[fi] = b.pelvis_angles + Vec3{0, 0.07 * gait * wave, 0.035 * gait * wave};
-    const Mat3 orientation = PelvisOrientation(facing[fi], pelvis_angles[fi]);
+    pelvis_[fi] = path_[fi] + forward * Forward(facing_[fi]) + lateral * LeftOf(facing_[fi]);
+    pelvis_angles_[fi] = b.pelvis_angles + Vec3{0, 0.07 * gait * wave, 0.035 * gait * wave};
+    const Mat3 orientation = PelvisOrientation(facing_[fi], pelvis_angles_[fi]);
     for (int s = 0; s < 2; ++s) {
-      const FootPose& foot = feet[fi][static_cast<size_t>(s)];
+      const FootPose& foot = feet_[fi][static_cast<size_t>(s)];
       if (foot.flight || !foot.bears_weight) continue;
       const Vec3 hip_offset =
-          orientation * skeleton.rest_offsets()[static_cast<size_t>(s == kLeft ? 1 : 2)];
-      const Vec3 hip_xy = pelvis[fi] + hip_offset;
+          orientation * skeleton_.rest_offsets()[static_cast<size_t>(s == kLeft ? 1 : 2)];
+      const Vec3 hip_xy = pelvis_[fi] + hip_offset;
       const double d = std::hypot(hip_xy.x - foot.ankle.x, hip_xy.y - foot.ankle.y);
-      const double reach = kReachMargin * leg[s];
+      const double reach = kReachMargin * leg_[s];
       const double hip_z = foot.ankle.z + std::sqrt(std::max(0.0, reach * reach - d * d));
       envelope[fi] = std::min(envelope[fi], hip_z - hip_offset.z);
     }
   }
   // Lower envelope smoothed by a parabolic erosion (|vertical acceleration| <= 2 * 3 m/s^2), so
   // the pelvis never has to drop abruptly to keep a foot in reach.
-  std::vector<double> height(static_cast<size_t>(frames));
-  const int window = static_cast<int>(fps * 0.5);
-  for (int64_t f = 0; f < frames; ++f) {
+  height_.resize(static_cast<size_t>(frames_));
+  const int window = static_cast<int>(fps_ * 0.5);
+  for (int64_t f = 0; f < frames_; ++f) {
     double eroded = std::numeric_limits<double>::infinity();
     for (int k = -window; k <= window; ++k) {
       const int64_t g = f + k;
-      if (g < 0 || g >= frames) continue;
-      const double tk = k * dt;
+      if (g < 0 || g >= frames_) continue;
+      const double tk = k * dt_;
       eroded = std::min(eroded, envelope[static_cast<size_t>(g)] + 3.0 * tk * tk);
     }
-    height[static_cast<size_t>(f)] = std::min(base[static_cast<size_t>(f)].height, eroded);
-    pelvis[static_cast<size_t>(f)].z = height[static_cast<size_t>(f)];
+    height_[static_cast<size_t>(f)] = std::min(base_[static_cast<size_t>(f)].height, eroded);
+    pelvis_[static_cast<size_t>(f)].z = height_[static_cast<size_t>(f)];
   }
   // Feet in flight move with the pelvis above the chord between takeoff and landing.
-  for (int64_t f = 0; f < frames; ++f) {
+  for (int64_t f = 0; f < frames_; ++f) {
     for (int s = 0; s < 2; ++s) {
-      FootPose& foot = feet[static_cast<size_t>(f)][static_cast<size_t>(s)];
+      FootPose& foot = feet_[static_cast<size_t>(f)][static_cast<size_t>(s)];
       if (!foot.flight) continue;
       const double u = foot.flight_s;
-      const double chord = Lerp(height[static_cast<size_t>(foot.takeoff_frame)],
-                                height[static_cast<size_t>(foot.landing_frame)], u);
+      const double chord = Lerp(height_[static_cast<size_t>(foot.takeoff_frame)],
+                                height_[static_cast<size_t>(foot.landing_frame)], u);
       foot.ankle = Lerp(foot.flight_from, foot.flight_to, Smooth((u - 0.15) / 0.7)) +
                    Vec3{0, 0,
-                        std::max(0.0, height[static_cast<size_t>(f)] - chord) +
+                        std::max(0.0, height_[static_cast<size_t>(f)] - chord) +
                             foot.tuck * std::sin(kPi * u)};
       foot.pitch = -0.3 * std::sin(kPi * u);
     }
   }
+}
 
-  // Pass 5: upper body and the pose solver.
-  Motion& motion = result.motion;
-  motion.fps = fps;
-  motion.poses.resize(static_cast<size_t>(frames) * kNumJoints * 3);
-  motion.trans.resize(static_cast<size_t>(frames) * 3);
-  for (int64_t f = 0; f < frames; ++f) {
-    const auto fi = static_cast<size_t>(f);
-    const double t = static_cast<double>(f) * dt;
-    const BaseFrame& b = base[fi];
-    const OverlayFrame& o = over[fi];
-    const double gait = gait_amount[fi];
-    const double wave = std::sin(2 * kPi * (gait_phase_at[fi] - 0.06));
-    PoseTargets targets;
-    targets.pelvis = pelvis[fi];
-    targets.facing = facing[fi];
-    targets.pelvis_angles = pelvis_angles[fi];
-    const double breathing = 0.012 * std::sin(2 * kPi * 0.25 * t);
-    Vec3 spine = b.spine + o.spine +
-                 Vec3{style.posture_lean + breathing + 0.015 * spine_noise(t),
-                      -1.1 * pelvis_angles[fi].y, 0};
-    // Raised arms are balanced by a small lean away (jointly performed, not pasted).
+void ClipSynthesizer::SolvePoses(Synthesis* result) const {
+  Motion& motion = result->motion;
+  motion.fps = fps_;
+  motion.poses.resize(static_cast<size_t>(frames_) * kNumJoints * 3);
+  motion.trans.resize(static_cast<size_t>(frames_) * 3);
+  for (int64_t f = 0; f < frames_; ++f) {
+    PoseTargets targets = TrunkTargets(f);
+    const UpperBodyFrame chest = ComputeUpperBody(skeleton_, targets);
     for (int s = 0; s < 2; ++s) {
-      const ArmGoal& g = o.arms[s];
-      if (g.weight > 0 && g.offset.y > 0.1) spine.z += (s == kRight ? -1 : 1) * 0.04 * g.weight;
+      PlaceHand(f, s, chest, &targets);
+      PlaceFoot(f, s, &targets);
     }
-    const Vec3 head = b.head + o.head +
-                      Vec3{0.03 * head_noise_x(t),
-                           0.05 * head_noise_y(t) - 0.3 * (spine.y + pelvis_angles[fi].y), 0};
-    targets.spine = {0.3 * spine, 0.3 * spine, 0.4 * spine};
-    targets.neck = 0.4 * head;
-    targets.head = 0.6 * head;
-    for (int s = 0; s < 2; ++s) {
-      targets.hands[static_cast<size_t>(s)].collar_raise = o.arms[s].weight * o.arms[s].collar;
-    }
-    const UpperBodyFrame chest = ComputeUpperBody(skeleton, targets);
-    const Vec3 world_down{0, 0, -1};
-    for (int s = 0; s < 2; ++s) {
-      const double mirror = SideSign(s);
-      const auto to_world = [&](const Vec3& v) {
-        return chest.chest * Vec3{mirror * v.x, v.y, v.z};
-      };
-      // Default arm of the base action with its gait swing (reduced when the other arm is busy).
-      ArmPlacement placement = DefaultArm(b.arm_style, b.arm_param, style.arm_hang_out);
-      if (b.arm_fade < 1) {
-        const ArmPlacement previous =
-            DefaultArm(b.previous_arm_style, b.previous_arm_param, style.arm_hang_out);
-        placement.offset = ArcBlend(previous.offset, placement.offset, b.arm_fade);
-        placement.pole = Lerp(previous.pole, placement.pole, b.arm_fade);
-        placement.gravity = b.arm_fade < 0.5 ? previous.gravity : placement.gravity;
-      }
-      const double other_busy = o.arms[1 - s].weight;
-      const double swing = b.arm_swing * style.arm_swing * gait * (1 - 0.4 * other_busy) *
-                           (s == kLeft ? wave : -wave);
-      placement.offset.z += (b.arm_style == ArmStyle::kRun ? 0.15 : 0.10) * swing;
-      placement.offset.y += 0.02 * std::abs(swing);
-      Vec3 wrist_offset = to_world(placement.offset);
-      if (placement.gravity) {
-        // A relaxed arm hangs towards the floor, not along a bent-over chest.
-        const Quat tilt = MatrixToQuat(RotationBetween(chest.chest * Vec3{0, -1, 0}, world_down));
-        wrist_offset = QuatToMatrix(Slerp(Quat{}, tilt, 0.8)) * wrist_offset;
-      }
-      Vec3 pole = to_world(placement.pole);
-      const ArmGoal& goal = o.arms[s];
-      if (goal.weight > 0) {
-        wrist_offset = ArcBlend(wrist_offset, to_world(goal.offset), goal.weight);
-        pole = Lerp(pole, to_world(goal.pole), goal.weight);
-      }
-      // Hands never come closer than 20 cm to their shoulder (the elbow would fold past its range).
-      if (Norm(wrist_offset) < 0.2)
-        wrist_offset = (0.2 / std::max(1e-9, Norm(wrist_offset))) * wrist_offset;
-      HandTarget& hand = targets.hands[static_cast<size_t>(s)];
-      hand.wrist = chest.shoulders[static_cast<size_t>(s)] + wrist_offset;
-      hand.elbow_pole = pole;
-      hand.wrist_angles = goal.weight * goal.wrist;
-      // Feet.
-      const FootPose& foot = feet[fi][static_cast<size_t>(s)];
-      FootTarget& target = targets.feet[static_cast<size_t>(s)];
-      target.ankle = foot.ankle;
-      if (!foot.bears_weight || foot.flight) {
-        // A swinging foot bends its knee rather than stretching: keep its target within reach.
-        const Vec3 hip = HipPosition(skeleton, targets.pelvis,
-                                     PelvisOrientation(targets.facing, targets.pelvis_angles), s);
-        const Vec3 reach = target.ankle - hip;
-        const double limit = kReachMargin * leg[s];
-        if (Norm(reach) > limit) target.ankle = hip + (limit / Norm(reach)) * reach;
-      }
-      target.toe_dir = ToeDirection(foot.yaw, foot.pitch);
-      // Knees point over the toes (the hip, not the ankle, takes the twist of a turning body); a
-      // kneeling knee points down.
-      target.knee_pole = Lerp(0.3 * Forward(facing[fi]) + 0.7 * Forward(foot.yaw), Vec3{0, 0, -1},
-                              0.5 * foot.knee_down);
-    }
-    const SolvedPose pose = SolvePose(skeleton, targets);
+    const SolvedPose pose = SolvePose(skeleton_, targets);
     for (int j = 0; j < kNumJoints; ++j)
       motion.SetLocalRotation(f, j, pose.local[static_cast<size_t>(j)]);
     motion.SetTranslation(f, pose.translation);
     for (double e : pose.leg_reach_error)
-      result.max_reach_error = std::max(result.max_reach_error, e);
+      result->max_reach_error = std::max(result->max_reach_error, e);
   }
+}
 
-  // Ground truth: one segment per annotated action instance.
+PoseTargets ClipSynthesizer::TrunkTargets(int64_t f) const {
+  const auto fi = static_cast<size_t>(f);
+  const double t = static_cast<double>(f) * dt_;
+  const BaseFrame& b = base_[fi];
+  const OverlayFrame& o = over_[fi];
+  PoseTargets targets;
+  targets.pelvis = pelvis_[fi];
+  targets.facing = facing_[fi];
+  targets.pelvis_angles = pelvis_angles_[fi];
+  const double breathing = 0.012 * std::sin(2 * kPi * 0.25 * t);
+  Vec3 spine = b.spine + o.spine +
+               Vec3{style_.posture_lean + breathing + 0.015 * spine_noise_(t),
+                    -1.1 * pelvis_angles_[fi].y, 0};
+  // Raised arms are balanced by a small lean away (jointly performed, not pasted).
+  for (int s = 0; s < 2; ++s) {
+    const ArmGoal& g = o.arms[s];
+    if (g.weight > 0 && g.offset.y > 0.1) spine.z += (s == kRight ? -1 : 1) * 0.04 * g.weight;
+  }
+  const Vec3 head = b.head + o.head +
+                    Vec3{0.03 * head_noise_x_(t),
+                         0.05 * head_noise_y_(t) - 0.3 * (spine.y + pelvis_angles_[fi].y), 0};
+  targets.spine = {0.3 * spine, 0.3 * spine, 0.4 * spine};
+  targets.neck = 0.4 * head;
+  targets.head = 0.6 * head;
+  for (int s = 0; s < 2; ++s) {
+    targets.hands[static_cast<size_t>(s)].collar_raise = o.arms[s].weight * o.arms[s].collar;
+  }
+  return targets;
+}
+
+void ClipSynthesizer::PlaceHand(int64_t f, int s, const UpperBodyFrame& chest,
+                                PoseTargets* targets) const {
+  const auto fi = static_cast<size_t>(f);
+  const BaseFrame& b = base_[fi];
+  const OverlayFrame& o = over_[fi];
+  const double gait = gait_amount_[fi];
+  const double wave = std::sin(2 * kPi * (gait_phase_at_[fi] - 0.06));
+  const Vec3 world_down{0, 0, -1};
+  const double mirror = SideSign(s);
+  const auto to_world = [&](const Vec3& v) { return chest.chest * Vec3{mirror * v.x, v.y, v.z}; };
+  // Default arm of the base action with its gait swing (reduced when the other arm is busy).
+  ArmPlacement placement = DefaultArm(b.arm_style, b.arm_param, style_.arm_hang_out);
+  if (b.arm_fade < 1) {
+    const ArmPlacement previous =
+        DefaultArm(b.previous_arm_style, b.previous_arm_param, style_.arm_hang_out);
+    placement.offset = ArcBlend(previous.offset, placement.offset, b.arm_fade);
+    placement.pole = Lerp(previous.pole, placement.pole, b.arm_fade);
+    placement.gravity = b.arm_fade < 0.5 ? previous.gravity : placement.gravity;
+  }
+  const double other_busy = o.arms[1 - s].weight;
+  const double swing =
+      b.arm_swing * style_.arm_swing * gait * (1 - 0.4 * other_busy) * (s == kLeft ? wave : -wave);
+  placement.offset.z += (b.arm_style == ArmStyle::kRun ? 0.15 : 0.10) * swing;
+  placement.offset.y += 0.02 * std::abs(swing);
+  Vec3 wrist_offset = to_world(placement.offset);
+  if (placement.gravity) {
+    // A relaxed arm hangs towards the floor, not along a bent-over chest.
+    const Quat tilt = MatrixToQuat(RotationBetween(chest.chest * Vec3{0, -1, 0}, world_down));
+    wrist_offset = QuatToMatrix(Slerp(Quat{}, tilt, 0.8)) * wrist_offset;
+  }
+  Vec3 pole = to_world(placement.pole);
+  const ArmGoal& goal = o.arms[s];
+  if (goal.weight > 0) {
+    wrist_offset = ArcBlend(wrist_offset, to_world(goal.offset), goal.weight);
+    pole = Lerp(pole, to_world(goal.pole), goal.weight);
+  }
+  // Hands never come closer than 20 cm to their shoulder (the elbow would fold past its range).
+  if (Norm(wrist_offset) < 0.2)
+    wrist_offset = (0.2 / std::max(1e-9, Norm(wrist_offset))) * wrist_offset;
+  HandTarget& hand = targets->hands[static_cast<size_t>(s)];
+  hand.wrist = chest.shoulders[static_cast<size_t>(s)] + wrist_offset;
+  hand.elbow_pole = pole;
+  hand.wrist_angles = goal.weight * goal.wrist;
+}
+
+void ClipSynthesizer::PlaceFoot(int64_t f, int s, PoseTargets* targets) const {
+  const auto fi = static_cast<size_t>(f);
+  const FootPose& foot = feet_[fi][static_cast<size_t>(s)];
+  FootTarget& target = targets->feet[static_cast<size_t>(s)];
+  target.ankle = foot.ankle;
+  if (!foot.bears_weight || foot.flight) {
+    // A swinging foot bends its knee rather than stretching: keep its target within reach.
+    const Vec3 hip = HipPosition(skeleton_, targets->pelvis,
+                                 PelvisOrientation(targets->facing, targets->pelvis_angles), s);
+    const Vec3 reach = target.ankle - hip;
+    const double limit = kReachMargin * leg_[s];
+    if (Norm(reach) > limit) target.ankle = hip + (limit / Norm(reach)) * reach;
+  }
+  target.toe_dir = ToeDirection(foot.yaw, foot.pitch);
+  // Knees point over the toes (the hip, not the ankle, takes the twist of a turning body); a
+  // kneeling knee points down.
+  target.knee_pole = Lerp(0.3 * Forward(facing_[fi]) + 0.7 * Forward(foot.yaw), Vec3{0, 0, -1},
+                          0.5 * foot.knee_down);
+}
+
+void ClipSynthesizer::AddSegments(Synthesis* result) const {
   const auto add_segment = [&](const ActionInstance& a) {
     if (!a.annotated) return;
     Segment seg;
     seg.start_frame =
-        static_cast<int32_t>(std::clamp<int64_t>(std::llround(a.start * fps), 0, frames - 1));
+        static_cast<int32_t>(std::clamp<int64_t>(std::llround(a.start * fps_), 0, frames_ - 1));
     seg.end_frame = static_cast<int32_t>(
-        std::clamp<int64_t>(std::llround(a.end * fps), seg.start_frame + 1, frames));
+        std::clamp<int64_t>(std::llround(a.end * fps_), seg.start_frame + 1, frames_));
     seg.text = a.label;
     seg.parts = PartsOf(a.id, a.side);
-    result.segments.push_back(seg);
+    result->segments.push_back(seg);
   };
-  for (const ActionInstance& a : script.base) add_segment(a);
-  for (const ActionInstance& a : script.overlays) add_segment(a);
-  return result;
+  for (const ActionInstance& a : script_.base) add_segment(a);
+  for (const ActionInstance& a : script_.overlays) add_segment(a);
+}
+
+}  // namespace
+
+Synthesis Synthesize(const ClipScript& script, const Skeleton& skeleton) {
+  return ClipSynthesizer(script, skeleton).Run();
 }
 
 }  // namespace motionpipe::corpus
