@@ -160,363 +160,458 @@ struct Context {
   double foot_length;
 };
 
+// What an action's base layer reads at one instant: the instance, the actor and the derived
+// scales every family uses.
+struct BaseInput {
+  const ActionInstance& a;
+  const Context& ctx;
+  const ActorStyle& style;
+  double tau;       // seconds since the action started
+  double D;         // its duration
+  double v_scale;   // its speed times the actor's
+  double amp;       // its amplitude times the actor's, clamped
+  double H0;        // standing pelvis height
+  double ramp;      // 0 -> 1 -> 0 over 0.6 s at either end
+  int side, other;  // the side the action names and the opposite one
+};
+
+// ---- Locomotion: the path moves, the feet follow a gait or step to keep up.
+
+void Walk(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double v = std::clamp((in.a.id == A::kWalk ? 1.15 : 0.95) * in.v_scale, 0.5, 1.9);
+  f.speed_forward = v * in.ramp;
+  f.gait = true;
+  f.duty = 0.62;
+  f.cycle = std::clamp(0.62 / (v * f.duty), 0.85, 1.3);
+  f.clearance = 0.08;
+  f.arm_swing = 1;
+  f.height = in.H0 - 0.01;
+  if (in.a.id == A::kWalkCircle) {
+    const double radius = 0.9 + 0.8 * in.amp;
+    f.facing_rate = (in.a.turn_left ? 1 : -1) * f.speed_forward / radius;
+  } else {
+    f.facing_rate = 0.05 * in.a.angle / kPi * in.ramp;  // a gently drifting heading
+  }
+}
+
+void JogOrRun(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const bool jog = in.a.id == A::kJog;
+  const double v =
+      jog ? std::clamp(2.3 * in.v_scale, 1.5, 3.2) : std::clamp(3.3 * in.v_scale, 2.4, 4.3);
+  f.speed_forward = v * in.ramp;
+  f.gait = true;
+  f.duty = jog ? 0.40 : 0.33;
+  f.cycle = std::clamp(0.62 / (v * f.duty), jog ? 0.6 : 0.55, jog ? 0.85 : 0.75);
+  f.clearance = jog ? 0.11 : 0.16;
+  f.heel_toe = false;
+  f.arm_style = ArmStyle::kRun;
+  f.arm_swing = 1.3;
+  f.spine = {jog ? 0.08 : 0.14, 0, 0};
+  f.height = in.H0 - (jog ? 0.03 : 0.04);
+}
+
+void WalkBackwards(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double v = std::clamp(0.7 * in.v_scale, 0.4, 1.1);
+  f.speed_forward = -v * in.ramp;
+  f.gait = true;
+  f.duty = 0.62;
+  f.cycle = std::clamp(0.5 / (v * f.duty), 0.9, 1.4);
+  f.clearance = 0.08;
+  f.heel_toe = false;
+  f.arm_swing = 0.4;
+  f.spine = {0.05, 0, 0};
+}
+
+void SideStep(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double v = std::clamp(0.5 * in.v_scale, 0.3, 0.8);
+  f.speed_left = (in.a.turn_left ? 1 : -1) * v * in.ramp;
+  f.settle_threshold = 0.09;
+  f.settle_lead = 0.35;
+}
+
+void TurnInPlace(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double u = Clamp01(in.tau / in.D);
+  f.facing_rate = in.a.angle * 6 * u * (1 - u) / in.D;  // derivative of smoothstep
+  f.settle_threshold = 0.08;
+}
+
+void MarchInPlace(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  f.gait = true;
+  f.duty = 0.5;
+  f.cycle = 1.1 / in.v_scale;
+  f.clearance = 0.20 * in.amp;
+  f.heel_toe = false;
+  f.lead = 0;
+  f.arm_swing = 1.2;
+}
+
+// ---- Jumps: both feet (or one) leave the floor on a schedule of repetitions.
+
+void Jump(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double period = 1.25 / std::sqrt(in.v_scale);
+  const double local = in.tau - 0.2;
+  const int rep = static_cast<int>(std::floor(local / period));
+  if (local < 0 || rep >= std::max(1, in.a.reps)) return;
+  const double u = (local - rep * period) / period;
+  const double rep_start = in.a.start + 0.2 + rep * period;
+  const double crouch = 0.16 * in.amp, apex = 0.10 + 0.15 * in.amp;
+  const bool forward = in.a.angle > 0;
+  if (u < 0.3) {
+    f.height = in.H0 - crouch * Smooth(u / 0.3);
+    f.arm_style = ArmStyle::kJumpSwing;
+    f.arm_param = u;
+  } else if (u < 0.42) {
+    f.height = Lerp(in.H0 - crouch, in.H0 + 0.03, Smooth((u - 0.3) / 0.12));
+    f.arm_style = ArmStyle::kJumpSwing;
+    f.arm_param = u;
+  } else if (u < 0.72) {
+    const double s = (u - 0.42) / 0.30;
+    f.height = in.H0 + 0.03 + 4 * apex * s * (1 - s);
+    const double flight = 0.30 * period;
+    if (forward) f.speed_forward = 0.35 * in.amp / flight;
+    for (FootRequest& foot : f.feet) {
+      foot.mode = FootMode::kFlight;
+      foot.takeoff = rep_start + 0.42 * period;
+      foot.landing = rep_start + 0.72 * period;
+      foot.tuck = 0.10 * in.amp;
+    }
+    f.arm_style = ArmStyle::kJumpSwing;
+    f.arm_param = u;
+  } else if (u < 0.86) {
+    f.height = Lerp(in.H0 + 0.03, in.H0 - 0.13 * in.amp, Smooth((u - 0.72) / 0.14));
+    f.arm_style = ArmStyle::kJumpSwing;
+    f.arm_param = u;
+  } else {
+    f.height = Lerp(in.H0 - 0.13 * in.amp, in.H0, Smooth((u - 0.86) / 0.14));
+  }
+}
+
+void Hop(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  // `in.side` hops; the in.other leg is held up behind.
+  const double lift = Envelope(in.tau, in.D, 0.35, 0.35);
+  f.feet[in.other].mode = FootMode::kScripted;
+  f.feet[in.other].reference = ScriptReference::kPath;
+  f.feet[in.other].offset = {-0.12 * Smooth((lift - 0.3) / 0.7), 0,
+                             0.28 * lift};  // up first, then back
+  f.feet[in.other].pitch = -0.3 * lift;
+  f.offset_left = SideSign(in.side) * 0.08 * lift;
+  f.arm_style = ArmStyle::kBalance;
+  f.arm_param = lift;
+  const double period = 0.55 / std::sqrt(in.v_scale);
+  const double local = in.tau - 0.4;
+  const int rep = static_cast<int>(std::floor(local / period));
+  if (local < 0 || rep >= std::max(1, in.a.reps)) return;
+  const double u = (local - rep * period) / period;
+  const double rep_start = in.a.start + 0.4 + rep * period;
+  if (u < 0.45) {
+    f.height = in.H0 - 0.08 * std::sin(kPi * u / 0.45);
+  } else if (u < 0.9) {
+    const double s = (u - 0.45) / 0.45;
+    f.height = in.H0 + 4 * (0.05 + 0.05 * in.amp) * s * (1 - s);
+    f.speed_forward = 0.22 * in.amp / (0.45 * period);
+    f.feet[in.side].mode = FootMode::kFlight;
+    f.feet[in.side].takeoff = rep_start + 0.45 * period;
+    f.feet[in.side].landing = rep_start + 0.9 * period;
+    f.feet[in.side].tuck = 0.05;
+  }
+}
+
+void JumpingJacks(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double period = 1.0 / std::sqrt(in.v_scale);
+  const double local = in.tau - 0.2;
+  const int rep = static_cast<int>(std::floor(local / period));
+  if (local < 0 || rep >= std::max(1, in.a.reps)) return;
+  const double u = (local - rep * period) / period;
+  const bool out = u < 0.5;  // this half-cycle lands wide (arms up)
+  const double h = out ? u / 0.5 : (u - 0.5) / 0.5;
+  const double half_start = in.a.start + 0.2 + rep * period + (out ? 0 : 0.5 * period);
+  const double width_from = out ? in.style.stance_width : 0.26;
+  const double width_to = out ? 0.26 : in.style.stance_width;
+  const double arm_from = out ? 0.0 : 1.0, arm_to = out ? 1.0 : 0.0;
+  f.arm_style = ArmStyle::kJacks;
+  if (h < 0.2) {
+    f.height = in.H0 - 0.05 * std::sin(kPi * h / 0.2);
+    f.stance_width = width_from;
+    f.arm_param = arm_from;
+  } else if (h < 0.75) {
+    const double s = (h - 0.2) / 0.55;
+    f.height = in.H0 + 0.02 + 4 * (0.08 + 0.04 * in.amp) * s * (1 - s);
+    f.stance_width = s < 0.5 ? width_from : width_to;
+    f.arm_param = Lerp(arm_from, arm_to, Smooth(s));
+    for (FootRequest& foot : f.feet) {
+      foot.mode = FootMode::kFlight;
+      foot.takeoff = half_start + 0.2 * 0.5 * period;
+      foot.landing = half_start + 0.75 * 0.5 * period;
+      foot.tuck = 0.06;
+    }
+  } else {
+    f.height = in.H0 - 0.06 * std::sin(kPi * (h - 0.75) / 0.25);
+    f.stance_width = width_to;
+    f.arm_param = arm_to;
+  }
+}
+
+// ---- Posture: the pelvis lowers and the trunk bends; the feet stay planted or kneel.
+
+void SitDown(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double descent = 1.4 / std::sqrt(in.v_scale);
+  const double u = Clamp01((in.tau - 0.3) / descent);
+  f.height = Lerp(in.H0, in.ctx.seat_height, Smooth(u));
+  f.offset_forward = -in.ctx.seat_back * Smooth(u);
+  f.spine = {Keys<double>({{0, 0.0}, {0.45, 0.45}, {1, 0.10}}, u), 0, 0};
+  f.head = {-0.3 * f.spine.x, 0, 0};
+  f.arm_style = ArmStyle::kSeated;
+  f.arm_param = Smooth((u - 0.6) / 0.4);
+}
+
+void StandUp(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double rise = 1.4 / std::sqrt(in.v_scale);
+  const double u = Clamp01(in.tau / rise);
+  const double w = Smooth((u - 0.25) / 0.75);
+  f.height = Lerp(in.ctx.seat_height, in.H0, w);
+  f.offset_forward = -in.ctx.seat_back * (1 - w);
+  f.spine = {Keys<double>({{0, 0.10}, {0.3, 0.55}, {1, 0.0}}, u), 0, 0};
+  f.head = {-0.3 * f.spine.x, 0, 0};
+  f.arm_style = ArmStyle::kSeated;
+  f.arm_param = 1 - Smooth(u / 0.4);
+}
+
+void Squat(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double period = 2.2 / in.a.speed;
+  const double local = in.tau - 0.15;
+  const int rep = static_cast<int>(std::floor(local / period));
+  double depth = 0;
+  if (local >= 0 && rep < std::max(1, in.a.reps)) {
+    const double u = (local - rep * period) / period;
+    depth = Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.55, 1.0}, {1, 0.0}}, u);
+  }
+  f.height = in.H0 - 0.36 * in.amp * depth;
+  f.offset_forward = -0.10 * in.amp * depth;
+  f.spine = {0.45 * in.amp * depth, 0, 0};
+  f.head = {-0.25 * in.amp * depth, 0, 0};
+  f.arm_style = ArmStyle::kForward;
+  f.arm_param = depth;
+}
+
+void Kneel(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double down = 1.0 / std::sqrt(in.v_scale);
+  const double hold_end = in.D - down;
+  const double u =
+      in.tau < hold_end ? Clamp01(in.tau / down) : 1 - Clamp01((in.tau - hold_end) / down);
+  FootRequest& knee = f.feet[in.side];
+  knee.mode = FootMode::kScripted;
+  knee.reference = ScriptReference::kPlant;
+  // Step back with the foot lifted, then rest on the toes: ankle height = foot length *
+  // sin(pitch).
+  const double toe_height = in.ctx.foot_length * std::sin(1.15);
+  knee.offset = Keys<Vec3>({{0, {0, 0, 0}},
+                            {0.3, {-0.06, 0, 0.10}},
+                            {0.65, {-0.30, 0, 0.14}},
+                            {1, {-0.40, 0, toe_height}}},
+                           u);
+  knee.pitch = -1.15 * Smooth((u - 0.2) / 0.8);
+  knee.knee_down = Smooth(u);
+  f.height = Lerp(in.H0, 0.47, Smooth(u));
+  f.spine = {0.12 * std::sin(kPi * u), 0, 0};
+  f.arm_style = ArmStyle::kBalance;
+  f.arm_param = 0.3 * Smooth(u);
+}
+
+void Crouch(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double down = 0.8 / std::sqrt(in.v_scale);
+  const double u = Envelope(in.tau, in.D, down, down);
+  f.height = in.H0 - 0.30 * in.amp * u;
+  f.offset_forward = -0.06 * in.amp * u;
+  f.spine = {0.6 * in.amp * u, 0, 0};
+  f.head = {-0.35 * u, 0, 0};
+  f.arm_style = ArmStyle::kForward;
+  f.arm_param = 0.6 * u;
+}
+
+void Bow(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double u =
+      Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(in.tau / in.D));
+  f.spine = {0.55 * in.amp * u, 0, 0};
+  f.pelvis_angles = {0.25 * in.amp * u, 0, 0};
+  f.offset_forward = -0.06 * in.amp * u;
+  f.head = {-0.1 * u, 0, 0};
+}
+
+// ---- Balance: weight shifts over planted feet.
+
+void Sway(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double env = Envelope(in.tau, in.D, 0.5, 0.5);
+  const double s = std::sin(2 * kPi * 0.33 * in.v_scale * in.tau);
+  f.offset_left = 0.07 * in.amp * s * env;
+  f.spine = {0, 0, 0.15 * in.amp * s * env};  // lean with the weight shift
+  f.pelvis_angles = {0, 0, -0.05 * in.amp * s * env};
+}
+
+void Tiptoe(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double env =
+      Envelope(in.tau, in.D, 0.5 / std::sqrt(in.v_scale), 0.5 / std::sqrt(in.v_scale));
+  f.heel_raise = 0.55 * in.amp * env;
+  f.height = in.H0 + 0.08 * in.amp * env;
+  f.arm_style = ArmStyle::kBalance;
+  f.arm_param = 0.3 * env;
+}
+
+// ---- One leg: the other carries the weight while this one is scripted.
+
+void KickKneeLiftOrStomp(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double shift = Envelope(in.tau, in.D, 0.35, 0.35);
+  f.offset_left = -SideSign(in.side) * 0.07 * shift;  // weight over the standing leg
+  f.arm_style = ArmStyle::kBalance;
+  f.arm_param = shift;
+  const double period = (in.a.id == A::kStomp ? 1.0 : 1.3) / std::sqrt(in.v_scale);
+  const double local = in.tau - 0.4;
+  const int rep = static_cast<int>(std::floor(local / period));
+  if (local < 0 || rep >= std::max(1, in.a.reps)) return;
+  const double u = (local - rep * period) / period;
+  FootRequest& foot = f.feet[in.side];
+  foot.mode = FootMode::kScripted;
+  foot.reference = ScriptReference::kPlant;
+  const double reach = std::clamp(in.amp, 0.6, 1.2);
+  if (in.a.id == A::kKick) {
+    foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
+                              {0.1, {0.0, 0, 0.07}},
+                              {0.25, {0.12, 0, 0.22}},
+                              {0.45, {0.42 * reach, 0, 0.48 * reach}},
+                              {0.6, {0.15, 0, 0.22}},
+                              {0.85, {0.0, 0, 0.02}},
+                              {1, {0, 0, 0}}},
+                             u);
+    foot.pitch = -0.45 * Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.85, 0.0}}, u);
+    f.spine = {-0.15 * Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.8, 0.0}}, u), 0, 0};
+  } else if (in.a.id == A::kKneeLift) {
+    foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
+                              {0.12, {0.0, 0, 0.08}},
+                              {0.35, {0.15, 0, 0.38 * reach}},
+                              {0.6, {0.15, 0, 0.38 * reach}},
+                              {0.9, {0.0, 0, 0.06}},
+                              {1, {0, 0, 0}}},
+                             u);
+    foot.pitch = -0.3 * Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, u);
+  } else {
+    foot.offset = Keys<Vec3>(
+        {{0, {0, 0, 0}}, {0.55, {0.04, 0, 0.24 * reach}}, {0.65, {0.02, 0, 0.0}}, {1, {0, 0, 0}}},
+        u);
+  }
+}
+
+void StretchLeg(const BaseInput& in, BaseFrame* frame) {
+  BaseFrame& f = *frame;
+  const double out_time = 0.6 / std::sqrt(in.v_scale);
+  const double hold = Envelope(in.tau, in.D, out_time, out_time);
+  FootRequest& foot = f.feet[in.side];
+  foot.mode = FootMode::kScripted;
+  foot.reference = ScriptReference::kPlant;
+  const double reach = 0.40 * std::clamp(in.amp, 0.7, 1.2);
+  // The foot rises, travels sideways and is set down; the way back mirrors it.
+  const double lift = std::sin(kPi * Clamp01(in.tau / out_time)) +
+                      std::sin(kPi * Clamp01((in.tau - (in.D - out_time)) / out_time));
+  const double travel =
+      Smooth((in.tau - 0.15 * out_time) / (0.7 * out_time)) *
+      (1 - Smooth((in.tau - (in.D - out_time) - 0.15 * out_time) / (0.7 * out_time)));
+  foot.offset = {0, SideSign(in.side) * reach * travel, 0.09 * lift};
+  f.offset_left = -SideSign(in.side) * 0.10 * hold;  // over the bending leg
+  f.height = in.H0 - 0.14 * hold * std::clamp(in.amp, 0.7, 1.2);
+  f.spine = {0.1 * hold, 0, -SideSign(in.side) * 0.05 * hold};
+  f.arm_style = ArmStyle::kBalance;
+  f.arm_param = 0.5 * hold;
+}
+
+using BaseFunction = void (*)(const BaseInput& in, BaseFrame* frame);
+
+// The table of base actions: each action's function (none for kStand and the overlay-only ones,
+// whose base layer is the standing default).
+BaseFunction BaseFunctionOf(ActionId id) {
+  switch (id) {
+    case A::kWalk:
+    case A::kWalkCircle:
+      return Walk;
+    case A::kJog:
+    case A::kRun:
+      return JogOrRun;
+    case A::kWalkBackwards:
+      return WalkBackwards;
+    case A::kSideStep:
+      return SideStep;
+    case A::kTurnInPlace:
+      return TurnInPlace;
+    case A::kJump:
+      return Jump;
+    case A::kHop:
+      return Hop;
+    case A::kMarchInPlace:
+      return MarchInPlace;
+    case A::kSitDown:
+      return SitDown;
+    case A::kStandUp:
+      return StandUp;
+    case A::kSquat:
+      return Squat;
+    case A::kKneel:
+      return Kneel;
+    case A::kCrouch:
+      return Crouch;
+    case A::kBow:
+      return Bow;
+    case A::kJumpingJacks:
+      return JumpingJacks;
+    case A::kSway:
+      return Sway;
+    case A::kTiptoe:
+      return Tiptoe;
+    case A::kKick:
+    case A::kKneeLift:
+    case A::kStomp:
+      return KickKneeLiftOrStomp;
+    case A::kStretchLeg:
+      return StretchLeg;
+    default:
+      return nullptr;
+  }
+}
+
 BaseFrame EvaluateBase(const ActionInstance& a, double tau, const Context& ctx) {
   const ActorStyle& style = *ctx.style;
   const double D = a.duration();
-  const double v_scale = a.speed * style.speed_scale;
-  const double amp = std::clamp(a.amplitude * style.amplitude_scale, 0.5, 1.3);
   const double H0 = ctx.standing_height;
-  const double ramp = Envelope(tau, D, 0.6, 0.6);
+  const int side = SideIndex(a.side);
+  const BaseInput in{a,
+                     ctx,
+                     style,
+                     tau,
+                     D,
+                     a.speed * style.speed_scale,
+                     std::clamp(a.amplitude * style.amplitude_scale, 0.5, 1.3),
+                     H0,
+                     Envelope(tau, D, 0.6, 0.6),
+                     side,
+                     1 - side};
   BaseFrame f;
   f.height = H0;
   f.stance_width = style.stance_width;
-  const int side = SideIndex(a.side);
-  const int other = 1 - side;
-  const double len_foot_kneel = ctx.foot_length;
-  switch (a.id) {
-    case A::kStand:
-      break;
-    case A::kWalk:
-    case A::kWalkCircle: {
-      const double v = std::clamp((a.id == A::kWalk ? 1.15 : 0.95) * v_scale, 0.5, 1.9);
-      f.speed_forward = v * ramp;
-      f.gait = true;
-      f.duty = 0.62;
-      f.cycle = std::clamp(0.62 / (v * f.duty), 0.85, 1.3);
-      f.clearance = 0.08;
-      f.arm_swing = 1;
-      f.height = H0 - 0.01;
-      if (a.id == A::kWalkCircle) {
-        const double radius = 0.9 + 0.8 * amp;
-        f.facing_rate = (a.turn_left ? 1 : -1) * f.speed_forward / radius;
-      } else {
-        f.facing_rate = 0.05 * a.angle / kPi * ramp;  // a gently drifting heading
-      }
-      break;
-    }
-    case A::kJog:
-    case A::kRun: {
-      const bool jog = a.id == A::kJog;
-      const double v =
-          jog ? std::clamp(2.3 * v_scale, 1.5, 3.2) : std::clamp(3.3 * v_scale, 2.4, 4.3);
-      f.speed_forward = v * ramp;
-      f.gait = true;
-      f.duty = jog ? 0.40 : 0.33;
-      f.cycle = std::clamp(0.62 / (v * f.duty), jog ? 0.6 : 0.55, jog ? 0.85 : 0.75);
-      f.clearance = jog ? 0.11 : 0.16;
-      f.heel_toe = false;
-      f.arm_style = ArmStyle::kRun;
-      f.arm_swing = 1.3;
-      f.spine = {jog ? 0.08 : 0.14, 0, 0};
-      f.height = H0 - (jog ? 0.03 : 0.04);
-      break;
-    }
-    case A::kWalkBackwards: {
-      const double v = std::clamp(0.7 * v_scale, 0.4, 1.1);
-      f.speed_forward = -v * ramp;
-      f.gait = true;
-      f.duty = 0.62;
-      f.cycle = std::clamp(0.5 / (v * f.duty), 0.9, 1.4);
-      f.clearance = 0.08;
-      f.heel_toe = false;
-      f.arm_swing = 0.4;
-      f.spine = {0.05, 0, 0};
-      break;
-    }
-    case A::kSideStep: {
-      const double v = std::clamp(0.5 * v_scale, 0.3, 0.8);
-      f.speed_left = (a.turn_left ? 1 : -1) * v * ramp;
-      f.settle_threshold = 0.09;
-      f.settle_lead = 0.35;
-      break;
-    }
-    case A::kTurnInPlace: {
-      const double u = Clamp01(tau / D);
-      f.facing_rate = a.angle * 6 * u * (1 - u) / D;  // derivative of smoothstep
-      f.settle_threshold = 0.08;
-      break;
-    }
-    case A::kJump: {
-      const double period = 1.25 / std::sqrt(v_scale);
-      const double local = tau - 0.2;
-      const int rep = static_cast<int>(std::floor(local / period));
-      if (local < 0 || rep >= std::max(1, a.reps)) break;
-      const double u = (local - rep * period) / period;
-      const double rep_start = a.start + 0.2 + rep * period;
-      const double crouch = 0.16 * amp, apex = 0.10 + 0.15 * amp;
-      const bool forward = a.angle > 0;
-      if (u < 0.3) {
-        f.height = H0 - crouch * Smooth(u / 0.3);
-        f.arm_style = ArmStyle::kJumpSwing;
-        f.arm_param = u;
-      } else if (u < 0.42) {
-        f.height = Lerp(H0 - crouch, H0 + 0.03, Smooth((u - 0.3) / 0.12));
-        f.arm_style = ArmStyle::kJumpSwing;
-        f.arm_param = u;
-      } else if (u < 0.72) {
-        const double s = (u - 0.42) / 0.30;
-        f.height = H0 + 0.03 + 4 * apex * s * (1 - s);
-        const double flight = 0.30 * period;
-        if (forward) f.speed_forward = 0.35 * amp / flight;
-        for (FootRequest& foot : f.feet) {
-          foot.mode = FootMode::kFlight;
-          foot.takeoff = rep_start + 0.42 * period;
-          foot.landing = rep_start + 0.72 * period;
-          foot.tuck = 0.10 * amp;
-        }
-        f.arm_style = ArmStyle::kJumpSwing;
-        f.arm_param = u;
-      } else if (u < 0.86) {
-        f.height = Lerp(H0 + 0.03, H0 - 0.13 * amp, Smooth((u - 0.72) / 0.14));
-        f.arm_style = ArmStyle::kJumpSwing;
-        f.arm_param = u;
-      } else {
-        f.height = Lerp(H0 - 0.13 * amp, H0, Smooth((u - 0.86) / 0.14));
-      }
-      break;
-    }
-    case A::kHop: {
-      // `side` hops; the other leg is held up behind.
-      const double lift = Envelope(tau, D, 0.35, 0.35);
-      f.feet[other].mode = FootMode::kScripted;
-      f.feet[other].reference = ScriptReference::kPath;
-      f.feet[other].offset = {-0.12 * Smooth((lift - 0.3) / 0.7), 0,
-                              0.28 * lift};  // up first, then back
-      f.feet[other].pitch = -0.3 * lift;
-      f.offset_left = SideSign(side) * 0.08 * lift;
-      f.arm_style = ArmStyle::kBalance;
-      f.arm_param = lift;
-      const double period = 0.55 / std::sqrt(v_scale);
-      const double local = tau - 0.4;
-      const int rep = static_cast<int>(std::floor(local / period));
-      if (local < 0 || rep >= std::max(1, a.reps)) break;
-      const double u = (local - rep * period) / period;
-      const double rep_start = a.start + 0.4 + rep * period;
-      if (u < 0.45) {
-        f.height = H0 - 0.08 * std::sin(kPi * u / 0.45);
-      } else if (u < 0.9) {
-        const double s = (u - 0.45) / 0.45;
-        f.height = H0 + 4 * (0.05 + 0.05 * amp) * s * (1 - s);
-        f.speed_forward = 0.22 * amp / (0.45 * period);
-        f.feet[side].mode = FootMode::kFlight;
-        f.feet[side].takeoff = rep_start + 0.45 * period;
-        f.feet[side].landing = rep_start + 0.9 * period;
-        f.feet[side].tuck = 0.05;
-      }
-      break;
-    }
-    case A::kMarchInPlace:
-      f.gait = true;
-      f.duty = 0.5;
-      f.cycle = 1.1 / v_scale;
-      f.clearance = 0.20 * amp;
-      f.heel_toe = false;
-      f.lead = 0;
-      f.arm_swing = 1.2;
-      break;
-    case A::kSitDown: {
-      const double descent = 1.4 / std::sqrt(v_scale);
-      const double u = Clamp01((tau - 0.3) / descent);
-      f.height = Lerp(H0, ctx.seat_height, Smooth(u));
-      f.offset_forward = -ctx.seat_back * Smooth(u);
-      f.spine = {Keys<double>({{0, 0.0}, {0.45, 0.45}, {1, 0.10}}, u), 0, 0};
-      f.head = {-0.3 * f.spine.x, 0, 0};
-      f.arm_style = ArmStyle::kSeated;
-      f.arm_param = Smooth((u - 0.6) / 0.4);
-      break;
-    }
-    case A::kStandUp: {
-      const double rise = 1.4 / std::sqrt(v_scale);
-      const double u = Clamp01(tau / rise);
-      const double w = Smooth((u - 0.25) / 0.75);
-      f.height = Lerp(ctx.seat_height, H0, w);
-      f.offset_forward = -ctx.seat_back * (1 - w);
-      f.spine = {Keys<double>({{0, 0.10}, {0.3, 0.55}, {1, 0.0}}, u), 0, 0};
-      f.head = {-0.3 * f.spine.x, 0, 0};
-      f.arm_style = ArmStyle::kSeated;
-      f.arm_param = 1 - Smooth(u / 0.4);
-      break;
-    }
-    case A::kSquat: {
-      const double period = 2.2 / a.speed;
-      const double local = tau - 0.15;
-      const int rep = static_cast<int>(std::floor(local / period));
-      double depth = 0;
-      if (local >= 0 && rep < std::max(1, a.reps)) {
-        const double u = (local - rep * period) / period;
-        depth = Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.55, 1.0}, {1, 0.0}}, u);
-      }
-      f.height = H0 - 0.36 * amp * depth;
-      f.offset_forward = -0.10 * amp * depth;
-      f.spine = {0.45 * amp * depth, 0, 0};
-      f.head = {-0.25 * amp * depth, 0, 0};
-      f.arm_style = ArmStyle::kForward;
-      f.arm_param = depth;
-      break;
-    }
-    case A::kKneel: {
-      const double down = 1.0 / std::sqrt(v_scale);
-      const double hold_end = D - down;
-      const double u = tau < hold_end ? Clamp01(tau / down) : 1 - Clamp01((tau - hold_end) / down);
-      FootRequest& knee = f.feet[side];
-      knee.mode = FootMode::kScripted;
-      knee.reference = ScriptReference::kPlant;
-      // Step back with the foot lifted, then rest on the toes: ankle height = foot length *
-      // sin(pitch).
-      const double toe_height = len_foot_kneel * std::sin(1.15);
-      knee.offset = Keys<Vec3>({{0, {0, 0, 0}},
-                                {0.3, {-0.06, 0, 0.10}},
-                                {0.65, {-0.30, 0, 0.14}},
-                                {1, {-0.40, 0, toe_height}}},
-                               u);
-      knee.pitch = -1.15 * Smooth((u - 0.2) / 0.8);
-      knee.knee_down = Smooth(u);
-      f.height = Lerp(H0, 0.47, Smooth(u));
-      f.spine = {0.12 * std::sin(kPi * u), 0, 0};
-      f.arm_style = ArmStyle::kBalance;
-      f.arm_param = 0.3 * Smooth(u);
-      break;
-    }
-    case A::kCrouch: {
-      const double down = 0.8 / std::sqrt(v_scale);
-      const double u = Envelope(tau, D, down, down);
-      f.height = H0 - 0.30 * amp * u;
-      f.offset_forward = -0.06 * amp * u;
-      f.spine = {0.6 * amp * u, 0, 0};
-      f.head = {-0.35 * u, 0, 0};
-      f.arm_style = ArmStyle::kForward;
-      f.arm_param = 0.6 * u;
-      break;
-    }
-    case A::kBow: {
-      const double u =
-          Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(tau / D));
-      f.spine = {0.55 * amp * u, 0, 0};
-      f.pelvis_angles = {0.25 * amp * u, 0, 0};
-      f.offset_forward = -0.06 * amp * u;
-      f.head = {-0.1 * u, 0, 0};
-      break;
-    }
-    case A::kJumpingJacks: {
-      const double period = 1.0 / std::sqrt(v_scale);
-      const double local = tau - 0.2;
-      const int rep = static_cast<int>(std::floor(local / period));
-      if (local < 0 || rep >= std::max(1, a.reps)) break;
-      const double u = (local - rep * period) / period;
-      const bool out = u < 0.5;  // this half-cycle lands wide (arms up)
-      const double h = out ? u / 0.5 : (u - 0.5) / 0.5;
-      const double half_start = a.start + 0.2 + rep * period + (out ? 0 : 0.5 * period);
-      const double width_from = out ? style.stance_width : 0.26;
-      const double width_to = out ? 0.26 : style.stance_width;
-      const double arm_from = out ? 0.0 : 1.0, arm_to = out ? 1.0 : 0.0;
-      f.arm_style = ArmStyle::kJacks;
-      if (h < 0.2) {
-        f.height = H0 - 0.05 * std::sin(kPi * h / 0.2);
-        f.stance_width = width_from;
-        f.arm_param = arm_from;
-      } else if (h < 0.75) {
-        const double s = (h - 0.2) / 0.55;
-        f.height = H0 + 0.02 + 4 * (0.08 + 0.04 * amp) * s * (1 - s);
-        f.stance_width = s < 0.5 ? width_from : width_to;
-        f.arm_param = Lerp(arm_from, arm_to, Smooth(s));
-        for (FootRequest& foot : f.feet) {
-          foot.mode = FootMode::kFlight;
-          foot.takeoff = half_start + 0.2 * 0.5 * period;
-          foot.landing = half_start + 0.75 * 0.5 * period;
-          foot.tuck = 0.06;
-        }
-      } else {
-        f.height = H0 - 0.06 * std::sin(kPi * (h - 0.75) / 0.25);
-        f.stance_width = width_to;
-        f.arm_param = arm_to;
-      }
-      break;
-    }
-    case A::kSway: {
-      const double env = Envelope(tau, D, 0.5, 0.5);
-      const double s = std::sin(2 * kPi * 0.33 * v_scale * tau);
-      f.offset_left = 0.07 * amp * s * env;
-      f.spine = {0, 0, 0.15 * amp * s * env};  // lean with the weight shift
-      f.pelvis_angles = {0, 0, -0.05 * amp * s * env};
-      break;
-    }
-    case A::kTiptoe: {
-      const double env = Envelope(tau, D, 0.5 / std::sqrt(v_scale), 0.5 / std::sqrt(v_scale));
-      f.heel_raise = 0.55 * amp * env;
-      f.height = H0 + 0.08 * amp * env;
-      f.arm_style = ArmStyle::kBalance;
-      f.arm_param = 0.3 * env;
-      break;
-    }
-    case A::kKick:
-    case A::kKneeLift:
-    case A::kStomp: {
-      const double shift = Envelope(tau, D, 0.35, 0.35);
-      f.offset_left = -SideSign(side) * 0.07 * shift;  // weight over the standing leg
-      f.arm_style = ArmStyle::kBalance;
-      f.arm_param = shift;
-      const double period = (a.id == A::kStomp ? 1.0 : 1.3) / std::sqrt(v_scale);
-      const double local = tau - 0.4;
-      const int rep = static_cast<int>(std::floor(local / period));
-      if (local < 0 || rep >= std::max(1, a.reps)) break;
-      const double u = (local - rep * period) / period;
-      FootRequest& foot = f.feet[side];
-      foot.mode = FootMode::kScripted;
-      foot.reference = ScriptReference::kPlant;
-      const double reach = std::clamp(amp, 0.6, 1.2);
-      if (a.id == A::kKick) {
-        foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
-                                  {0.1, {0.0, 0, 0.07}},
-                                  {0.25, {0.12, 0, 0.22}},
-                                  {0.45, {0.42 * reach, 0, 0.48 * reach}},
-                                  {0.6, {0.15, 0, 0.22}},
-                                  {0.85, {0.0, 0, 0.02}},
-                                  {1, {0, 0, 0}}},
-                                 u);
-        foot.pitch = -0.45 * Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.85, 0.0}}, u);
-        f.spine = {-0.15 * Keys<double>({{0, 0.0}, {0.45, 1.0}, {0.8, 0.0}}, u), 0, 0};
-      } else if (a.id == A::kKneeLift) {
-        foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
-                                  {0.12, {0.0, 0, 0.08}},
-                                  {0.35, {0.15, 0, 0.38 * reach}},
-                                  {0.6, {0.15, 0, 0.38 * reach}},
-                                  {0.9, {0.0, 0, 0.06}},
-                                  {1, {0, 0, 0}}},
-                                 u);
-        foot.pitch = -0.3 * Keys<double>({{0, 0.0}, {0.35, 1.0}, {0.6, 1.0}, {1, 0.0}}, u);
-      } else {
-        foot.offset = Keys<Vec3>({{0, {0, 0, 0}},
-                                  {0.55, {0.04, 0, 0.24 * reach}},
-                                  {0.65, {0.02, 0, 0.0}},
-                                  {1, {0, 0, 0}}},
-                                 u);
-      }
-      break;
-    }
-    case A::kStretchLeg: {
-      const double out_time = 0.6 / std::sqrt(v_scale);
-      const double hold = Envelope(tau, D, out_time, out_time);
-      FootRequest& foot = f.feet[side];
-      foot.mode = FootMode::kScripted;
-      foot.reference = ScriptReference::kPlant;
-      const double reach = 0.40 * std::clamp(amp, 0.7, 1.2);
-      // The foot rises, travels sideways and is set down; the way back mirrors it.
-      const double lift = std::sin(kPi * Clamp01(tau / out_time)) +
-                          std::sin(kPi * Clamp01((tau - (D - out_time)) / out_time));
-      const double travel =
-          Smooth((tau - 0.15 * out_time) / (0.7 * out_time)) *
-          (1 - Smooth((tau - (D - out_time) - 0.15 * out_time) / (0.7 * out_time)));
-      foot.offset = {0, SideSign(side) * reach * travel, 0.09 * lift};
-      f.offset_left = -SideSign(side) * 0.10 * hold;  // over the bending leg
-      f.height = H0 - 0.14 * hold * std::clamp(amp, 0.7, 1.2);
-      f.spine = {0.1 * hold, 0, -SideSign(side) * 0.05 * hold};
-      f.arm_style = ArmStyle::kBalance;
-      f.arm_param = 0.5 * hold;
-      break;
-    }
-    default:
-      break;
-  }
+  if (const BaseFunction evaluate = BaseFunctionOf(a.id)) evaluate(in, &f);
   return f;
 }
 
