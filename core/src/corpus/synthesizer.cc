@@ -641,201 +641,272 @@ void AddArm(OverlayFrame* out, int side, double weight, const Vec3& offset, cons
   g = {weight, offset, pole, collar, wrist};
 }
 
+// What an overlay action reads at one instant (the base actions' BaseInput for the upper body).
+struct OverlayInput {
+  const ActionInstance& a;
+  const ActorStyle& style;
+  double tau;              // seconds since the action started
+  double D;                // its duration
+  double v;                // its speed times the actor's
+  double amp;              // its amplitude times the actor's, clamped
+  double env;              // 0 -> 1 -> 0 over 0.35 s at either end (> 0 here)
+  std::vector<int> sides;  // the arms it moves
+};
+
+void Wave(const OverlayInput& in, OverlayFrame* out) {
+  const double f = in.a.reps > 0 ? in.a.reps / std::max(0.5, in.D - 0.9) : 1.8 * in.v;
+  const double swing =
+      0.10 * in.amp * std::sin(2 * kPi * f * (in.tau - 0.45)) * Smooth((in.tau - 0.3) / 0.3);
+  for (int s : in.sides) {
+    AddArm(out, s, in.env, {0.12 + swing, 0.30, 0.08}, {1, -1, 0}, 0.06, {0, 0, 0.3 * swing});
+    out->spine.z += (s == kRight ? -1 : 1) * 0.04 * in.env;
+  }
+}
+
+void RaiseArm(const OverlayInput& in, OverlayFrame* out) {
+  const double elevation = std::clamp(2.0 + 0.8 * (in.amp - 1), 1.5, 2.8);  // radians from hanging
+  const double u = Envelope(in.tau, in.D, 0.5, 0.5);
+  for (int s : in.sides) {
+    const double e = elevation * u;
+    AddArm(out, s, in.env,
+           {0.15 * std::sin(e), -0.50 * std::cos(e),
+            0.42 * std::sin(e) - 0.3 * std::sin(e) * std::sin(e) * 0.5},
+           {0.3, 0, -1}, 0.15 * u * (e > 1.6 ? 1 : 0));
+    if (in.a.side != Side::kBoth) out->spine.z += (s == kRight ? -1 : 1) * 0.05 * u;
+  }
+}
+
+void Punch(const OverlayInput& in, OverlayFrame* out) {
+  const int reps = std::max(1, in.a.reps);
+  const double period = (in.D - 0.7) / reps;
+  const Vec3 guard{-0.12, 0.05, 0.24};
+  for (size_t k = 0; k < in.sides.size(); ++k) {
+    const int s = in.sides[k];
+    double extension = 0;
+    const double local = in.tau - 0.35;
+    if (local > 0) {
+      // With both hands the punches alternate.
+      const double offset = in.sides.size() == 2 ? 0.5 * k : 0.0;
+      double u = std::fmod(local / period + offset, 1.0);
+      const int rep = static_cast<int>(local / period + offset);
+      if (rep < reps) extension = Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.45, 1.0}, {1, 0.0}}, u);
+    }
+    const Vec3 strike{-0.16, 0.05, 0.50 * std::min(1.04, in.amp)};
+    AddArm(out, s, in.env, Lerp(guard, strike, extension), {1, -1, -0.3});
+    out->spine.y += (s == kRight ? 1 : -1) * 0.10 * extension;
+  }
+  out->slow = std::max(out->slow, 0.2 * in.env);
+}
+
+void Clap(const OverlayInput& in, OverlayFrame* out) {
+  const int reps = std::max(1, in.a.reps);
+  const double f = reps / std::max(0.5, in.D - 0.7);
+  const double close = std::pow(0.5 - 0.5 * std::cos(2 * kPi * f * (in.tau - 0.35)), 2.0) *
+                       Smooth((in.tau - 0.35) / 0.2);
+  const Vec3 open{-0.10, -0.04, 0.30}, shut{-0.245, -0.05, 0.33};
+  for (int s : {kLeft, kRight}) AddArm(out, s, in.env, Lerp(open, shut, close), {1, -1, -0.4});
+}
+
+void ReachForward(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Envelope(in.tau, in.D, 0.45, 0.45);
+  for (int s : in.sides)
+    AddArm(out, s, in.env,
+           Lerp({0.04, -0.49, 0.05}, {-0.06, 0.02, 0.50 * std::min(1.04, in.amp)}, u),
+           {1, -1, -0.2});
+  out->spine.x += 0.10 * u * in.amp;
+}
+
+void ArmCircle(const OverlayInput& in, OverlayFrame* out) {
+  const int reps = std::max(1, in.a.reps);
+  const double theta = 2 * kPi * reps * Clamp01((in.tau - 0.35) / std::max(0.5, in.D - 0.7));
+  for (int s : in.sides) {
+    const double phase = in.a.side == Side::kBoth ? 0 : 0;
+    AddArm(out, s, in.env, {0.08, -0.48 * std::cos(theta + phase), 0.48 * std::sin(theta + phase)},
+           {1, 0, -1}, 0.12 * Smooth(-std::cos(theta)));
+  }
+}
+
+void Throw(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Clamp01(in.tau / in.D);
+  const Vec3 pose = Keys<Vec3>({{0, {0.04, -0.49, 0.03}},
+                                {0.35, {0.06, 0.22, -0.26}},
+                                {0.55, {-0.05, 0.20, 0.45}},
+                                {0.70, {-0.25, -0.30, 0.25}},
+                                {1, {0.04, -0.49, 0.03}}},
+                               u);
+  const double twist = Keys<double>({{0, 0.0}, {0.35, -0.35}, {0.6, 0.35}, {1, 0.0}}, u);
+  for (int s : in.sides) {
+    AddArm(out, s, in.env, pose, {1, -0.6, -0.5});
+    out->spine.y += (s == kRight ? 1 : -1) * twist * in.amp;
+  }
+}
+
+void Drink(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Envelope(in.tau, in.D, 0.6, 0.6);
+  for (int s : in.sides)
+    AddArm(out, s, in.env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.24, 0.15}, u), {1, -1, 0});
+  out->head.x -= 0.25 * Smooth((u - 0.6) / 0.4);
+  out->slow = std::max(out->slow, 0.25 * in.env);
+}
+
+void HandsOnHips(const OverlayInput& in, OverlayFrame* out) {
+  for (int s : {kLeft, kRight}) AddArm(out, s, in.env, {-0.10, -0.30, -0.03}, {1, 0, -0.5});
+}
+
+void CrossArms(const OverlayInput& in, OverlayFrame* out) {
+  AddArm(out, kLeft, in.env, {-0.41, -0.15, 0.22}, {1, -1, 0});
+  AddArm(out, kRight, in.env, {-0.40, -0.11, 0.19}, {1, -1, 0});
+}
+
+void Point(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Envelope(in.tau, in.D, 0.4, 0.4);
+  for (int s : in.sides)
+    AddArm(out, s, in.env, Lerp({0.04, -0.49, 0.03}, {-0.02, 0.05, 0.50}, u), {1, -1, -0.2});
+}
+
+void Salute(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Envelope(in.tau, in.D, 0.35, 0.35);
+  for (int s : in.sides)
+    AddArm(out, s, in.env, Lerp({0.04, -0.49, 0.03}, {-0.21, 0.33, 0.12}, u), {1, 0, 0});
+}
+
+void ScratchHead(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Envelope(in.tau, in.D, 0.4, 0.4);
+  const double rub = 0.03 * std::sin(2 * kPi * 3.0 * in.tau) * u;
+  for (int s : in.sides)
+    AddArm(out, s, in.env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.42, rub}, u), {1, 0.3, 0});
+  out->head.x += 0.1 * u;
+}
+
+void Shrug(const OverlayInput& in, OverlayFrame* out) {
+  const double u =
+      Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(in.tau / in.D));
+  for (int s : {kLeft, kRight}) {
+    AddArm(out, s, in.env, Lerp({0.04, -0.49, 0.03}, {0.10, -0.38, 0.18}, u), {0.3, 0, -1},
+           0.28 * u * in.amp);
+  }
+}
+
+void StretchArms(const OverlayInput& in, OverlayFrame* out) {
+  const double u = Envelope(in.tau, in.D, 0.6, 0.6);
+  for (int s : {kLeft, kRight})
+    AddArm(out, s, in.env, Lerp({0.04, -0.49, 0.03}, {0.02, 0.52, 0.02}, u), {0.3, 0, -1}, 0.2 * u);
+  out->spine.x -= 0.12 * u;
+}
+
+void BendForward(const OverlayInput& in, OverlayFrame* out) {
+  out->spine.x += 1.0 * in.amp * in.env;
+  out->head.x -= 0.3 * in.amp * in.env;
+  out->slow = std::max(out->slow, 0.35 * in.env);
+}
+
+void Lean(const OverlayInput& in, OverlayFrame* out) {
+  out->spine.z += (in.a.side == Side::kLeft ? -1 : 1) * 0.45 * in.amp * in.env;
+  out->slow = std::max(out->slow, 0.1 * in.env);
+}
+
+void Twist(const OverlayInput& in, OverlayFrame* out) {
+  const double u =
+      Keys<double>({{0, 0.0}, {0.4, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(in.tau / in.D));
+  out->spine.y += (in.a.side == Side::kLeft ? 1 : -1) * 0.7 * in.amp * u;
+  out->slow = std::max(out->slow, 0.1 * in.env);
+}
+
+void Nod(const OverlayInput& in, OverlayFrame* out) {
+  const double f = std::max(1, in.a.reps) / std::max(0.5, in.D - 0.4);
+  out->head.x += 0.30 * in.amp * std::sin(2 * kPi * f * (in.tau - 0.2)) * in.env;
+}
+
+void ShakeHead(const OverlayInput& in, OverlayFrame* out) {
+  const double f = std::max(1, in.a.reps) / std::max(0.5, in.D - 0.4);
+  out->head.y += 0.45 * in.amp * std::sin(2 * kPi * f * (in.tau - 0.2)) * in.env;
+}
+
+void LookAround(const OverlayInput& in, OverlayFrame* out) {
+  const double yaw =
+      0.9 * in.amp * std::sin(2 * kPi * 0.28 * in.v * in.tau + (in.a.turn_left ? 0 : kPi)) * in.env;
+  out->head.y += yaw;
+  out->head.x -= 0.08 * in.env;
+  out->spine.y += 0.25 * yaw;
+  out->slow = std::max(out->slow, 0.05 * in.env);
+}
+
+void LookUp(const OverlayInput& in, OverlayFrame* out) {
+  out->head.x -= 0.55 * in.amp * in.env;
+  out->spine.x -= 0.08 * in.env;
+}
+
+using OverlayFunction = void (*)(const OverlayInput& in, OverlayFrame* out);
+
+// The table of overlay actions (arms, trunk and head over the base layer).
+OverlayFunction OverlayFunctionOf(ActionId id) {
+  switch (id) {
+    case A::kWave:
+      return Wave;
+    case A::kRaiseArm:
+      return RaiseArm;
+    case A::kPunch:
+      return Punch;
+    case A::kClap:
+      return Clap;
+    case A::kReachForward:
+      return ReachForward;
+    case A::kArmCircle:
+      return ArmCircle;
+    case A::kThrow:
+      return Throw;
+    case A::kDrink:
+      return Drink;
+    case A::kHandsOnHips:
+      return HandsOnHips;
+    case A::kCrossArms:
+      return CrossArms;
+    case A::kPoint:
+      return Point;
+    case A::kSalute:
+      return Salute;
+    case A::kScratchHead:
+      return ScratchHead;
+    case A::kShrug:
+      return Shrug;
+    case A::kStretchArms:
+      return StretchArms;
+    case A::kBendForward:
+      return BendForward;
+    case A::kLean:
+      return Lean;
+    case A::kTwist:
+      return Twist;
+    case A::kNod:
+      return Nod;
+    case A::kShakeHead:
+      return ShakeHead;
+    case A::kLookAround:
+      return LookAround;
+    case A::kLookUp:
+      return LookUp;
+    default:
+      return nullptr;
+  }
+}
+
 void EvaluateOverlay(const ActionInstance& a, double tau, const ActorStyle& style,
                      OverlayFrame* out) {
   const double D = a.duration();
-  const double v = a.speed * style.speed_scale;
-  const double amp = std::clamp(a.amplitude * style.amplitude_scale, 0.5, 1.3);
   const double env = Envelope(tau, D, 0.35, 0.35);
   if (env <= 0) return;
-  std::vector<int> sides;
-  if (a.side == Side::kLeft || a.side == Side::kBoth) sides.push_back(kLeft);
-  if (a.side == Side::kRight || a.side == Side::kBoth) sides.push_back(kRight);
-  const ActionKind kind = Def(a.id).kind;
-  if (kind == ActionKind::kArm) out->slow = std::max(out->slow, 0.12 * env);
-  switch (a.id) {
-    case A::kWave: {
-      const double f = a.reps > 0 ? a.reps / std::max(0.5, D - 0.9) : 1.8 * v;
-      const double swing =
-          0.10 * amp * std::sin(2 * kPi * f * (tau - 0.45)) * Smooth((tau - 0.3) / 0.3);
-      for (int s : sides) {
-        AddArm(out, s, env, {0.12 + swing, 0.30, 0.08}, {1, -1, 0}, 0.06, {0, 0, 0.3 * swing});
-        out->spine.z += (s == kRight ? -1 : 1) * 0.04 * env;
-      }
-      break;
-    }
-    case A::kRaiseArm: {
-      const double elevation = std::clamp(2.0 + 0.8 * (amp - 1), 1.5, 2.8);  // radians from hanging
-      const double u = Envelope(tau, D, 0.5, 0.5);
-      for (int s : sides) {
-        const double e = elevation * u;
-        AddArm(out, s, env,
-               {0.15 * std::sin(e), -0.50 * std::cos(e),
-                0.42 * std::sin(e) - 0.3 * std::sin(e) * std::sin(e) * 0.5},
-               {0.3, 0, -1}, 0.15 * u * (e > 1.6 ? 1 : 0));
-        if (a.side != Side::kBoth) out->spine.z += (s == kRight ? -1 : 1) * 0.05 * u;
-      }
-      break;
-    }
-    case A::kPunch: {
-      const int reps = std::max(1, a.reps);
-      const double period = (D - 0.7) / reps;
-      const Vec3 guard{-0.12, 0.05, 0.24};
-      for (size_t k = 0; k < sides.size(); ++k) {
-        const int s = sides[k];
-        double extension = 0;
-        const double local = tau - 0.35;
-        if (local > 0) {
-          // With both hands the punches alternate.
-          const double offset = sides.size() == 2 ? 0.5 * k : 0.0;
-          double u = std::fmod(local / period + offset, 1.0);
-          const int rep = static_cast<int>(local / period + offset);
-          if (rep < reps)
-            extension = Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.45, 1.0}, {1, 0.0}}, u);
-        }
-        const Vec3 strike{-0.16, 0.05, 0.50 * std::min(1.04, amp)};
-        AddArm(out, s, env, Lerp(guard, strike, extension), {1, -1, -0.3});
-        out->spine.y += (s == kRight ? 1 : -1) * 0.10 * extension;
-      }
-      out->slow = std::max(out->slow, 0.2 * env);
-      break;
-    }
-    case A::kClap: {
-      const int reps = std::max(1, a.reps);
-      const double f = reps / std::max(0.5, D - 0.7);
-      const double close = std::pow(0.5 - 0.5 * std::cos(2 * kPi * f * (tau - 0.35)), 2.0) *
-                           Smooth((tau - 0.35) / 0.2);
-      const Vec3 open{-0.10, -0.04, 0.30}, shut{-0.245, -0.05, 0.33};
-      for (int s : {kLeft, kRight}) AddArm(out, s, env, Lerp(open, shut, close), {1, -1, -0.4});
-      break;
-    }
-    case A::kReachForward: {
-      const double u = Envelope(tau, D, 0.45, 0.45);
-      for (int s : sides)
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.05}, {-0.06, 0.02, 0.50 * std::min(1.04, amp)}, u),
-               {1, -1, -0.2});
-      out->spine.x += 0.10 * u * amp;
-      break;
-    }
-    case A::kArmCircle: {
-      const int reps = std::max(1, a.reps);
-      const double theta = 2 * kPi * reps * Clamp01((tau - 0.35) / std::max(0.5, D - 0.7));
-      for (int s : sides) {
-        const double phase = a.side == Side::kBoth ? 0 : 0;
-        AddArm(out, s, env, {0.08, -0.48 * std::cos(theta + phase), 0.48 * std::sin(theta + phase)},
-               {1, 0, -1}, 0.12 * Smooth(-std::cos(theta)));
-      }
-      break;
-    }
-    case A::kThrow: {
-      const double u = Clamp01(tau / D);
-      const Vec3 pose = Keys<Vec3>({{0, {0.04, -0.49, 0.03}},
-                                    {0.35, {0.06, 0.22, -0.26}},
-                                    {0.55, {-0.05, 0.20, 0.45}},
-                                    {0.70, {-0.25, -0.30, 0.25}},
-                                    {1, {0.04, -0.49, 0.03}}},
-                                   u);
-      const double twist = Keys<double>({{0, 0.0}, {0.35, -0.35}, {0.6, 0.35}, {1, 0.0}}, u);
-      for (int s : sides) {
-        AddArm(out, s, env, pose, {1, -0.6, -0.5});
-        out->spine.y += (s == kRight ? 1 : -1) * twist * amp;
-      }
-      break;
-    }
-    case A::kDrink: {
-      const double u = Envelope(tau, D, 0.6, 0.6);
-      for (int s : sides)
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.24, 0.15}, u), {1, -1, 0});
-      out->head.x -= 0.25 * Smooth((u - 0.6) / 0.4);
-      out->slow = std::max(out->slow, 0.25 * env);
-      break;
-    }
-    case A::kHandsOnHips: {
-      for (int s : {kLeft, kRight}) AddArm(out, s, env, {-0.10, -0.30, -0.03}, {1, 0, -0.5});
-      break;
-    }
-    case A::kCrossArms: {
-      AddArm(out, kLeft, env, {-0.41, -0.15, 0.22}, {1, -1, 0});
-      AddArm(out, kRight, env, {-0.40, -0.11, 0.19}, {1, -1, 0});
-      break;
-    }
-    case A::kPoint: {
-      const double u = Envelope(tau, D, 0.4, 0.4);
-      for (int s : sides)
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.02, 0.05, 0.50}, u), {1, -1, -0.2});
-      break;
-    }
-    case A::kSalute: {
-      const double u = Envelope(tau, D, 0.35, 0.35);
-      for (int s : sides)
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.21, 0.33, 0.12}, u), {1, 0, 0});
-      break;
-    }
-    case A::kScratchHead: {
-      const double u = Envelope(tau, D, 0.4, 0.4);
-      const double rub = 0.03 * std::sin(2 * kPi * 3.0 * tau) * u;
-      for (int s : sides)
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {-0.24, 0.42, rub}, u), {1, 0.3, 0});
-      out->head.x += 0.1 * u;
-      break;
-    }
-    case A::kShrug: {
-      const double u = Keys<double>({{0, 0.0}, {0.3, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(tau / D));
-      for (int s : {kLeft, kRight}) {
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {0.10, -0.38, 0.18}, u), {0.3, 0, -1},
-               0.28 * u * amp);
-      }
-      break;
-    }
-    case A::kStretchArms: {
-      const double u = Envelope(tau, D, 0.6, 0.6);
-      for (int s : {kLeft, kRight})
-        AddArm(out, s, env, Lerp({0.04, -0.49, 0.03}, {0.02, 0.52, 0.02}, u), {0.3, 0, -1},
-               0.2 * u);
-      out->spine.x -= 0.12 * u;
-      break;
-    }
-    case A::kBendForward:
-      out->spine.x += 1.0 * amp * env;
-      out->head.x -= 0.3 * amp * env;
-      out->slow = std::max(out->slow, 0.35 * env);
-      break;
-    case A::kLean:
-      out->spine.z += (a.side == Side::kLeft ? -1 : 1) * 0.45 * amp * env;
-      out->slow = std::max(out->slow, 0.1 * env);
-      break;
-    case A::kTwist: {
-      const double u = Keys<double>({{0, 0.0}, {0.4, 1.0}, {0.6, 1.0}, {1, 0.0}}, Clamp01(tau / D));
-      out->spine.y += (a.side == Side::kLeft ? 1 : -1) * 0.7 * amp * u;
-      out->slow = std::max(out->slow, 0.1 * env);
-      break;
-    }
-    case A::kNod: {
-      const double f = std::max(1, a.reps) / std::max(0.5, D - 0.4);
-      out->head.x += 0.30 * amp * std::sin(2 * kPi * f * (tau - 0.2)) * env;
-      break;
-    }
-    case A::kShakeHead: {
-      const double f = std::max(1, a.reps) / std::max(0.5, D - 0.4);
-      out->head.y += 0.45 * amp * std::sin(2 * kPi * f * (tau - 0.2)) * env;
-      break;
-    }
-    case A::kLookAround: {
-      const double yaw =
-          0.9 * amp * std::sin(2 * kPi * 0.28 * v * tau + (a.turn_left ? 0 : kPi)) * env;
-      out->head.y += yaw;
-      out->head.x -= 0.08 * env;
-      out->spine.y += 0.25 * yaw;
-      out->slow = std::max(out->slow, 0.05 * env);
-      break;
-    }
-    case A::kLookUp:
-      out->head.x -= 0.55 * amp * env;
-      out->spine.x -= 0.08 * env;
-      break;
-    default:
-      break;
-  }
+  OverlayInput in{a,
+                  style,
+                  tau,
+                  D,
+                  a.speed * style.speed_scale,
+                  std::clamp(a.amplitude * style.amplitude_scale, 0.5, 1.3),
+                  env,
+                  {}};
+  if (a.side == Side::kLeft || a.side == Side::kBoth) in.sides.push_back(kLeft);
+  if (a.side == Side::kRight || a.side == Side::kBoth) in.sides.push_back(kRight);
+  if (Def(a.id).kind == ActionKind::kArm) out->slow = std::max(out->slow, 0.12 * env);
+  if (const OverlayFunction evaluate = OverlayFunctionOf(a.id)) evaluate(in, out);
 }
 
 // Default arm placement of a base action (chest frame, x = outward, relative to the shoulder).
