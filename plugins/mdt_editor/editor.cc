@@ -43,7 +43,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(
       j.value("diffusion", nlohmann::json::object()), "diffusion.",
       {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion", "guidance_text",
-       "preconditioning", "sigma_data", "snr_shift", "learned_skip", "components"});
+       "preconditioning", "sigma_data", "snr_shift", "learned_skip", "components", "whiten"});
   EditorOptions o;
   o.variant = j.value("variant", o.variant);
   if (o.variant != "mdt" && o.variant != "tmed" && o.variant != "mdm") {
@@ -105,6 +105,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.components = d.value("components", o.components);
   if (o.components < 0 || o.components > kEditFeatureDim)
     throw std::invalid_argument("diffusion.components must be in [0, 207] (0: the 207 columns)");
+  o.whiten = d.value("whiten", o.whiten);
   o.guidance_motion = d.value("guidance_motion", o.guidance_motion);
   o.guidance_text = d.value("guidance_text", o.variant == "mdm" ? 2.5 : o.guidance_text);
   if (o.drop_text + o.drop_source + o.drop_both > 1)
@@ -153,6 +154,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"preconditioning", preconditioning},
             {"learned_skip", learned_skip},
             {"components", components},
+            {"whiten", whiten},
             {"sigma_data", sigma_data},
             {"snr_shift", snr_shift}}}};
 }
@@ -316,6 +318,7 @@ double EditorNetImpl::FitFrameBasis(const torch::Tensor& covariance) {
   if (!basis_.defined()) throw std::logic_error("FitFrameBasis: diffusion.components is 0");
   double explained = 0;
   auto [basis, scale] = PrincipalFrameBasis(covariance, o_.components, o_.sigma_data, &explained);
+  if (!o_.whiten) scale = torch::ones_like(scale);  // an orthonormal projection only
   torch::NoGradGuard no_grad;
   basis_.copy_(basis);
   basis_scale_.copy_(scale);

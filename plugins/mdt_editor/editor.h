@@ -74,6 +74,10 @@ struct EditorOptions {
   // 207-d frame (issue 15); a linear whitening code, as latent diffusion's but fitted, not
   // trained. 0: the 207 columns (the reference).
   int64_t components = 0;
+  // With components: scale each axis to spread sigma_data (true: every axis has the same
+  // signal-to-noise ratio at a step), or keep the feature space's scale (false: the 207-column
+  // diffusion restricted to the kept axes, the same signal-to-noise ratio per direction).
+  bool whiten = true;
   double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
   double guidance_motion = 2, guidance_text = 2;                  // g_m, g_t
   nn::TextEncoderOptions text;

@@ -447,6 +447,13 @@ TEST(Editor, PrincipalComponentsCodeTheFrameExactlyAtItsRank) {
   ASSERT_EQ(x0.sizes(), (std::vector<int64_t>{12, 3, 5}));
   const auto aligned = AlignSource(source, data.source_padding, data.target_padding);
   EXPECT_LT((net->Decode(x0) - aligned).abs().max().item<double>(), 1e-4);
+  // Unwhitened, the code is the orthonormal projection: coordinates keep the frame's scale.
+  EditorOptions projection = o;
+  projection.whiten = false;
+  EditorNet projected(projection);
+  projected->FitFrameBasis(covariance);
+  EXPECT_NEAR(projected->Encode(source).pow(2).sum().item<double>(),
+              source.pow(2).sum().item<double>(), 1e-3 * source.pow(2).sum().item<double>());
   // The range is checked.
   nlohmann::json too_many = o.ToJson();
   too_many["diffusion"]["components"] = kEditFeatureDim + 1;
