@@ -159,38 +159,8 @@ struct Candidate {
   size_t index;
 };
 
-}  // namespace
-
-const char* EditKindName(EditKind kind) {
-  switch (kind) {
-    case EditKind::kSpeed:
-      return "speed";
-    case EditKind::kAmplitude:
-      return "amplitude";
-    case EditKind::kSide:
-      return "side";
-    case EditKind::kAddAction:
-      return "add_action";
-    case EditKind::kRemoveAction:
-      return "remove_action";
-    case EditKind::kReplaceAction:
-      return "replace_action";
-    case EditKind::kRepetitions:
-      return "repetitions";
-    case EditKind::kTiming:
-      return "timing";
-    case EditKind::kReplaceBase:
-      return "replace_base";
-    case EditKind::kPosture:
-      return "posture";
-    case EditKind::kCount:
-      break;
-  }
-  return "unknown";
-}
-
-Edit SampleEdit(const ClipScript& source, Rng& rng) {
-  // Every edit that applies to this script, then one of them at random.
+// Every edit that applies to this script.
+std::vector<Candidate> Candidates(const ClipScript& source) {
   std::vector<Candidate> candidates;
   for (size_t k = 0; k < source.base.size(); ++k) {
     const ActionInstance& b = source.base[k];
@@ -224,7 +194,337 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
     candidates.push_back({EditKind::kTiming, false, source.base.size() - 1});
   }
   candidates.push_back({EditKind::kPosture, false, 0});
+  return candidates;
+}
 
+// What an edit of one kind reads and writes: the source, the chosen candidate and its instance
+// before the edit, and the edit being built (its target script and the target's instance).
+struct EditContext {
+  const ClipScript& source;
+  const Candidate& pick;
+  const ActionInstance& original;
+  const std::string& verb;  // the original's verb phrase, second person
+  ClipScript& t;            // edit.target
+  ActionInstance& inst;     // the picked instance in t
+  Edit& edit;
+  Rng& rng;
+};
+
+void ApplySpeed(const EditContext& in) {
+  const bool faster =
+      in.original.speed < 1.25 && (in.original.speed < 0.8 || in.rng.Bernoulli(0.5));
+  const double factor = faster ? in.rng.Uniform(1.35, 1.6) : in.rng.Uniform(0.6, 0.72);
+  in.inst.speed = in.original.speed * factor;
+  const ActionKind kind = Def(in.inst.id).kind;
+  const bool continuous =
+      kind == ActionKind::kLocomotion && in.inst.reps == 0 && in.inst.id != A::kTurnInPlace;
+  if (!continuous) {
+    const double new_duration =
+        std::max(0.8, in.original.duration() / (in.inst.reps > 0 ? factor : std::sqrt(factor)));
+    if (in.pick.overlay)
+      RetimeOverlay(&in.t, in.pick.index, new_duration);
+    else
+      RetimeBase(&in.t, in.pick.index, new_duration);
+  }
+  const std::string word = faster ? "faster" : "slower";
+  in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{
+                          "{verb} {word}", "do it {word}", "move {word}", "{verb} a bit {word}",
+                          faster ? "speed up" : "slow down", "{verb}, but {word}"}),
+                      {{"{verb}", in.verb}, {"{word}", word}, {"{noun}", Noun(in.original)}});
+}
+
+void ApplyAmplitude(const EditContext& in) {
+  const bool more =
+      in.original.amplitude < 1.15 && (in.original.amplitude < 0.8 || in.rng.Bernoulli(0.5));
+  in.inst.amplitude =
+      in.original.amplitude * (more ? in.rng.Uniform(1.4, 1.7) : in.rng.Uniform(0.45, 0.6));
+  in.edit.text = AmplitudeText(in.original, more, in.rng);
+}
+
+void ApplySide(const EditContext& in) {
+  if (Def(in.inst.id).sided) {
+    in.inst.side = in.original.side == Side::kLeft ? Side::kRight : Side::kLeft;
+    const std::string other = in.inst.side == Side::kLeft ? "left" : "right";
+    const bool leg = Def(in.inst.id).kind == ActionKind::kLeg || in.inst.id == A::kHop ||
+                     in.inst.id == A::kKneel;
+    const std::string limb =
+        leg ? "leg" : (Def(in.inst.id).kind == ActionKind::kArm ? "hand" : "side");
+    in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{
+                            "use your {other} {limb} instead", "do it with the other {limb}",
+                            "use the {other} {limb} instead of the {side} one",
+                            "switch to the {other} {limb}", "{new_verb} instead"}),
+                        {{"{other}", other},
+                         {"{limb}", limb},
+                         {"{side}", in.original.side == Side::kLeft ? "left" : "right"},
+                         {"{new_verb}", VerbPhrase(in.inst, Person::kSecond)}});
+  } else {
+    in.inst.turn_left = !in.original.turn_left;
+    in.inst.angle = -in.original.angle;
+    const std::string other = in.inst.turn_left ? "left" : "right";
+    in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{
+                            "{new_verb} instead", "go {other} instead",
+                            "to the {other} instead of the {old}", "{new_verb}, not {old}"}),
+                        {{"{new_verb}", VerbPhrase(in.inst, Person::kSecond)},
+                         {"{other}", other},
+                         {"{old}", in.original.turn_left ? "left" : "right"}});
+  }
+}
+
+void ApplyRepetitions(const EditContext& in) {
+  const ActionDef& def = Def(in.inst.id);
+  int reps = in.original.reps;
+  while (reps == in.original.reps)
+    reps = in.rng.Int(std::max(1, def.min_reps - 1), def.max_reps + 1);
+  in.inst.reps = reps;
+  const double new_duration =
+      std::max(0.8, in.original.duration() + (reps - in.original.reps) * RepPeriod(in.original));
+  if (in.pick.overlay)
+    RetimeOverlay(&in.t, in.pick.index, new_duration);
+  else
+    RetimeBase(&in.t, in.pick.index, new_duration);
+  std::vector<std::string> options = {"do it {times}", "{verb} {times}", "repeat it {times}"};
+  if (reps == 1) options = {"{verb} only once", "just once"};
+  if (reps == 1 && in.verb.find(' ') == std::string::npos) options.push_back("do only one {noun}");
+  if (reps == in.original.reps + 1) options.push_back("one more time");
+  if (reps < in.original.reps) options.push_back("fewer repetitions, only {times}");
+  in.edit.text =
+      Fill(in.rng.Pick(options),
+           {{"{verb}", in.verb}, {"{times}", Times(reps)}, {"{noun}", Noun(in.original)}});
+}
+
+void ApplyAddAction(const EditContext& in) {
+  // A new gesture during this base action, on parts it leaves free.
+  const ActionInstance& base = in.source.base[in.pick.index];
+  PartSet used = PartsOf(base.id, base.side);
+  for (const ActionInstance& o : in.source.overlays) {
+    if (o.start < base.end && o.end > base.start) used |= PartsOf(o.id, o.side);
+  }
+  ActionInstance added;
+  bool found = false;
+  for (int attempt = 0; attempt < 30 && !found; ++attempt) {
+    const ActionId id =
+        static_cast<ActionId>(in.rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
+    added = SampleInstance(id, in.rng);
+    found = (PartsOf(added.id, added.side) & used) == 0 &&
+            (Def(id).kind != ActionKind::kTorso || base.id == A::kStand || base.id == A::kWalk);
+  }
+  if (!found) {  // nothing fits: fall back to a posture edit
+    in.edit.kind = EditKind::kPosture;
+    in.t.style.posture_lean = in.source.style.posture_lean - 0.12;
+    in.edit.text = "stand up straighter";
+    in.edit.edit_start = 0;
+    in.edit.edit_end = in.source.duration;
+    return;
+  }
+  const double room = base.duration() - 0.4;
+  const double length = std::min(added.duration(), room);
+  added.start = base.start + 0.2 + in.rng.Uniform(0, room - length);
+  added.end = added.start + length;
+  in.t.overlays.push_back(added);
+  in.edit.edit_start = added.start;
+  in.edit.edit_end = added.end;
+  const bool at_end = added.end > base.end - 0.6;
+  std::vector<std::string> options = {"also {new}", "{new} while {base_ing}",
+                                      "{new} at the same time", "while {base_ing}, {new}",
+                                      "add: {new}"};
+  if (at_end) options.push_back("{new} at the end");
+  in.edit.text = Fill(in.rng.Pick(options),
+                      {{"{new}", VerbPhrase(added, Person::kSecond)},
+                       {"{base_ing}", text::GerundPhrase(VerbPhrase(base, Person::kSecond))}});
+}
+
+void ApplyRemoveAction(const EditContext& in) {
+  in.t.overlays.erase(in.t.overlays.begin() + static_cast<std::ptrdiff_t>(in.pick.index));
+  std::vector<std::string> options = {"don't {verb}", "do not {verb}", "skip {verb_ing}",
+                                      "without {verb_ing}", "just {base}, without {verb_ing}"};
+  if (Def(in.original.id).kind == ActionKind::kArm) options.push_back("keep your arms down");
+  if (Def(in.original.id).kind == ActionKind::kHead) options.push_back("keep your head still");
+  in.edit.text = Fill(in.rng.Pick(options),
+                      {{"{verb}", in.verb},
+                       {"{noun}", Noun(in.original)},
+                       {"{verb_ing}", text::GerundPhrase(in.verb)},
+                       {"{base}", VerbPhrase(in.source.base[in.source.BaseAt(in.original.start)],
+                                             Person::kSecond)}});
+}
+
+void ApplyReplaceAction(const EditContext& in) {
+  const ActionInstance& base = in.source.base[in.source.BaseAt(in.original.start)];
+  PartSet used = PartsOf(base.id, base.side);
+  for (size_t k = 0; k < in.source.overlays.size(); ++k) {
+    const ActionInstance& o = in.source.overlays[k];
+    if (k != in.pick.index && o.start < in.original.end && o.end > in.original.start)
+      used |= PartsOf(o.id, o.side);
+  }
+  ActionInstance replacement;
+  bool found = false;
+  for (int attempt = 0; attempt < 30 && !found; ++attempt) {
+    const ActionId id =
+        static_cast<ActionId>(in.rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
+    replacement = SampleInstance(id, in.rng);
+    found = id != in.original.id && (PartsOf(id, replacement.side) & used) == 0 &&
+            Def(id).kind != ActionKind::kTorso;
+  }
+  if (!found) {
+    in.t.overlays.erase(in.t.overlays.begin() + static_cast<std::ptrdiff_t>(in.pick.index));
+    in.edit.kind = EditKind::kRemoveAction;
+    in.edit.text = "don't " + in.verb;
+    return;
+  }
+  replacement.start = in.original.start;
+  replacement.end = in.original.end;
+  in.inst = replacement;
+  in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
+                                                           "instead of {old_ing}, {new}",
+                                                           "{new} instead", "don't {old}, {new}"}),
+                      {{"{new}", VerbPhrase(replacement, Person::kSecond)},
+                       {"{old}", in.verb},
+                       {"{old_ing}", text::GerundPhrase(in.verb)}});
+}
+
+void ApplyTiming(const EditContext& in) {
+  // Do not perform the last base action: keep doing the previous one instead.
+  const size_t last = in.t.base.size() - 1;
+  const ActionInstance removed = in.t.base[last];
+  const ActionInstance& previous = in.source.base[last - 1];
+  in.edit.edit_start = removed.start;
+  in.edit.edit_end = in.source.duration;
+  in.t.base.pop_back();
+  in.t.base.back().end = removed.end;
+  in.t.overlays.erase(
+      std::remove_if(in.t.overlays.begin(), in.t.overlays.end(),
+                     [&](const ActionInstance& o) { return o.start >= removed.start - 1e-9; }),
+      in.t.overlays.end());
+  RetextInstance(&in.t.base.back(), in.rng);
+  in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{
+                          "do not {last} at the end, keep {prev_ing}", "don't {last} at the end",
+                          "keep {prev_ing} instead of {last_ing}", "skip {last_ing} at the end",
+                          "don't {last} at the end, just keep {prev_ing}"}),
+                      {{"{last}", VerbPhrase(removed, Person::kSecond)},
+                       {"{prev_ing}", text::GerundPhrase(VerbPhrase(previous, Person::kSecond))},
+                       {"{last_ing}", text::GerundPhrase(VerbPhrase(removed, Person::kSecond))},
+                       {"{last_noun}", Noun(removed)}});
+}
+
+void ApplyReplaceBase(const EditContext& in) {
+  const ActionKind kind = Def(in.original.id).kind;
+  ActionInstance replacement;
+  for (int attempt = 0; attempt < 30; ++attempt) {
+    const ActionId id = static_cast<ActionId>(
+        in.rng.Int(static_cast<int>(A::kStand), static_cast<int>(A::kStretchLeg)));
+    if (id == in.original.id || id == A::kSitDown || id == A::kStandUp) continue;
+    if (Def(id).kind != kind &&
+        !(kind == ActionKind::kLeg && Def(id).kind == ActionKind::kWholeBody))
+      continue;
+    replacement = SampleInstance(id, in.rng);
+    break;
+  }
+  if (replacement.id == A::kStand && in.original.id == A::kStand)
+    replacement = SampleInstance(A::kWalk, in.rng);
+  // Overlays that would clash with the new action's parts are dropped.
+  const PartSet parts = PartsOf(replacement.id, replacement.side);
+  in.t.overlays.erase(std::remove_if(in.t.overlays.begin(), in.t.overlays.end(),
+                                     [&](const ActionInstance& o) {
+                                       return o.start >= in.original.start &&
+                                              o.end <= in.original.end + 1e-9 &&
+                                              (PartsOf(o.id, o.side) & parts) != 0;
+                                     }),
+                      in.t.overlays.end());
+  replacement.start = in.original.start;
+  replacement.end = in.original.end;
+  in.inst = replacement;
+  RetimeBase(&in.t, in.pick.index,
+             std::max(in.original.duration(),
+                      std::min(replacement.duration(), in.original.duration() * 1.5)));
+  in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
+                                                           "instead of {old_ing}, {new}",
+                                                           "{new} instead", "don't {old}, {new}"}),
+                      {{"{new}", VerbPhrase(replacement, Person::kSecond)},
+                       {"{old}", in.verb},
+                       {"{old_ing}", text::GerundPhrase(in.verb)}});
+}
+
+void ApplyPosture(const EditContext& in) {
+  const bool straighter = in.source.style.posture_lean > -0.02;
+  in.t.style.posture_lean = in.source.style.posture_lean + (straighter ? -0.12 : 0.15);
+  in.edit.text = in.rng.Pick(
+      straighter ? std::vector<std::string>{"stand up straighter", "keep your back straight",
+                                            "stand a little straighter", "lean back a bit"}
+                 : std::vector<std::string>{"lean forward more", "hunch over a little",
+                                            "bend your upper body forward a bit", "lean forward"});
+  in.edit.edit_start = 0;
+  in.edit.edit_end = in.source.duration;
+}
+
+void ApplyEdit(const EditContext& in) {
+  switch (in.pick.kind) {
+    case EditKind::kSpeed:
+      ApplySpeed(in);
+      break;
+    case EditKind::kAmplitude:
+      ApplyAmplitude(in);
+      break;
+    case EditKind::kSide:
+      ApplySide(in);
+      break;
+    case EditKind::kRepetitions:
+      ApplyRepetitions(in);
+      break;
+    case EditKind::kAddAction:
+      ApplyAddAction(in);
+      break;
+    case EditKind::kRemoveAction:
+      ApplyRemoveAction(in);
+      break;
+    case EditKind::kReplaceAction:
+      ApplyReplaceAction(in);
+      break;
+    case EditKind::kTiming:
+      ApplyTiming(in);
+      break;
+    case EditKind::kReplaceBase:
+      ApplyReplaceBase(in);
+      break;
+    case EditKind::kPosture:
+      ApplyPosture(in);
+      break;
+    case EditKind::kCount:
+      break;
+  }
+}
+
+}  // namespace
+
+const char* EditKindName(EditKind kind) {
+  switch (kind) {
+    case EditKind::kSpeed:
+      return "speed";
+    case EditKind::kAmplitude:
+      return "amplitude";
+    case EditKind::kSide:
+      return "side";
+    case EditKind::kAddAction:
+      return "add_action";
+    case EditKind::kRemoveAction:
+      return "remove_action";
+    case EditKind::kReplaceAction:
+      return "replace_action";
+    case EditKind::kRepetitions:
+      return "repetitions";
+    case EditKind::kTiming:
+      return "timing";
+    case EditKind::kReplaceBase:
+      return "replace_base";
+    case EditKind::kPosture:
+      return "posture";
+    case EditKind::kCount:
+      break;
+  }
+  return "unknown";
+}
+
+Edit SampleEdit(const ClipScript& source, Rng& rng) {
+  // Every edit that applies to this script, then one of them at random.
+  const std::vector<Candidate> candidates = Candidates(source);
   // Choose the kind of edit first (so that kinds with many candidate actions do not dominate), then
   // the action it applies to.
   static const double kKindWeight[] = {1.0, 1.2, 1.0, 1.2, 1.0, 0.8, 0.8, 0.6, 0.8, 0.4};
@@ -249,252 +549,7 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
   edit.edit_end = original.end;
   const std::string verb = VerbPhrase(original, Person::kSecond);
 
-  switch (pick.kind) {
-    case EditKind::kSpeed: {
-      const bool faster = original.speed < 1.25 && (original.speed < 0.8 || rng.Bernoulli(0.5));
-      const double factor = faster ? rng.Uniform(1.35, 1.6) : rng.Uniform(0.6, 0.72);
-      inst.speed = original.speed * factor;
-      const ActionKind kind = Def(inst.id).kind;
-      const bool continuous =
-          kind == ActionKind::kLocomotion && inst.reps == 0 && inst.id != A::kTurnInPlace;
-      if (!continuous) {
-        const double new_duration =
-            std::max(0.8, original.duration() / (inst.reps > 0 ? factor : std::sqrt(factor)));
-        if (pick.overlay)
-          RetimeOverlay(&t, pick.index, new_duration);
-        else
-          RetimeBase(&t, pick.index, new_duration);
-      }
-      const std::string word = faster ? "faster" : "slower";
-      edit.text = Fill(rng.Pick(std::vector<std::string>{
-                           "{verb} {word}", "do it {word}", "move {word}", "{verb} a bit {word}",
-                           faster ? "speed up" : "slow down", "{verb}, but {word}"}),
-                       {{"{verb}", verb}, {"{word}", word}, {"{noun}", Noun(original)}});
-      break;
-    }
-    case EditKind::kAmplitude: {
-      const bool more =
-          original.amplitude < 1.15 && (original.amplitude < 0.8 || rng.Bernoulli(0.5));
-      inst.amplitude = original.amplitude * (more ? rng.Uniform(1.4, 1.7) : rng.Uniform(0.45, 0.6));
-      edit.text = AmplitudeText(original, more, rng);
-      break;
-    }
-    case EditKind::kSide: {
-      if (Def(inst.id).sided) {
-        inst.side = original.side == Side::kLeft ? Side::kRight : Side::kLeft;
-        const std::string other = inst.side == Side::kLeft ? "left" : "right";
-        const bool leg =
-            Def(inst.id).kind == ActionKind::kLeg || inst.id == A::kHop || inst.id == A::kKneel;
-        const std::string limb =
-            leg ? "leg" : (Def(inst.id).kind == ActionKind::kArm ? "hand" : "side");
-        edit.text = Fill(rng.Pick(std::vector<std::string>{
-                             "use your {other} {limb} instead", "do it with the other {limb}",
-                             "use the {other} {limb} instead of the {side} one",
-                             "switch to the {other} {limb}", "{new_verb} instead"}),
-                         {{"{other}", other},
-                          {"{limb}", limb},
-                          {"{side}", original.side == Side::kLeft ? "left" : "right"},
-                          {"{new_verb}", VerbPhrase(inst, Person::kSecond)}});
-      } else {
-        inst.turn_left = !original.turn_left;
-        inst.angle = -original.angle;
-        const std::string other = inst.turn_left ? "left" : "right";
-        edit.text = Fill(rng.Pick(std::vector<std::string>{
-                             "{new_verb} instead", "go {other} instead",
-                             "to the {other} instead of the {old}", "{new_verb}, not {old}"}),
-                         {{"{new_verb}", VerbPhrase(inst, Person::kSecond)},
-                          {"{other}", other},
-                          {"{old}", original.turn_left ? "left" : "right"}});
-      }
-      break;
-    }
-    case EditKind::kRepetitions: {
-      const ActionDef& def = Def(inst.id);
-      int reps = original.reps;
-      while (reps == original.reps) reps = rng.Int(std::max(1, def.min_reps - 1), def.max_reps + 1);
-      inst.reps = reps;
-      const double new_duration =
-          std::max(0.8, original.duration() + (reps - original.reps) * RepPeriod(original));
-      if (pick.overlay)
-        RetimeOverlay(&t, pick.index, new_duration);
-      else
-        RetimeBase(&t, pick.index, new_duration);
-      std::vector<std::string> options = {"do it {times}", "{verb} {times}", "repeat it {times}"};
-      if (reps == 1) options = {"{verb} only once", "just once"};
-      if (reps == 1 && verb.find(' ') == std::string::npos) options.push_back("do only one {noun}");
-      if (reps == original.reps + 1) options.push_back("one more time");
-      if (reps < original.reps) options.push_back("fewer repetitions, only {times}");
-      edit.text = Fill(rng.Pick(options),
-                       {{"{verb}", verb}, {"{times}", Times(reps)}, {"{noun}", Noun(original)}});
-      break;
-    }
-    case EditKind::kAddAction: {
-      // A new gesture during this base action, on parts it leaves free.
-      const ActionInstance& base = source.base[pick.index];
-      PartSet used = PartsOf(base.id, base.side);
-      for (const ActionInstance& o : source.overlays) {
-        if (o.start < base.end && o.end > base.start) used |= PartsOf(o.id, o.side);
-      }
-      ActionInstance added;
-      bool found = false;
-      for (int attempt = 0; attempt < 30 && !found; ++attempt) {
-        const ActionId id = static_cast<ActionId>(
-            rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
-        added = SampleInstance(id, rng);
-        found = (PartsOf(added.id, added.side) & used) == 0 &&
-                (Def(id).kind != ActionKind::kTorso || base.id == A::kStand || base.id == A::kWalk);
-      }
-      if (!found) {  // nothing fits: fall back to a posture edit
-        edit.kind = EditKind::kPosture;
-        t.style.posture_lean = source.style.posture_lean - 0.12;
-        edit.text = "stand up straighter";
-        edit.edit_start = 0;
-        edit.edit_end = source.duration;
-        break;
-      }
-      const double room = base.duration() - 0.4;
-      const double length = std::min(added.duration(), room);
-      added.start = base.start + 0.2 + rng.Uniform(0, room - length);
-      added.end = added.start + length;
-      t.overlays.push_back(added);
-      edit.edit_start = added.start;
-      edit.edit_end = added.end;
-      const bool at_end = added.end > base.end - 0.6;
-      std::vector<std::string> options = {"also {new}", "{new} while {base_ing}",
-                                          "{new} at the same time", "while {base_ing}, {new}",
-                                          "add: {new}"};
-      if (at_end) options.push_back("{new} at the end");
-      edit.text = Fill(rng.Pick(options),
-                       {{"{new}", VerbPhrase(added, Person::kSecond)},
-                        {"{base_ing}", text::GerundPhrase(VerbPhrase(base, Person::kSecond))}});
-      break;
-    }
-    case EditKind::kRemoveAction: {
-      t.overlays.erase(t.overlays.begin() + static_cast<std::ptrdiff_t>(pick.index));
-      std::vector<std::string> options = {"don't {verb}", "do not {verb}", "skip {verb_ing}",
-                                          "without {verb_ing}", "just {base}, without {verb_ing}"};
-      if (Def(original.id).kind == ActionKind::kArm) options.push_back("keep your arms down");
-      if (Def(original.id).kind == ActionKind::kHead) options.push_back("keep your head still");
-      edit.text = Fill(
-          rng.Pick(options),
-          {{"{verb}", verb},
-           {"{noun}", Noun(original)},
-           {"{verb_ing}", text::GerundPhrase(verb)},
-           {"{base}", VerbPhrase(source.base[source.BaseAt(original.start)], Person::kSecond)}});
-      break;
-    }
-    case EditKind::kReplaceAction: {
-      const ActionInstance& base = source.base[source.BaseAt(original.start)];
-      PartSet used = PartsOf(base.id, base.side);
-      for (size_t k = 0; k < source.overlays.size(); ++k) {
-        const ActionInstance& o = source.overlays[k];
-        if (k != pick.index && o.start < original.end && o.end > original.start)
-          used |= PartsOf(o.id, o.side);
-      }
-      ActionInstance replacement;
-      bool found = false;
-      for (int attempt = 0; attempt < 30 && !found; ++attempt) {
-        const ActionId id = static_cast<ActionId>(
-            rng.Int(static_cast<int>(A::kWave), static_cast<int>(A::kLookUp)));
-        replacement = SampleInstance(id, rng);
-        found = id != original.id && (PartsOf(id, replacement.side) & used) == 0 &&
-                Def(id).kind != ActionKind::kTorso;
-      }
-      if (!found) {
-        t.overlays.erase(t.overlays.begin() + static_cast<std::ptrdiff_t>(pick.index));
-        edit.kind = EditKind::kRemoveAction;
-        edit.text = "don't " + verb;
-        break;
-      }
-      replacement.start = original.start;
-      replacement.end = original.end;
-      inst = replacement;
-      edit.text = Fill(rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
-                                                         "instead of {old_ing}, {new}",
-                                                         "{new} instead", "don't {old}, {new}"}),
-                       {{"{new}", VerbPhrase(replacement, Person::kSecond)},
-                        {"{old}", verb},
-                        {"{old_ing}", text::GerundPhrase(verb)}});
-      break;
-    }
-    case EditKind::kTiming: {
-      // Do not perform the last base action: keep doing the previous one instead.
-      const size_t last = t.base.size() - 1;
-      const ActionInstance removed = t.base[last];
-      const ActionInstance& previous = source.base[last - 1];
-      edit.edit_start = removed.start;
-      edit.edit_end = source.duration;
-      t.base.pop_back();
-      t.base.back().end = removed.end;
-      t.overlays.erase(
-          std::remove_if(t.overlays.begin(), t.overlays.end(),
-                         [&](const ActionInstance& o) { return o.start >= removed.start - 1e-9; }),
-          t.overlays.end());
-      RetextInstance(&t.base.back(), rng);
-      edit.text = Fill(rng.Pick(std::vector<std::string>{
-                           "do not {last} at the end, keep {prev_ing}", "don't {last} at the end",
-                           "keep {prev_ing} instead of {last_ing}", "skip {last_ing} at the end",
-                           "don't {last} at the end, just keep {prev_ing}"}),
-                       {{"{last}", VerbPhrase(removed, Person::kSecond)},
-                        {"{prev_ing}", text::GerundPhrase(VerbPhrase(previous, Person::kSecond))},
-                        {"{last_ing}", text::GerundPhrase(VerbPhrase(removed, Person::kSecond))},
-                        {"{last_noun}", Noun(removed)}});
-      break;
-    }
-    case EditKind::kReplaceBase: {
-      const ActionKind kind = Def(original.id).kind;
-      ActionInstance replacement;
-      for (int attempt = 0; attempt < 30; ++attempt) {
-        const ActionId id = static_cast<ActionId>(
-            rng.Int(static_cast<int>(A::kStand), static_cast<int>(A::kStretchLeg)));
-        if (id == original.id || id == A::kSitDown || id == A::kStandUp) continue;
-        if (Def(id).kind != kind &&
-            !(kind == ActionKind::kLeg && Def(id).kind == ActionKind::kWholeBody))
-          continue;
-        replacement = SampleInstance(id, rng);
-        break;
-      }
-      if (replacement.id == A::kStand && original.id == A::kStand)
-        replacement = SampleInstance(A::kWalk, rng);
-      // Overlays that would clash with the new action's parts are dropped.
-      const PartSet parts = PartsOf(replacement.id, replacement.side);
-      t.overlays.erase(std::remove_if(t.overlays.begin(), t.overlays.end(),
-                                      [&](const ActionInstance& o) {
-                                        return o.start >= original.start &&
-                                               o.end <= original.end + 1e-9 &&
-                                               (PartsOf(o.id, o.side) & parts) != 0;
-                                      }),
-                       t.overlays.end());
-      replacement.start = original.start;
-      replacement.end = original.end;
-      inst = replacement;
-      RetimeBase(&t, pick.index,
-                 std::max(original.duration(),
-                          std::min(replacement.duration(), original.duration() * 1.5)));
-      edit.text = Fill(rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
-                                                         "instead of {old_ing}, {new}",
-                                                         "{new} instead", "don't {old}, {new}"}),
-                       {{"{new}", VerbPhrase(replacement, Person::kSecond)},
-                        {"{old}", verb},
-                        {"{old_ing}", text::GerundPhrase(verb)}});
-      break;
-    }
-    case EditKind::kPosture: {
-      const bool straighter = source.style.posture_lean > -0.02;
-      t.style.posture_lean = source.style.posture_lean + (straighter ? -0.12 : 0.15);
-      edit.text = rng.Pick(
-          straighter
-              ? std::vector<std::string>{"stand up straighter", "keep your back straight",
-                                         "stand a little straighter", "lean back a bit"}
-              : std::vector<std::string>{"lean forward more", "hunch over a little",
-                                         "bend your upper body forward a bit", "lean forward"});
-      edit.edit_start = 0;
-      edit.edit_end = source.duration;
-      break;
-    }
-    case EditKind::kCount:
-      break;
-  }
+  ApplyEdit({source, pick, original, verb, t, inst, edit, rng});
   // The edited instance gets texts for its new parameters (it no longer exists after a removal, and
   // a fallback may have changed the kind, so decide on the final kind).
   if (edit.kind == EditKind::kSpeed || edit.kind == EditKind::kAmplitude ||

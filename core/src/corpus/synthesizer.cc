@@ -295,7 +295,7 @@ void Jump(const BaseInput& in, BaseFrame* frame) {
 
 void Hop(const BaseInput& in, BaseFrame* frame) {
   BaseFrame& f = *frame;
-  // `in.side` hops; the in.other leg is held up behind.
+  // `side` hops; the other leg is held up behind.
   const double lift = Envelope(in.tau, in.D, 0.35, 0.35);
   f.feet[in.other].mode = FootMode::kScripted;
   f.feet[in.other].reference = ScriptReference::kPath;
