@@ -14,10 +14,11 @@ constexpr PartSet LL = PartBit(BodyPart::kLeftLeg);
 constexpr PartSet RL = PartBit(BodyPart::kRightLeg);
 constexpr PartSet kLegs = G | LL | RL;
 
-std::vector<ActionDef> BuildVocabulary() {
+// Locomotion (global + legs).
+std::vector<ActionDef> LocomotionActions() {
   using K = ActionKind;
   using A = ActionId;
-  std::vector<ActionDef> v = {
+  return {
       {A::kStand,
        "stand",
        K::kLocomotion,
@@ -124,6 +125,14 @@ std::vector<ActionDef> BuildVocabulary() {
        {"walk in a circle", "walk in circle", "circle around", "walk around in a circle {dir}"},
        {"a person walks in a circle", "a person walks around in a {dir} circle",
         "someone walks in a small circle"}},
+  };
+}
+
+// Locomotion: jumps, hops and marching in place.
+std::vector<ActionDef> HopActions() {
+  using K = ActionKind;
+  using A = ActionId;
+  return {
       {A::kJump,
        "jump",
        K::kLocomotion,
@@ -163,6 +172,14 @@ std::vector<ActionDef> BuildVocabulary() {
        {"march in place", "march", "step in place", "marching", "jog in place"},
        {"a person marches in place", "a person steps on the spot lifting their knees",
         "someone marches without moving forward"}},
+  };
+}
+
+// Whole body.
+std::vector<ActionDef> WholeBodyActions() {
+  using K = ActionKind;
+  using A = ActionId;
+  return {
       {A::kSitDown,
        "sit_down",
        K::kWholeBody,
@@ -278,6 +295,14 @@ std::vector<ActionDef> BuildVocabulary() {
        {"tiptoe", "stand on tiptoes", "stand on toes", "rise onto toes", "calf raise"},
        {"a person rises onto their tiptoes", "a person stands on their toes and comes back down",
         "someone lifts their heels off the ground"}},
+  };
+}
+
+// Legs, while standing.
+std::vector<ActionDef> LegActions() {
+  using K = ActionKind;
+  using A = ActionId;
+  return {
       {A::kKick,
        "kick",
        K::kLeg,
@@ -335,6 +360,14 @@ std::vector<ActionDef> BuildVocabulary() {
        {"a person stretches {their_leg} out to the side",
         "a person does a side lunge to the {side}",
         "someone extends {their_leg} sideways and bends the other knee"}},
+  };
+}
+
+// Arms: gestures and movements of the whole arm.
+std::vector<ActionDef> ArmActions() {
+  using K = ActionKind;
+  using A = ActionId;
+  return {
       {A::kWave,
        "wave",
        K::kArm,
@@ -432,6 +465,14 @@ std::vector<ActionDef> BuildVocabulary() {
         "overhand throw"},
        {"a person throws something with {their_hand}",
         "a person winds up and throws with {their_arm}", "someone throws a ball overhand"}},
+  };
+}
+
+// Arms: the hands at the body, the head or the hips.
+std::vector<ActionDef> HandActions() {
+  using K = ActionKind;
+  using A = ActionId;
+  return {
       {A::kDrink,
        "drink",
        K::kArm,
@@ -540,6 +581,14 @@ std::vector<ActionDef> BuildVocabulary() {
         "arms overhead stretch"},
        {"a person stretches both arms above their head", "a person reaches up high with both arms",
         "someone stretches their arms overhead"}},
+  };
+}
+
+// Torso and head.
+std::vector<ActionDef> TorsoAndHeadActions() {
+  using K = ActionKind;
+  using A = ActionId;
+  return {
       {A::kBendForward,
        "bend_forward",
        K::kTorso,
@@ -635,6 +684,15 @@ std::vector<ActionDef> BuildVocabulary() {
        {"a person looks up", "a person tilts their head back and looks up",
         "someone looks up at the sky"}},
   };
+}
+
+// The vocabulary in ActionId order (Def indexes it by id).
+std::vector<ActionDef> BuildVocabulary() {
+  std::vector<ActionDef> v;
+  for (auto family : {LocomotionActions, HopActions, WholeBodyActions, LegActions, ArmActions,
+                      HandActions, TorsoAndHeadActions}) {
+    for (ActionDef& def : family()) v.push_back(std::move(def));
+  }
   return v;
 }
 
