@@ -15,6 +15,7 @@
 #include "../plugins/mdt_editor/edit_data.h"
 #include "../plugins/mdt_editor/editor.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/motionfix207.h"
 
 using namespace motionpipe;
@@ -72,7 +73,7 @@ int main(int argc, char** argv) {
   nn::SetTorchThreads(1);
   torch::manual_seed(0);
   const std::string checkpoint = dirs[0];
-  auto text = ReadFile(checkpoint + "/model.json");
+  auto text = ReadFile(layout::ModelConfigFile(checkpoint));
   if (!text.ok()) return std::fprintf(stderr, "%s\n", text.status().message().c_str()), 1;
   const auto options = EditorOptions::FromJson(nlohmann::json::parse(*text).at("config"));
   EditorNet net(options);
@@ -80,7 +81,7 @@ int main(int argc, char** argv) {
   auto stddev = net->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
   net->text_encoder()->LoadExtras(checkpoint);
   torch::serialize::InputArchive archive;
-  archive.load_from(checkpoint + "/model.pt");
+  archive.load_from(layout::ModelWeightsFile(checkpoint));
   net->load(archive);
   net->eval();
   if (g_m < 0) g_m = options.guidance_motion, g_t = options.guidance_text;

@@ -8,6 +8,7 @@
 
 #include "commands.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/corpus/corpus.h"
 #include "motionpipe/corpus/inspect.h"
 #include "motionpipe/features/motionfix207.h"
@@ -268,7 +269,7 @@ void AddDataCommands(CLI::App& app, int* exit_code) {
       auto files = similarity::ResolveTripletFiles(inputs);
       if (!files.ok()) return void(*exit_code = Fail(files.status()));
       const int n = threads > 0 ? threads : omp_get_max_threads();
-      const std::string shard_dir = out_dir + "/task-00000";
+      const std::string shard_dir = layout::TaskDir(out_dir);
       auto report =
           similarity::FilterShard(similarity::PlanShard(*files, 1, 0), *options, n, shard_dir);
       if (!report.ok()) return void(*exit_code = Fail(report.status()));

@@ -8,6 +8,7 @@
 #include "commands.h"
 #include "labelers.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/formats/bvh.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/sinc/composition.h"
@@ -183,10 +184,10 @@ void AddSincCommands(CLI::App& app, int* exit_code) {
             static_cast<double>(w.value("rss_after_last_shard", int64_t{0})) / 1e6);
       }
       // A few texts of the first shard.
-      auto source = ReadFile(dir + "/task-00000/source.json");
+      auto source = ReadFile(layout::TaskDir(dir) + "/source.json");
       if (!source.ok()) return;
       auto table = sinc::ReadSpans(nlohmann::json::parse(*source).value("spans", std::string()));
-      auto shard = sinc::ReadPairs(dir + "/task-00000/pairs.npz");
+      auto shard = sinc::ReadPairs(layout::TaskDir(dir) + "/pairs.npz");
       if (!table.ok() || !shard.ok()) return;
       for (size_t k = 0; k < std::min<size_t>(5, shard->recipes.size()); ++k) {
         const auto& r = shard->recipes[k];

@@ -7,6 +7,7 @@
 
 #include "cron.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/base/log.h"
 
 namespace motionpipe::coordinator {
@@ -32,13 +33,10 @@ Scheduler::Job* Scheduler::FindJob(int64_t id) {
 }
 
 std::string Scheduler::TaskDir(const Job& job, const Stage& stage, int task) const {
-  char name[32];
-  if (stage.spec.reduce && task == stage.spec.shards) {
-    std::snprintf(name, sizeof(name), "result");
-  } else {
-    std::snprintf(name, sizeof(name), "task-%05d", task);
-  }
-  return job.output_dir + "/" + stage.spec.name + "/" + name;
+  const std::string stage_dir = job.output_dir + "/" + stage.spec.name;
+  if (stage.spec.reduce && task == stage.spec.shards)
+    return stage_dir + "/" + layout::kResultDirName;
+  return layout::TaskDir(stage_dir, task);
 }
 
 std::string Scheduler::StagingDir(const Job& job, const Stage& stage, int task,

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 
 namespace motionpipe::worker {
 
@@ -10,8 +11,9 @@ namespace fs = std::filesystem;
 
 Result<std::string> ResolveCheckpoint(const std::string& path) {
   if (!fs::exists(path)) return NotFound(path + ": no such checkpoint directory");
-  for (const std::string& candidate : {path, path + "/model", path + "/task-00000/model"}) {
-    if (fs::exists(candidate + "/model.json")) return candidate;
+  for (const std::string& candidate :
+       {path, layout::CheckpointDir(path), layout::CheckpointDir(layout::TaskDir(path))}) {
+    if (fs::exists(layout::ModelConfigFile(candidate))) return candidate;
   }
   return NotFound(path +
                   ": not a checkpoint (no model.json in it, in model/ or in task-00000/model/)");
@@ -20,15 +22,15 @@ Result<std::string> ResolveCheckpoint(const std::string& path) {
 Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string& path,
                                    const nlohmann::json& options) {
   MP_ASSIGN_OR_RETURN(const std::string dir, ResolveCheckpoint(path));
-  MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(dir + "/model.json"));
+  MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(layout::ModelConfigFile(dir)));
   nlohmann::json meta;
   try {
     meta = nlohmann::json::parse(text);
   } catch (const std::exception& e) {
-    return DataLoss(dir + "/model.json: " + e.what());
+    return DataLoss(layout::ModelConfigFile(dir) + ": " + e.what());
   }
   const std::string name = meta.value("name", std::string());
-  if (name.empty()) return DataLoss(dir + "/model.json: no model name");
+  if (name.empty()) return DataLoss(layout::ModelConfigFile(dir) + ": no model name");
   const mp_object_factory* factory = plugins.FindFactory("generator", name);
   if (!factory)
     return NotFound(dir + ": model '" + name +

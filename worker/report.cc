@@ -15,6 +15,7 @@
 
 #include "metric_history.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/render/chart.h"
 #include "motionpipe/render/motion_render.h"
@@ -659,8 +660,8 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   std::vector<TrainCurve> curves;
   std::vector<std::pair<std::string, json>> showcases;  // stage, showcase.json
   for (const std::string& stage : stages) {
-    const std::string task = job + "/" + stage + "/task-00000";
-    if (auto metrics = ReadJson(task + "/metrics.json")) {
+    const std::string task = layout::TaskDir(job + "/" + stage);
+    if (auto metrics = ReadJson(layout::MetricsFile(task))) {
       const std::string method = metrics->value("method", stage);
       const bool edit = metrics->contains("generated_to_target"),
                  gen = metrics->contains("temos_score");
@@ -672,13 +673,15 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
         m.runs.push_back({stage, task, *metrics});
       }
     }
-    if (auto curve = ReadCurve(stage, task + "/losses.csv")) {
-      if (auto rank = ReadJson(task + "/rank-0.json")) curve->seconds = rank->value("seconds", 0.0);
-      if (auto val = ReadCurve(stage, task + "/val_losses.csv", "val_loss"))
+    if (auto curve = ReadCurve(stage, layout::LossesFile(task))) {
+      if (auto rank = ReadJson(layout::RankSummaryFile(task, 0)))
+        curve->seconds = rank->value("seconds", 0.0);
+      if (auto val = ReadCurve(stage, layout::ValLossesFile(task), "val_loss"))
         curve->val_steps = val->steps, curve->val_losses = val->losses;
       curves.push_back(std::move(*curve));
     }
-    if (auto showcase = ReadJson(task + "/showcase.json")) showcases.push_back({stage, *showcase});
+    if (auto showcase = ReadJson(layout::ShowcaseFile(task)))
+      showcases.push_back({stage, *showcase});
   }
   // Paper rows, in the paper's order; other methods after them.
   const auto order = [](std::map<std::string, Method>& methods, const auto& paper_rows) {
@@ -980,7 +983,7 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   for (const auto& [stage, showcase] : showcases) {
     body << "<h2>" << Escape(showcase.value("title", stage)) << "</h2>\n";
     if (showcase.contains("text")) body << "<p>" << Escape(showcase.value("text", "")) << "</p>\n";
-    const std::string dir = job + "/" + stage + "/task-00000";
+    const std::string dir = layout::TaskDir(job + "/" + stage);
     for (const json& item : showcase.value("items", json::array())) {
       const std::string file = item.value("image", std::string());
       auto bytes = ReadFile(dir + "/" + file);

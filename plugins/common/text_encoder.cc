@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/formats/npz.h"
 
 namespace motionpipe::nn {
@@ -374,17 +375,19 @@ std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& f
   std::string dir;
   if (from == "input") {
     for (const std::string& input : input_dirs) {
-      for (const std::string& candidate : {input, input + "/model"}) {
-        if (dir.empty() && fs::exists(candidate + "/model.json")) dir = candidate;
+      for (const std::string& candidate : {input, layout::CheckpointDir(input)}) {
+        if (dir.empty() && fs::exists(layout::ModelConfigFile(candidate))) dir = candidate;
       }
     }
     if (dir.empty())
       throw std::invalid_argument(
           "text_encoder_from: input, but no stage input holds a checkpoint (model/model.json)");
   } else {
-    dir = fs::exists(from + "/model/model.json") ? from + "/model" : from;
+    dir = fs::exists(layout::ModelConfigFile(layout::CheckpointDir(from)))
+              ? layout::CheckpointDir(from)
+              : from;
   }
-  auto text = ReadFile(dir + "/model.json");
+  auto text = ReadFile(layout::ModelConfigFile(dir));
   if (!text.ok()) throw std::invalid_argument("text_encoder_from: " + text.status().message());
   nlohmann::json theirs;
   try {
@@ -402,7 +405,7 @@ std::string LoadPretrainedTextEncoder(TextEncoder& encoder, const std::string& f
   }
   try {
     torch::serialize::InputArchive archive, sub;
-    archive.load_from(dir + "/model.pt");
+    archive.load_from(layout::ModelWeightsFile(dir));
     archive.read("text_encoder", sub);
     pretrained->load(sub);
   } catch (const c10::Error& e) {

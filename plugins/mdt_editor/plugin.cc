@@ -18,6 +18,7 @@
 #include "edit_data.h"
 #include "editor.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/anchor.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/labels/labeler.h"
@@ -161,12 +162,12 @@ class EditorModel : public plugin::Model {
 class EditorGenerator : public plugin::Generator {
  public:
   EditorGenerator(const std::string& dir, const nlohmann::json& options) {
-    auto text = ReadFile(dir + "/model.json");
+    auto text = ReadFile(layout::ModelConfigFile(dir));
     if (!text.ok()) throw std::invalid_argument(text.status().message());
     model_ = std::make_unique<EditorModel>(nlohmann::json::parse(*text).at("config"));
     model_->LoadExtras(dir);
     torch::serialize::InputArchive archive;
-    archive.load_from(dir + "/model.pt");
+    archive.load_from(layout::ModelWeightsFile(dir));
     model_->Module().load(archive);
     model_->Module().eval();
     body_parts_ = options.value("body_parts", false);

@@ -25,6 +25,7 @@
 #include "../api/model.hpp"
 #include "../common/threads.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/temos135.h"
 #include "motionpipe/labels/labeler.h"
 #include "motionpipe/sinc/composition.h"
@@ -144,13 +145,13 @@ class SincGenerator : public plugin::Generator {
  public:
   // options: {"compositing": true} runs a single-action checkpoint as the GPT-compositing baseline.
   SincGenerator(const std::string& dir, const nlohmann::json& options) {
-    auto text = ReadFile(dir + "/model.json");
+    auto text = ReadFile(layout::ModelConfigFile(dir));
     if (!text.ok()) throw std::invalid_argument(text.status().message());
     const nlohmann::json meta = nlohmann::json::parse(*text);
     model_ = std::make_unique<SincModel>(meta.at("config"));
     model_->LoadExtras(dir);
     torch::serialize::InputArchive archive;
-    archive.load_from(dir + "/model.pt");
+    archive.load_from(layout::ModelWeightsFile(dir));
     model_->Module().load(archive);
     model_->Module().eval();
     compositing_ = model_->variant() == "compositing" || options.value("compositing", false);

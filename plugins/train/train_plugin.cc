@@ -39,6 +39,7 @@
 #include "../api/plugin.hpp"
 #include "../common/threads.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/base/random.h"
 
 namespace motionpipe::train {
@@ -173,13 +174,13 @@ void ExportStateDict(torch::nn::Module& module, const std::string& path) {
 void WriteModelDir(plugin::Model& model, const Options& options, int64_t step,
                    const std::string& dir) {
   fs::create_directories(dir);
-  SaveModule(model.Module(), dir + "/model.pt");
+  SaveModule(model.Module(), layout::ModelWeightsFile(dir));
   model.SaveExtras(dir);
   const json meta = {{"name", model.Name()},
                      {"config", model.Config()},
                      {"step", step},
                      {"trainer", options.ToJson()}};
-  const Status s = WriteFileAtomic(dir + "/model.json", meta.dump(1) + "\n");
+  const Status s = WriteFileAtomic(layout::ModelConfigFile(dir), meta.dump(1) + "\n");
   if (!s.ok()) throw std::runtime_error(s.message());
 }
 
@@ -347,12 +348,12 @@ void Train(const Task& task) {
 
   // Resume from the newest checkpoint of an earlier attempt of this gang.
   int64_t start = 0;
-  const std::string csv = state_dir + "/losses.csv", val_csv = state_dir + "/val_losses.csv",
+  const std::string csv = layout::LossesFile(state_dir), val_csv = layout::ValLossesFile(state_dir),
                     best_dir = state_dir + "/best";
   double best_val = std::numeric_limits<double>::infinity();
   int64_t best_step = -1;
   if (const auto latest = LatestCheckpoint(state_dir)) {
-    LoadModule(model.Module(), latest->dir + "/model.pt");
+    LoadModule(model.Module(), layout::ModelWeightsFile(latest->dir));
     torch::load(optimizer, latest->dir + "/optimizer.pt");
     start = latest->step;
     task.Log(MP_LOG_INFO,
@@ -512,7 +513,7 @@ void Train(const Task& task) {
         const std::string tmp = state_dir + "/" + name + ".tmp";
         fs::remove_all(tmp);
         fs::create_directories(tmp);
-        SaveModule(model.Module(), tmp + "/model.pt");
+        SaveModule(model.Module(), layout::ModelWeightsFile(tmp));
         torch::save(optimizer, tmp + "/optimizer.pt");
         const Status s = WriteFileAtomic(
             tmp + "/trainer.json",
@@ -542,10 +543,10 @@ void Train(const Task& task) {
     model.Module().eval();
     if (options.keep == "best" && best_step >= 0 && best_step < options.steps) {
       // The lowest validation loss: that model is the output (its weights, extras and step).
-      LoadModule(model.Module(), best_dir + "/model.pt");
-      WriteModelDir(model, options, best_step, out_dir + "/model");
+      LoadModule(model.Module(), layout::ModelWeightsFile(best_dir));
+      WriteModelDir(model, options, best_step, layout::CheckpointDir(out_dir));
     } else {
-      WriteModelDir(model, options, options.steps, out_dir + "/model");
+      WriteModelDir(model, options, options.steps, layout::CheckpointDir(out_dir));
     }
     ExportStateDict(model.Module(), out_dir + "/state_dict.pt");
     for (const std::string& file : {csv, val_csv}) {
@@ -565,8 +566,7 @@ void Train(const Task& task) {
       {"final_loss", last_loss}};
   if (rank == 0 && best_step >= 0)
     summary["best"] = {{"step", best_step}, {"val_loss", best_val}, {"kept", options.keep}};
-  const Status s =
-      WriteFileAtomic(out_dir + "/rank-" + std::to_string(rank) + ".json", summary.dump(1) + "\n");
+  const Status s = WriteFileAtomic(layout::RankSummaryFile(out_dir, rank), summary.dump(1) + "\n");
   if (!s.ok()) throw std::runtime_error(s.message());
   task.Metric("final_loss", last_loss);
   task.Metric("samples_per_second", static_cast<double>(trained * local) / std::max(seconds, 1e-9));

@@ -1,4 +1,5 @@
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -69,6 +70,25 @@ TEST(FileLock, OneHolderAtATimeNamedByPid) {
   }
   EXPECT_TRUE(FileLock::Acquire(path).ok());  // released with its holder
   EXPECT_EQ(FileLock::Acquire(dir + "/no/such/dir/lock").status().code(), StatusCode::kIoError);
+}
+
+
+// Issue 16: the job's on-disk names have one home; these are the names jobs already on disk use
+// (changing one would orphan every earlier job's outputs, so the test pins them).
+TEST(JobLayout, NamesAreTheOnesJobsUse) {
+  EXPECT_EQ(layout::TaskDirName(0), "task-00000");
+  EXPECT_EQ(layout::TaskDirName(123456), "task-123456");
+  EXPECT_EQ(layout::TaskDir("out/demo-1/train"), "out/demo-1/train/task-00000");
+  EXPECT_EQ(layout::TaskDir("s", 12), "s/task-00012");
+  EXPECT_EQ(layout::CheckpointDir("t"), "t/model");
+  EXPECT_EQ(layout::ModelConfigFile("t/model"), "t/model/model.json");
+  EXPECT_EQ(layout::ModelWeightsFile("t/model"), "t/model/model.pt");
+  EXPECT_EQ(layout::RankSummaryFile("t", 1), "t/rank-1.json");
+  EXPECT_EQ(layout::LossesFile("t"), "t/losses.csv");
+  EXPECT_EQ(layout::ValLossesFile("t"), "t/val_losses.csv");
+  EXPECT_EQ(layout::MetricsFile("t"), "t/metrics.json");
+  EXPECT_EQ(layout::ShowcaseFile("t"), "t/showcase.json");
+  EXPECT_STREQ(layout::kResultDirName, "result");
 }
 
 }  // namespace

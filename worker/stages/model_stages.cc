@@ -32,6 +32,7 @@
 #include "../metric_history.h"
 #include "../report.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/base/log.h"
 #include "motionpipe/base/random.h"
 #include "motionpipe/eval/metrics.h"
@@ -91,7 +92,7 @@ std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
         auto resolved = ResolveCheckpoint(matches.gl_pathv[k]);
         if (!resolved.ok()) continue;
         std::error_code ec;
-        const auto time = fs::last_write_time(*resolved + "/model.json", ec);
+        const auto time = fs::last_write_time(layout::ModelConfigFile(*resolved), ec);
         if (!ec && (newest.empty() || time > newest_time)) newest = *resolved, newest_time = time;
       }
     }
@@ -380,7 +381,7 @@ std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics,
   if (path.empty()) return std::nullopt;
   std::string data;
   for (const auto& id : ids) data += id + "\n";
-  auto config = ReadFile(checkpoint + "/model.json");
+  auto config = ReadFile(layout::ModelConfigFile(checkpoint));
   std::vector<MetricRecord> records;
   for (const Tracked& t : tracked) {
     MetricRecord r;
@@ -410,7 +411,7 @@ std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics,
     (*metrics)["pushgateway"] =
         PushToGateway(ctx, p.value("pushgateway", std::string()), method, tracked, *regressions);
   if (!regressions->empty() && p.value("fail_on_regression", false)) {
-    (void)WriteFileAtomic(ctx.output_dir() + "/metrics.json",
+    (void)WriteFileAtomic(layout::MetricsFile(ctx.output_dir()),
                           metrics->dump(1) + "\n");  // for the record; the task fails
     return TaskReport::BadInput("regression: " + regressions->front().Describe() +
                                 (regressions->size() > 1
@@ -434,7 +435,7 @@ void AddTiming(json* metrics, std::chrono::steady_clock::time_point started,
 
 // Writes metrics.json; the task's report carries the number of regressions.
 TaskReport WriteMetrics(const TaskContext& ctx, const json& metrics) {
-  if (Status st = WriteFileAtomic(ctx.output_dir() + "/metrics.json", metrics.dump(1) + "\n");
+  if (Status st = WriteFileAtomic(layout::MetricsFile(ctx.output_dir()), metrics.dump(1) + "\n");
       !st.ok())
     return TaskReport::Error(st.message());
   TaskReport out = TaskReport::Ok();
@@ -1105,7 +1106,7 @@ class ShowcaseStage : public StageExecutor {
            {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk",
             "cos to " + cmu.front().id}},
           {"rows", table_rows}}}};
-    if (Status st = WriteFileAtomic(out + "/showcase.json", showcase.dump(1) + "\n"); !st.ok())
+    if (Status st = WriteFileAtomic(layout::ShowcaseFile(out), showcase.dump(1) + "\n"); !st.ok())
       return TaskReport::Error(st.message());
     return TaskReport::Ok();
   }
