@@ -60,9 +60,10 @@ struct EditorOptions {
   std::string preconditioning = "x0";
   // A gain s(t) per diffusion step and feature column: the estimate adds s(t) (x_t - sqrt(abar_t)
   // prior mean), s starting at the Gaussian (Wiener) optimum for spread sigma_data and corrected
-  // by training. At d < 207 the trunk cannot carry a frame's 207 numbers (the plain head's x0
-  // error at t = 0 is 0.023-0.046 where x_t alone gives 0.0002); this path can, and the loss sets
-  // how much of x_t to trust at each step (not in the paper).
+  // by training, so that x_t passes by the trunk where it is nearly clean (the plain head's x0
+  // error at t = 0 is 0.023-0.046 where x_t alone gives 0.0002) and the loss sets how much of x_t
+  // to trust at each step (not in the paper). Measured (issue 15): it removes that floor but lets
+  // the middle steps' noise into the edits, on 207 columns and on 64 components alike.
   bool learned_skip = false;
   double sigma_data = 0.5;  // the normalised features' spread: (x - mean) / (2 std)
   // > 0: the diffusion runs on the first `components` principal components of the normalised
@@ -70,9 +71,10 @@ struct EditorOptions {
   // spread sigma_data, instead of on the 207 columns; the network reads and writes those
   // coordinates and the x0 loss is still taken on the decoded 207-d frame. Not in the paper: the
   // 207 columns are redundant (6D rotations, joint positions derived from them, 55 columns the
-  // corpus never moves), and at demo width (d = 128) the trunk can neither rebuild nor denoise a
-  // 207-d frame (issue 15); a linear whitening code, as latent diffusion's but fitted, not
-  // trained. 0: the 207 columns (the reference).
+  // corpus never moves); a linear whitening code, as latent diffusion's but fitted, not trained.
+  // Measured at d = 128 with 64 components (issue 15): the low-noise error and the edits are no
+  // better than with 207 columns, so the frame's width was not what limited the MDT.
+  // 0: the 207 columns (the reference).
   int64_t components = 0;
   // With components: scale each axis to spread sigma_data (true: every axis has the same
   // signal-to-noise ratio at a step), or keep the feature space's scale (false: the 207-column

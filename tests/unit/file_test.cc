@@ -1,10 +1,11 @@
 #include "motionpipe/base/file.h"
-#include "motionpipe/base/job_layout.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <filesystem>
+
+#include "motionpipe/base/job_layout.h"
 
 namespace motionpipe {
 namespace {
@@ -71,7 +72,6 @@ TEST(FileLock, OneHolderAtATimeNamedByPid) {
   EXPECT_TRUE(FileLock::Acquire(path).ok());  // released with its holder
   EXPECT_EQ(FileLock::Acquire(dir + "/no/such/dir/lock").status().code(), StatusCode::kIoError);
 }
-
 
 // Issue 16: the job's on-disk names have one home; these are the names jobs already on disk use
 // (changing one would orphan every earlier job's outputs, so the test pins them).
