@@ -115,6 +115,24 @@ torch::Tensor SampleDdim(const CosineSchedule& schedule, at::IntArrayRef shape, 
   return x;
 }
 
+torch::Tensor SampleDdimFromNoised(
+    const CosineSchedule& schedule, const torch::Tensor& start, int64_t t_start, int64_t steps,
+    const Denoise& denoise, torch::Generator generator,
+    const std::function<torch::Tensor(const torch::Tensor&)>& project) {
+  torch::NoGradGuard no_grad;
+  if (t_start < 0 || t_start >= schedule.steps())
+    throw std::invalid_argument("SampleDdimFromNoised: t_start outside the schedule");
+  const auto noise = torch::randn(start.sizes(), generator);
+  auto x = schedule.QSample(start, torch::full({start.size(1)}, t_start, torch::kInt64), noise);
+  const auto ts = DdimTimesteps(t_start + 1, std::min(steps, t_start + 1));
+  for (size_t k = 0; k < ts.size(); ++k) {
+    auto x0 = denoise(x, ts[k]);
+    if (project) x0 = project(x0);
+    x = schedule.DdimStep(x0, x, ts[k], k + 1 < ts.size() ? ts[k + 1] : -1);
+  }
+  return x;
+}
+
 torch::Tensor GuideThreeWay(const torch::Tensor& u, const torch::Tensor& c_m,
                             const torch::Tensor& c_tm, double g_m, double g_t) {
   return u + g_m * (c_m - u) + g_t * (c_tm - c_m);

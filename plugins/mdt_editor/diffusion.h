@@ -62,6 +62,14 @@ torch::Tensor SampleDdpm(const CosineSchedule& schedule, at::IntArrayRef shape,
 torch::Tensor SampleDdim(const CosineSchedule& schedule, at::IntArrayRef shape, int64_t steps,
                          const Denoise& denoise, torch::Generator generator,
                          const std::function<torch::Tensor(const torch::Tensor&)>& project = {});
+// SDEdit (Meng et al. 2022), not in SimMotionEdit: `start` noised to step t_start (x_t =
+// sqrt(abar) start + sqrt(1 - abar) eps) and DDIM from there to the end in `steps` evenly spaced
+// steps. The sample keeps what the noise at t_start leaves of `start`; t_start = T - 1 is close
+// to SampleDdim.
+torch::Tensor SampleDdimFromNoised(
+    const CosineSchedule& schedule, const torch::Tensor& start, int64_t t_start, int64_t steps,
+    const Denoise& denoise, torch::Generator generator,
+    const std::function<torch::Tensor(const torch::Tensor&)>& project = {});
 // The DDIM step indices, descending, for `steps` of a `total`-step schedule.
 std::vector<int64_t> DdimTimesteps(int64_t total, int64_t steps);
 

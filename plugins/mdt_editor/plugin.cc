@@ -177,6 +177,13 @@ class EditorGenerator : public plugin::Generator {
     // The guidance scales g_m, g_t (three-way) or g_t (MDM): the checkpoint's unless given.
     guidance_motion_ = options.value("guidance_motion", model_->options().guidance_motion);
     guidance_text_ = options.value("guidance_text", model_->options().guidance_text);
+    // > 0: DDIM starts from the aligned source noised to this step (SDEdit), not from pure noise.
+    start_step_ = options.value("start_step", int64_t{0});
+    if (start_step_ < 0 || start_step_ >= model_->schedule().steps())
+      throw std::invalid_argument("start_step must be in [0, " +
+                                  std::to_string(model_->schedule().steps() - 1) + "]");
+    if (start_step_ > 0 && !model_->options().uses_source())
+      throw std::invalid_argument("start_step starts from the source: an mdt or tmed checkpoint");
   }
 
   std::string Name() const override {
@@ -319,9 +326,15 @@ class EditorGenerator : public plugin::Generator {
     const auto& r0 = requests[0];
     auto generator = at::make_generator<at::CPUGeneratorImpl>(r0.seed);
     const std::vector<int64_t> shape = {tt, n, model_->net()->diffusion_dim()};
+    if (start_step_ > 0 && r0.sampler != "ddim")
+      return InvalidArgument("start_step needs the ddim sampler (got '" + r0.sampler + "')");
     torch::Tensor x;
     if (r0.sampler.empty() || r0.sampler == "ddpm") {
       x = SampleDdpm(model_->schedule(), shape, denoise, generator, project);
+    } else if (r0.sampler == "ddim" && start_step_ > 0) {
+      const auto start = model_->net()->Encode(AlignSource(source, source_padding, target_padding));
+      x = SampleDdimFromNoised(model_->schedule(), start, start_step_, r0.steps > 0 ? r0.steps : 50,
+                               denoise, generator, project);
     } else if (r0.sampler == "ddim") {
       x = SampleDdim(model_->schedule(), shape, r0.steps > 0 ? r0.steps : 50, denoise, generator,
                      project);
@@ -349,6 +362,7 @@ class EditorGenerator : public plugin::Generator {
 
   std::unique_ptr<EditorModel> model_;
   bool body_parts_ = false;
+  int64_t start_step_ = 0;
   std::string labeler_;
   double guidance_motion_ = 2, guidance_text_ = 2;
 };

@@ -464,6 +464,41 @@ TEST(Editor, PrincipalComponentsCodeTheFrameExactlyAtItsRank) {
   EXPECT_TRUE(torch::equal(identity->Encode(source), source));
 }
 
+// SDEdit's sampler: from `start` noised to t_start, DDIM with an exact x0 ends on that x0; with a
+// denoiser that returns its input's scaled mean it stays near `start`, nearer the lower t_start.
+TEST(Diffusion, SamplingFromANoisedStartEndsOnTheEstimateAndKeepsTheStart) {
+  const CosineSchedule schedule(300);
+  torch::manual_seed(4);
+  const auto start = torch::randn({20, 2, 7}) * 0.5;
+  const auto target = torch::randn({20, 2, 7}) * 0.5;
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(1);
+  const Denoise exact = [&](const torch::Tensor&, int64_t) { return target; };
+  const auto x = SampleDdimFromNoised(schedule, start, 150, 10, exact, generator);
+  EXPECT_LT((x - target).abs().max().item<double>(), 1e-4);
+  // The posterior mean of data N(start, 0) is start itself: the sample returns to it exactly.
+  const Denoise keep = [&](const torch::Tensor&, int64_t) { return start; };
+  for (int64_t t_start : {30, 150, 299}) {
+    const auto y = SampleDdimFromNoised(schedule, start, t_start, 20, keep, generator);
+    EXPECT_LT((y - start).abs().max().item<double>(), 1e-4) << t_start;
+  }
+  // A denoiser that trusts x_t: the lower t_start, the nearer the sample stays to the start.
+  const Denoise trust = [&](const torch::Tensor& xt, int64_t t) {
+    return xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)]);
+  };
+  double previous = 0;
+  for (int64_t t_start : {10, 60, 150}) {
+    auto g = at::make_generator<at::CPUGeneratorImpl>(2);
+    const double d = (SampleDdimFromNoised(schedule, start, t_start, 10, trust, g) - start)
+                         .pow(2)
+                         .mean()
+                         .item<double>();
+    EXPECT_GT(d, previous) << t_start;
+    previous = d;
+  }
+  EXPECT_THROW(SampleDdimFromNoised(schedule, start, 300, 10, exact, generator),
+               std::invalid_argument);
+}
+
 TEST(Editor, SamplingGivesTheRequestedLengthFiniteAndRepeatsUnderASeed) {
   torch::manual_seed(3);
   EditorNet net(Tiny("mdt"));
