@@ -463,7 +463,9 @@ Result<json> EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t,
 
 // params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
 // batch (32), seed, method (a name for the report; default: the edit stage's model), yardstick
-// ("untrained": this row is the report's untrained editor, initial weights, same sampler).
+// ("untrained": this row is the report's untrained editor, initial weights, same sampler),
+// jitter_yardsticks (spreads in radians: the copy with that white noise on its joint rotations,
+// scored as "jittered_copies").
 class EvalEditStage : public StageExecutor {
  public:
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
@@ -550,6 +552,28 @@ class EvalEditStage : public StageExecutor {
     metrics["target_to_source"] = {{"batches", ScoresJson(*target_to_source)}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
                                {"target", MeanPlausibility(targets)}};
+    // Diagnostic (issue 15), on request: the copy with white noise of spread sigma (radians) on
+    // every joint rotation, scored in the same batches, shows how much of an edit's score the
+    // evaluator loses to roughness alone.
+    json jittered = json::object();
+    for (double sigma : p.value("jitter_yardsticks", std::vector<double>{})) {
+      if (!(sigma > 0 && sigma < 1))
+        return TaskReport::BadInput("eval_edit: jitter_yardsticks are spreads in (0, 1) radians");
+      std::vector<Motion> noisy = sources;
+      Rng rng(seed ^ 0x6a177e12ULL);
+      for (Motion& m : noisy) {
+        for (float& v : m.poses) v += static_cast<float>(sigma * rng.Normal());
+      }
+      auto rows = (*encoder)->EncodeMotions(noisy);
+      if (!rows.ok()) return TaskReport::Error("eval_edit: " + rows.status().message());
+      auto scores = EditRetrieval(ToEmbeddings(*rows), t, s, batch, seed);
+      if (!scores.ok()) return TaskReport::Error("eval_edit: " + scores.status().message());
+      json entry = *scores;
+      entry["sigma"] = sigma;
+      entry["plausibility"] = MeanPlausibility(noisy);
+      jittered[std::to_string(sigma)] = entry;
+    }
+    if (!jittered.empty()) metrics["jittered_copies"] = jittered;
     const json& g2t = metrics["generated_to_target"]["all"];
     if (auto failed =
             RecordHistory(ctx, &metrics, method, edited_checkpoint, ids,
