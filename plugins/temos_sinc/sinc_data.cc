@@ -159,13 +159,22 @@ std::pair<torch::Tensor, torch::Tensor> SincDataset::ComputeStats() const {
     }
     count += frames;
   }
-  std::vector<float> mean(kTemosFeatureDim), stddev(kTemosFeatureDim);
-  for (int d = 0; d < kTemosFeatureDim; ++d) {
-    const double m = sum[static_cast<size_t>(d)] / static_cast<double>(std::max<int64_t>(1, count));
+  return StatsFromSums(sum, sq, count);
+}
+
+std::pair<torch::Tensor, torch::Tensor> StatsFromSums(const std::vector<double>& sum,
+                                                      const std::vector<double>& squares,
+                                                      int64_t count) {
+  // The same rule as the editor's statistics (ConstantFeatureColumnsKeepUnitScale).
+  constexpr double kConstantColumnVariance = 1e-12;
+  const size_t dims = sum.size();
+  std::vector<float> mean(dims), stddev(dims);
+  for (size_t d = 0; d < dims; ++d) {
+    const double m = sum[d] / static_cast<double>(std::max<int64_t>(1, count));
     const double var =
-        sq[static_cast<size_t>(d)] / static_cast<double>(std::max<int64_t>(1, count)) - m * m;
-    mean[static_cast<size_t>(d)] = static_cast<float>(m);
-    stddev[static_cast<size_t>(d)] = static_cast<float>(std::sqrt(std::max(var, 0.0)));
+        std::max(squares[d] / static_cast<double>(std::max<int64_t>(1, count)) - m * m, 0.0);
+    mean[d] = static_cast<float>(m);
+    stddev[d] = static_cast<float>(var < kConstantColumnVariance ? 1.0 : std::sqrt(var));
   }
   return {torch::tensor(mean), torch::tensor(stddev)};
 }

@@ -8,6 +8,7 @@
 
 #include "../../plugins/common/text_encoder.h"
 #include "../../plugins/common/transformer.h"
+#include "../../plugins/temos_sinc/sinc_data.h"
 #include "../../plugins/temos_sinc/temos.h"
 #include "motionpipe/formats/npz.h"
 
@@ -191,6 +192,23 @@ TEST(Temos, KlIsTheMeanOverEveryElementLikeTheReference) {
                                   torch::cat({mu_p, mu_p}, 1), torch::cat({logvar_p, logvar_p}, 1))
                   .item<double>(),
               elementwise.mean().item<double>(), 1e-5);
+}
+
+// Issue 15: a 135-d feature column constant over the training motions had std 0, and the demo's
+// TMR turned a copy with 0.1 degree of joint noise into chance retrieval. Such a column keeps std
+// 1; the others get their own.
+TEST(Temos, ConstantFeatureColumnsKeepUnitScale) {
+  using temos::StatsFromSums;
+  // Three columns over 4 frames: values {1, 1, 1, 1}, {0, 2, 0, 2}, {0.5, 0.5, 0.5, 0.5}.
+  const std::vector<double> sum = {4, 4, 2}, squares = {4, 8, 1};
+  const auto [mean, stddev] = StatsFromSums(sum, squares, 4);
+  EXPECT_NEAR(mean[0].item<double>(), 1.0, 1e-6);
+  EXPECT_NEAR(mean[1].item<double>(), 1.0, 1e-6);
+  EXPECT_NEAR(stddev[0].item<double>(), 1.0, 1e-6);  // constant: unit scale, not 0
+  EXPECT_NEAR(stddev[1].item<double>(), 1.0, 1e-6);  // population std of {0, 2, 0, 2}
+  EXPECT_NEAR(stddev[2].item<double>(), 1.0, 1e-6);
+  const auto [m2, s2] = StatsFromSums({0.0}, {0.04}, 1);  // one frame: variance 0.04 - 0 = 0.04
+  EXPECT_NEAR(s2[0].item<double>(), 0.2, 1e-6);
 }
 
 TEST(Temos, OverfitsASmallBatch) {
