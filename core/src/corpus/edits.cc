@@ -210,6 +210,16 @@ struct EditContext {
   Rng& rng;
 };
 
+// The text of an edit that replaces the original action (an overlay or a base action).
+std::string ReplacementText(const EditContext& in, const ActionInstance& replacement) {
+  return Fill(in.rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
+                                                   "instead of {old_ing}, {new}", "{new} instead",
+                                                   "don't {old}, {new}"}),
+              {{"{new}", VerbPhrase(replacement, Person::kSecond)},
+               {"{old}", in.verb},
+               {"{old_ing}", text::GerundPhrase(in.verb)}});
+}
+
 void ApplySpeed(const EditContext& in) {
   const bool faster =
       in.original.speed < 1.25 && (in.original.speed < 0.8 || in.rng.Bernoulli(0.5));
@@ -373,12 +383,7 @@ void ApplyReplaceAction(const EditContext& in) {
   replacement.start = in.original.start;
   replacement.end = in.original.end;
   in.inst = replacement;
-  in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
-                                                           "instead of {old_ing}, {new}",
-                                                           "{new} instead", "don't {old}, {new}"}),
-                      {{"{new}", VerbPhrase(replacement, Person::kSecond)},
-                       {"{old}", in.verb},
-                       {"{old_ing}", text::GerundPhrase(in.verb)}});
+  in.edit.text = ReplacementText(in, replacement);
 }
 
 void ApplyTiming(const EditContext& in) {
@@ -435,12 +440,7 @@ void ApplyReplaceBase(const EditContext& in) {
   RetimeBase(&in.t, in.pick.index,
              std::max(in.original.duration(),
                       std::min(replacement.duration(), in.original.duration() * 1.5)));
-  in.edit.text = Fill(in.rng.Pick(std::vector<std::string>{"{new} instead of {old_ing}",
-                                                           "instead of {old_ing}, {new}",
-                                                           "{new} instead", "don't {old}, {new}"}),
-                      {{"{new}", VerbPhrase(replacement, Person::kSecond)},
-                       {"{old}", in.verb},
-                       {"{old_ing}", text::GerundPhrase(in.verb)}});
+  in.edit.text = ReplacementText(in, replacement);
 }
 
 void ApplyPosture(const EditContext& in) {
