@@ -8,6 +8,17 @@
 
 namespace motionpipe::worker {
 
+TaskReport TaskReport::FromStatus(const Status& s) {
+  switch (s.code()) {
+    case StatusCode::kInvalidArgument:
+    case StatusCode::kNotFound:
+    case StatusCode::kDataLoss:
+      return BadInput(s.message());
+    default:
+      return Error(s.message());
+  }
+}
+
 std::vector<std::string> TaskContext::InputDirs(const std::string& stage) const {
   for (const auto& input : spec.inputs()) {
     if (input.stage() == stage) return {input.dirs().begin(), input.dirs().end()};

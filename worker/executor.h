@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "motionpipe.pb.h"
+#include "motionpipe/base/status.h"
 
 namespace motionpipe::worker {
 
@@ -28,6 +29,9 @@ struct TaskReport {
   static TaskReport BadInput(std::string message) {
     return {Outcome::kBadInput, std::move(message), {}};
   }
+  // The one mapping of a failed Status: deterministic input problems (invalid argument, not found,
+  // data loss) fail the task at once as bad input; anything else may be transient and is retried.
+  static TaskReport FromStatus(const Status& s);
 };
 
 struct TaskContext {

@@ -5,6 +5,7 @@
 #include <map>
 
 #include "motionpipe/features/motionfix207.h"
+#include "motionpipe/formats/motionfix.h"
 #include "motionpipe/similarity/filter.h"
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -52,14 +53,8 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
   std::vector<std::string> paths;
   if (options_.filter == "none") {
     for (const auto& dir : input_dirs) {
-      for (const std::string& folder : {dir, dir + "/motionfix"}) {
-        if (!fs::is_directory(folder)) continue;
-        for (const auto& entry : fs::directory_iterator(folder)) {
-          const std::string name = entry.path().filename().string();
-          if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz")
-            paths.push_back(entry.path().string());
-        }
-      }
+      const std::vector<std::string> found = TripletFilesIn(dir);
+      paths.insert(paths.end(), found.begin(), found.end());
     }
     if (paths.empty())
       throw std::invalid_argument(

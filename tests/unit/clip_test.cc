@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
+
 #include "motionpipe/formats/amass.h"
 #include "motionpipe/formats/humanml3d.h"
 #include "motionpipe/formats/motionfix.h"
@@ -139,6 +142,27 @@ TEST(Triplets, RoundTripWithJointsAndEditRange) {
   EXPECT_EQ((*back)[1].target_joints, triplets[1].target_joints);
   EXPECT_EQ((*back)[1].edit_end, 20);
   EXPECT_EQ((*back)[0].edit_start, -1);
+}
+
+// One rule finds a directory's triplet files: motionfix/triplets*.npz (a corpus or dataset stage's
+// output) before triplets*.npz beside it, sorted; other files are not triplets.
+TEST(Triplets, TripletFilesInPrefersTheMotionfixFolderAndSorts) {
+  namespace fs = std::filesystem;
+  const std::string dir = ::testing::TempDir() + "/triplet_files";
+  fs::remove_all(dir);
+  fs::create_directories(dir + "/motionfix");
+  const auto touch = [](const std::string& path) { std::ofstream(path) << "x"; };
+  EXPECT_TRUE(TripletFilesIn(dir).empty());
+  EXPECT_TRUE(TripletFilesIn(dir + "/missing").empty());
+  touch(dir + "/triplets-00001.npz");
+  touch(dir + "/triplets-00000.npz");
+  touch(dir + "/clips-00000.npz");
+  touch(dir + "/triplets-notes.txt");
+  EXPECT_EQ(TripletFilesIn(dir),
+            (std::vector<std::string>{dir + "/triplets-00000.npz", dir + "/triplets-00001.npz"}));
+  touch(dir + "/motionfix/triplets-train.npz");
+  EXPECT_EQ(TripletFilesIn(dir), (std::vector<std::string>{dir + "/motionfix/triplets-train.npz"}));
+  fs::remove_all(dir);
 }
 
 TEST(HumanML3D, JointsConvertFromYUpToZUp) {

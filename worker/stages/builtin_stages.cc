@@ -155,24 +155,11 @@ class CorpusStage : public StageExecutor {
     }
     if (const Status s = corpus::GenerateCorpusShard(options, ctx.spec.index(), ctx.output_dir());
         !s.ok()) {
-      return s.code() == StatusCode::kInvalidArgument ? TaskReport::BadInput(s.message())
-                                                      : TaskReport::Error(s.message());
+      return TaskReport::FromStatus(s);
     }
     return TaskReport::Ok();
   }
 };
-
-// Deterministic input problems fail the task at once; anything else may be transient.
-TaskReport FromStatus(const Status& s) {
-  switch (s.code()) {
-    case StatusCode::kInvalidArgument:
-    case StatusCode::kNotFound:
-    case StatusCode::kDataLoss:
-      return TaskReport::BadInput(s.message());
-    default:
-      return TaskReport::Error(s.message());
-  }
-}
 
 // SimMotionEdit's dataset filter (similarity curves, MotionSNR, classes): shard tasks each filter
 // their part of the triplet files; the reduce task writes the summary and its plot.
@@ -189,7 +176,7 @@ class FilterStage : public StageExecutor {
       const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(),
                                             ctx.spec.shard_dirs().end());
       auto summary = similarity::SummarizeFilter(shards, ctx.output_dir());
-      if (!summary.ok()) return FromStatus(summary.status());
+      if (!summary.ok()) return TaskReport::FromStatus(summary.status());
       TaskReport report;
       report.metrics["triplets"] = (*summary)["triplets"].get<double>();
       report.metrics["kept"] = (*summary)["kept"].get<double>();
@@ -215,10 +202,10 @@ class FilterStage : public StageExecutor {
       if (inputs.empty()) return TaskReport::BadInput("input stage '" + stage + "' has no outputs");
     }
     auto files = similarity::ResolveTripletFiles(inputs);
-    if (!files.ok()) return FromStatus(files.status());
+    if (!files.ok()) return TaskReport::FromStatus(files.status());
     const auto slices = similarity::PlanShard(*files, ctx.spec.count(), ctx.spec.index());
     auto report = similarity::FilterShard(slices, *options, ctx.threads, ctx.output_dir());
-    if (!report.ok()) return FromStatus(report.status());
+    if (!report.ok()) return TaskReport::FromStatus(report.status());
     TaskReport out;
     out.metrics["triplets"] = static_cast<double>(report->triplets);
     out.metrics["kept"] = static_cast<double>(report->kept);

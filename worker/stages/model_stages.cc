@@ -53,26 +53,18 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// Triplet files of the inputs: DIR/motionfix/triplets*.npz or DIR/triplets*.npz, sorted. An input
-// with a result directory (a corpus) is read from there only: its task directories hold the same
-// triplets as shards.
+// Triplet files of the inputs (TripletFilesIn), sorted. An input with a result directory (a
+// corpus) is read from there only: its task directories hold the same triplets as shards.
 std::vector<std::string> TripletFiles(const TaskContext& ctx) {
   std::vector<std::string> files;
-  const auto scan = [&](const std::string& dir) {
-    size_t found = 0;
-    for (const std::string& folder : {dir, dir + "/motionfix"}) {
-      if (!fs::is_directory(folder)) continue;
-      for (const auto& entry : fs::directory_iterator(folder)) {
-        const std::string name = entry.path().filename().string();
-        if (name.rfind("triplets", 0) == 0 && entry.path().extension() == ".npz")
-          files.push_back(entry.path().string()), ++found;
-      }
-    }
-    return found;
+  const auto add = [&](const std::string& dir) {
+    const std::vector<std::string> found = TripletFilesIn(dir);
+    files.insert(files.end(), found.begin(), found.end());
+    return !found.empty();
   };
   for (const auto& input : ctx.spec.inputs()) {
-    if (!input.result_dir().empty() && scan(input.result_dir()) > 0) continue;
-    for (const auto& dir : input.dirs()) scan(dir);
+    if (!input.result_dir().empty() && add(input.result_dir())) continue;
+    for (const auto& dir : input.dirs()) add(dir);
   }
   std::sort(files.begin(), files.end());
   files.erase(std::unique(files.begin(), files.end()), files.end());

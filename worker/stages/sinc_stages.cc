@@ -17,17 +17,6 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-TaskReport FromStatus(const Status& s) {
-  switch (s.code()) {
-    case StatusCode::kInvalidArgument:
-    case StatusCode::kNotFound:
-    case StatusCode::kDataLoss:
-      return TaskReport::BadInput(s.message());
-    default:
-      return TaskReport::Error(s.message());
-  }
-}
-
 // Every directory the task's inputs committed (results first).
 std::vector<std::string> AllInputDirs(const TaskContext& ctx) {
   std::vector<std::string> dirs;
@@ -176,7 +165,7 @@ class SinglesStage : public StageExecutor {
     int64_t skipped = 0;
     std::string problem;
     auto table = sinc::ExtractBabelSpans(babel, amass_root, extraction, &skipped, &problem);
-    if (!table.ok()) return FromStatus(table.status());
+    if (!table.ok()) return TaskReport::FromStatus(table.status());
     if (table->size() == 0)
       return TaskReport::BadInput("singles: no spans (" + std::to_string(skipped) +
                                   " sequences skipped: " + problem + ")");
@@ -190,7 +179,7 @@ class SinglesStage : public StageExecutor {
       }
     }
     auto labeler = MakeLabeler(labeler_name, labeler_config, plugins_);
-    if (!labeler.ok()) return FromStatus(labeler.status());
+    if (!labeler.ok()) return TaskReport::FromStatus(labeler.status());
     if ((*labeler)->NeedsMotion())
       return TaskReport::BadInput("singles: labeler '" + labeler_name +
                                   "' labels motions; choose a text labeler");
@@ -202,7 +191,7 @@ class SinglesStage : public StageExecutor {
     std::vector<labels::LabelInput> inputs;
     for (const auto& [text, unused] : parts) inputs.push_back({text, nullptr});
     auto labelled = (*labeler)->Label(inputs);
-    if (!labelled.ok()) return FromStatus(labelled.status());
+    if (!labelled.ok()) return TaskReport::FromStatus(labelled.status());
     size_t k = 0;
     for (auto& [text, set] : parts) set = (*labelled)[k++];
     std::map<std::string, int64_t> per_split, per_parts;
@@ -260,11 +249,11 @@ class SynthStage : public StageExecutor {
       return TaskReport::BadInput(
           "synth: no spans.npz (params.spans, or an input `singles` stage)");
     auto table = sinc::ReadSpans(spans_path);
-    if (!table.ok()) return FromStatus(table.status());
+    if (!table.ok()) return TaskReport::FromStatus(table.status());
     json merged = p;
     if (!merged.contains("seed")) merged["seed"] = ctx.spec.seed();
     auto options = sinc::SynthOptionsFromJson(merged, "params");
-    if (!options.ok()) return FromStatus(options.status());
+    if (!options.ok()) return TaskReport::FromStatus(options.status());
     const int64_t total = p.value("pairs", int64_t{10000});
     const int64_t shard_size = p.value("shard_size", int64_t{50000});
     const int64_t begin = static_cast<int64_t>(ctx.spec.index()) * shard_size;
@@ -272,7 +261,7 @@ class SynthStage : public StageExecutor {
     if (count <= 0) return TaskReport::Ok();
     auto report = sinc::SynthesiseShard(*table, *options, ctx.spec.index(), count, ctx.threads,
                                         ctx.output_dir());
-    if (!report.ok()) return FromStatus(report.status());
+    if (!report.ok()) return TaskReport::FromStatus(report.status());
     // The spans file the recipes index, for loaders and exports.
     const json source = {{"spans", fs::absolute(spans_path).string()},
                          {"first_pair", begin},

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 
 namespace motionpipe {
 
@@ -169,6 +170,23 @@ Status WriteTriplets(const std::string& path, const std::vector<Triplet>& triple
 Result<std::vector<Triplet>> ReadTriplets(const std::string& path) {
   MP_ASSIGN_OR_RETURN(const Npz npz, ReadNpz(path));
   return TripletsFromNpz(npz, path);
+}
+
+std::vector<std::string> TripletFilesIn(const std::string& dir) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> files;
+  for (const std::string& folder : {dir + "/motionfix", dir}) {
+    std::error_code ec;
+    for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      if (name.rfind("triplets", 0) == 0 && it->path().extension() == ".npz" &&
+          it->is_regular_file(ec))
+        files.push_back(it->path().string());
+    }
+    if (!files.empty()) break;
+  }
+  std::sort(files.begin(), files.end());
+  return files;
 }
 
 }  // namespace motionpipe

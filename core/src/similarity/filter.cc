@@ -71,23 +71,16 @@ Result<std::vector<TripletFile>> ResolveTripletFiles(const std::vector<std::stri
     }
     if (!fs::is_directory(input, ec))
       return NotFound(input + ": no such triplets file or directory");
-    std::vector<std::string> found;
-    for (const auto& [dir, pattern_prefix] : std::vector<std::pair<std::string, std::string>>{
-             {input + "/motionfix", "triplets-"}, {input, "triplets-"}, {input, ""}}) {
-      if (!fs::is_directory(dir, ec)) continue;
-      for (const auto& entry : fs::directory_iterator(dir, ec)) {
-        const std::string name = entry.path().filename().string();
-        if (entry.is_regular_file() && name.size() > 4 &&
-            name.compare(name.size() - 4, 4, ".npz") == 0 &&
-            name.compare(0, pattern_prefix.size(), pattern_prefix) == 0) {
-          found.push_back(entry.path().string());
-        }
-      }
-      if (!found.empty()) break;
+    // The triplet files of a stage's output, else every .npz of a user's folder of converted files.
+    std::vector<std::string> found = TripletFilesIn(input);
+    for (fs::directory_iterator it(input, ec), end; found.empty() && !ec && it != end;
+         it.increment(ec)) {
+      if (it->path().extension() == ".npz" && it->is_regular_file(ec))
+        found.push_back(it->path().string());
     }
     if (found.empty())
       return NotFound(
-          input + ": no triplets files (motionfix/triplets-*.npz, triplets-*.npz or *.npz) found");
+          input + ": no triplets files (motionfix/triplets*.npz, triplets*.npz or *.npz) found");
     std::sort(found.begin(), found.end());
     for (auto& path : found) files.push_back({std::move(path), 0});
   }

@@ -48,6 +48,11 @@ Status WriteTriplets(const std::string& path, const std::vector<Triplet>& triple
                      bool compress = false);
 Result<std::vector<Triplet>> ReadTriplets(const std::string& path);
 
+// The triplet files a directory holds, sorted: DIR/motionfix/triplets*.npz (what the corpus and
+// dataset stages write), else DIR/triplets*.npz; empty when it holds neither. The one rule by which
+// the filter, the editors' data and the evaluation stages find triplets in a directory.
+std::vector<std::string> TripletFilesIn(const std::string& dir);
+
 }  // namespace motionpipe
 
 namespace motionpipe {
