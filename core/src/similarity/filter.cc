@@ -118,15 +118,11 @@ std::vector<ShardSlice> PlanShard(const std::vector<TripletFile>& files, int sha
   return slices;
 }
 
-Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices,
-                                const SimilarityOptions& options, int threads,
-                                const std::string& out_dir) {
-  MP_RETURN_IF_ERROR(ValidateOptions(options, "similarity options"));
-  const auto started = std::chrono::steady_clock::now();
-  threads = std::max(1, threads);
-  const std::vector<double> boundaries = Boundaries(options.classes);
+namespace {
 
-  // Outputs, in slice and row order.
+// What a shard's filter keeps and counts, in slice and row order: the columns of similarity.npz,
+// the dropped triplets with their reasons, and the figures of stats.json.
+struct ShardOutputs {
   std::vector<std::string> ids, files, splits;
   std::vector<int64_t> rows, offsets{0};
   std::vector<double> snr;
@@ -136,12 +132,138 @@ Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices,
   json dropped = json::array();
   std::map<std::string, int64_t> dropped_by_reason;
   SnrList snr_list;
-  std::vector<int64_t> class_frames(static_cast<size_t>(std::max(options.classes, 1)), 0);
-  std::vector<std::array<int64_t, 3>> confusion(boundaries.size(), {0, 0, 0});
+  std::vector<int64_t> class_frames;
+  std::vector<double> boundaries;
+  std::vector<std::array<int64_t, 3>> confusion;  // per boundary: tp, fp, fn
   std::map<std::string, std::vector<std::array<int64_t, 3>>> confusion_by_kind;
   std::map<std::string, int64_t> kept_by_split;
   int64_t ground_truth_triplets = 0, triplets = 0, kept_frames = 0;
 
+  explicit ShardOutputs(const SimilarityOptions& options)
+      : class_frames(static_cast<size_t>(std::max(options.classes, 1)), 0),
+        boundaries(Boundaries(options.classes)),
+        confusion(boundaries.size(), {0, 0, 0}) {}
+
+  // Row `k` of `columns` (file `path`) with its similarity result `r`.
+  void Add(const TripletColumns& columns, size_t k, const std::string& path,
+           const SimilarityResult& r, const SimilarityOptions& options) {
+    const int64_t file_row = columns.first_row + static_cast<int64_t>(k);
+    if (std::isfinite(r.snr)) {
+      snr_list.values.push_back(r.snr);
+      snr_list.kept.push_back(r.kept() ? 1 : 0);
+    } else if (std::isinf(r.snr)) {
+      ++snr_list.infinite;
+    }
+    if (!r.kept()) {
+      json entry = {{"id", columns.ids[k]},
+                    {"file", path},
+                    {"row", file_row},
+                    {"reason", DropReasonName(r.dropped)},
+                    {"detail", r.detail}};
+      if (std::isfinite(r.snr)) entry["snr"] = r.snr;
+      dropped.push_back(std::move(entry));
+      ++dropped_by_reason[DropReasonName(r.dropped)];
+      return;
+    }
+    ids.push_back(columns.ids[k]);
+    files.push_back(path);
+    splits.push_back(columns.splits[k]);
+    ++kept_by_split[columns.splits[k]];
+    rows.push_back(file_row);
+    snr.push_back(r.snr);
+    edit_start.push_back(columns.edit_start[k]);
+    edit_end.push_back(columns.edit_end[k]);
+    const size_t frames = r.normalized.size();
+    offsets.push_back(offsets.back() + static_cast<int64_t>(frames));
+    kept_frames += static_cast<int64_t>(frames);
+    for (size_t i = 0; i < frames; ++i) {
+      similarity.push_back(static_cast<float>(r.normalized[i]));
+      combined.push_back(static_cast<float>(r.combined[i]));
+      raw_rot.push_back(static_cast<float>(r.raw_rot[i]));
+      raw_loc.push_back(static_cast<float>(r.raw_loc[i]));
+    }
+    if (options.classes > 0) {
+      classes.insert(classes.end(), r.classes.begin(), r.classes.end());
+      for (const uint8_t c : r.classes) ++class_frames[c];
+    }
+    CountEditRange(columns, k, r);
+  }
+
+  // Agreement of the low-similarity frames with the frames the edit is known to change.
+  void CountEditRange(const TripletColumns& columns, size_t k, const SimilarityResult& r) {
+    const int32_t gs = columns.edit_start[k], ge = columns.edit_end[k];
+    if (gs < 0 || ge <= gs) return;
+    ++ground_truth_triplets;
+    auto& by_kind = confusion_by_kind[columns.kinds[k].empty() ? "unknown" : columns.kinds[k]];
+    by_kind.resize(boundaries.size(), {0, 0, 0});
+    const size_t frames = r.normalized.size();
+    for (size_t b = 0; b < boundaries.size(); ++b) {
+      for (size_t i = 0; i < frames; ++i) {
+        const bool predicted = r.normalized[i] < boundaries[b];
+        const bool edited = static_cast<int64_t>(i) >= gs && static_cast<int64_t>(i) < ge;
+        const int slot = predicted && edited ? 0 : (predicted ? 1 : (edited ? 2 : -1));
+        if (slot < 0) continue;
+        ++confusion[b][static_cast<size_t>(slot)];
+        ++by_kind[b][static_cast<size_t>(slot)];
+      }
+    }
+  }
+
+  Status WriteSimilarity(const std::string& path, const SimilarityOptions& options) const {
+    const auto n = static_cast<int64_t>(ids.size());
+    const auto f = static_cast<int64_t>(similarity.size());
+    Npz npz;
+    npz.Add("format", NpyArray::ScalarString(kSimilarityFormat));
+    npz.Add("options", NpyArray::ScalarString(OptionsToJson(options).dump()));
+    npz.Add("ids", NpyArray::Strings({n}, ids));
+    npz.Add("files", NpyArray::Strings({n}, files));
+    npz.Add("splits", NpyArray::Strings({n}, splits));
+    npz.Add("rows", NpyArray::Int64({n}, rows));
+    npz.Add("offsets", NpyArray::Int64({n + 1}, offsets));
+    npz.Add("snr", NpyArray::Float64({n}, snr));
+    npz.Add("similarity", NpyArray::Float32({f}, similarity));
+    if (options.classes > 0) npz.Add("classes", NpyArray::UInt8({f}, classes));
+    npz.Add("combined", NpyArray::Float32({f}, combined));
+    npz.Add("raw_rot", NpyArray::Float32({f}, raw_rot));
+    npz.Add("raw_loc", NpyArray::Float32({f}, raw_loc));
+    npz.Add("edit_start", NpyArray::Int32({n}, edit_start));
+    npz.Add("edit_end", NpyArray::Int32({n}, edit_end));
+    return WriteNpz(path, npz, false);
+  }
+
+  json Stats(const SimilarityOptions& options, double seconds, int threads) const {
+    json by_kind = json::object();
+    for (const auto& [kind, counts] : confusion_by_kind)
+      by_kind[kind] = ConfusionJson(counts, boundaries);
+    return {{"triplets", triplets},
+            {"kept", static_cast<int64_t>(ids.size())},
+            {"kept_frames", kept_frames},
+            {"kept_by_split", kept_by_split},
+            {"dropped", dropped_by_reason},
+            {"snr", snr_list.values},
+            {"snr_kept", snr_list.kept},
+            {"snr_infinite", snr_list.infinite},
+            {"classes", options.classes},
+            {"class_frames", options.classes > 0 ? json(class_frames) : json::array()},
+            {"edit_range",
+             {{"triplets", ground_truth_triplets},
+              {"boundaries", ConfusionJson(confusion, boundaries)},
+              {"by_kind", by_kind}}},
+            {"options", OptionsToJson(options)},
+            {"seconds", seconds},
+            {"threads", threads}};
+  }
+};
+
+}  // namespace
+
+Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices,
+                                const SimilarityOptions& options, int threads,
+                                const std::string& out_dir) {
+  MP_RETURN_IF_ERROR(ValidateOptions(options, "similarity options"));
+  const auto started = std::chrono::steady_clock::now();
+  threads = std::max(1, threads);
+  ShardOutputs out(options);
   for (const ShardSlice& slice : slices) {
     TripletColumnOptions read;
     read.row_begin = slice.row_begin;
@@ -160,117 +282,20 @@ Result<ShardReport> FilterShard(const std::vector<ShardSlice>& slices,
             SideView(columns.source, row), SideView(columns.target, row), options, &workspace);
       }
     }
-    triplets += n;
-    for (int64_t row = 0; row < n; ++row) {
-      const auto k = static_cast<size_t>(row);
-      const SimilarityResult& r = results[k];
-      const int64_t file_row = columns.first_row + row;
-      if (std::isfinite(r.snr)) {
-        snr_list.values.push_back(r.snr);
-        snr_list.kept.push_back(r.kept() ? 1 : 0);
-      } else if (std::isinf(r.snr)) {
-        ++snr_list.infinite;
-      }
-      if (!r.kept()) {
-        json entry = {{"id", columns.ids[k]},
-                      {"file", slice.path},
-                      {"row", file_row},
-                      {"reason", DropReasonName(r.dropped)},
-                      {"detail", r.detail}};
-        if (std::isfinite(r.snr)) entry["snr"] = r.snr;
-        dropped.push_back(std::move(entry));
-        ++dropped_by_reason[DropReasonName(r.dropped)];
-        continue;
-      }
-      ids.push_back(columns.ids[k]);
-      files.push_back(slice.path);
-      splits.push_back(columns.splits[k]);
-      ++kept_by_split[columns.splits[k]];
-      rows.push_back(file_row);
-      snr.push_back(r.snr);
-      edit_start.push_back(columns.edit_start[k]);
-      edit_end.push_back(columns.edit_end[k]);
-      const size_t frames = r.normalized.size();
-      offsets.push_back(offsets.back() + static_cast<int64_t>(frames));
-      kept_frames += static_cast<int64_t>(frames);
-      for (size_t i = 0; i < frames; ++i) {
-        similarity.push_back(static_cast<float>(r.normalized[i]));
-        combined.push_back(static_cast<float>(r.combined[i]));
-        raw_rot.push_back(static_cast<float>(r.raw_rot[i]));
-        raw_loc.push_back(static_cast<float>(r.raw_loc[i]));
-      }
-      if (options.classes > 0) {
-        classes.insert(classes.end(), r.classes.begin(), r.classes.end());
-        for (const uint8_t c : r.classes) ++class_frames[c];
-      }
-      // Agreement of the low-similarity frames with the frames the edit is known to change.
-      const int32_t gs = columns.edit_start[k], ge = columns.edit_end[k];
-      if (gs >= 0 && ge > gs) {
-        ++ground_truth_triplets;
-        auto& by_kind = confusion_by_kind[columns.kinds[k].empty() ? "unknown" : columns.kinds[k]];
-        by_kind.resize(boundaries.size(), {0, 0, 0});
-        for (size_t b = 0; b < boundaries.size(); ++b) {
-          for (size_t i = 0; i < frames; ++i) {
-            const bool predicted = r.normalized[i] < boundaries[b];
-            const bool edited = static_cast<int64_t>(i) >= gs && static_cast<int64_t>(i) < ge;
-            const int slot = predicted && edited ? 0 : (predicted ? 1 : (edited ? 2 : -1));
-            if (slot < 0) continue;
-            ++confusion[b][static_cast<size_t>(slot)];
-            ++by_kind[b][static_cast<size_t>(slot)];
-          }
-        }
-      }
-    }
+    out.triplets += n;
+    for (size_t k = 0; k < results.size(); ++k)
+      out.Add(columns, k, slice.path, results[k], options);
   }
-
   MP_RETURN_IF_ERROR(MakeDirs(out_dir));
-  const auto n = static_cast<int64_t>(ids.size());
-  const auto f = static_cast<int64_t>(similarity.size());
-  Npz npz;
-  npz.Add("format", NpyArray::ScalarString(kSimilarityFormat));
-  npz.Add("options", NpyArray::ScalarString(OptionsToJson(options).dump()));
-  npz.Add("ids", NpyArray::Strings({n}, ids));
-  npz.Add("files", NpyArray::Strings({n}, files));
-  npz.Add("splits", NpyArray::Strings({n}, splits));
-  npz.Add("rows", NpyArray::Int64({n}, rows));
-  npz.Add("offsets", NpyArray::Int64({n + 1}, offsets));
-  npz.Add("snr", NpyArray::Float64({n}, snr));
-  npz.Add("similarity", NpyArray::Float32({f}, similarity));
-  if (options.classes > 0) npz.Add("classes", NpyArray::UInt8({f}, classes));
-  npz.Add("combined", NpyArray::Float32({f}, combined));
-  npz.Add("raw_rot", NpyArray::Float32({f}, raw_rot));
-  npz.Add("raw_loc", NpyArray::Float32({f}, raw_loc));
-  npz.Add("edit_start", NpyArray::Int32({n}, edit_start));
-  npz.Add("edit_end", NpyArray::Int32({n}, edit_end));
-  MP_RETURN_IF_ERROR(WriteNpz(out_dir + "/similarity.npz", npz, false));
-  MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/dropped.json", dropped.dump(1) + "\n", false));
-
+  MP_RETURN_IF_ERROR(out.WriteSimilarity(out_dir + "/similarity.npz", options));
+  MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/dropped.json", out.dropped.dump(1) + "\n", false));
   ShardReport report;
-  report.triplets = triplets;
-  report.kept = n;
+  report.triplets = out.triplets;
+  report.kept = static_cast<int64_t>(out.ids.size());
   report.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-  json by_kind = json::object();
-  for (const auto& [kind, counts] : confusion_by_kind)
-    by_kind[kind] = ConfusionJson(counts, boundaries);
-  json stats = {{"triplets", triplets},
-                {"kept", n},
-                {"kept_frames", kept_frames},
-                {"kept_by_split", kept_by_split},
-                {"dropped", dropped_by_reason},
-                {"snr", snr_list.values},
-                {"snr_kept", snr_list.kept},
-                {"snr_infinite", snr_list.infinite},
-                {"classes", options.classes},
-                {"class_frames", options.classes > 0 ? json(class_frames) : json::array()},
-                {"edit_range",
-                 {{"triplets", ground_truth_triplets},
-                  {"boundaries", ConfusionJson(confusion, boundaries)},
-                  {"by_kind", by_kind}}},
-                {"options", OptionsToJson(options)},
-                {"seconds", report.seconds},
-                {"threads", threads}};
-  MP_RETURN_IF_ERROR(WriteFileAtomic(out_dir + "/stats.json", stats.dump(1) + "\n", false));
+  MP_RETURN_IF_ERROR(WriteFileAtomic(
+      out_dir + "/stats.json", out.Stats(options, report.seconds, threads).dump(1) + "\n", false));
   return report;
 }
 
