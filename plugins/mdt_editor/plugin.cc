@@ -208,6 +208,36 @@ class EditorGenerator : public plugin::Generator {
   }
 
  private:
+  // MDM-BP: a projection of each x0 estimate that gives back the source's values for the body
+  // parts its edit text does not involve (`source`: [T, n, 207], normalised, at the target length).
+  Result<std::function<torch::Tensor(const torch::Tensor&)>> KeepUneditedParts(
+      const std::vector<std::string>& texts, const torch::Tensor& source) const {
+    const auto n = static_cast<int64_t>(texts.size());
+    auto labeler = labels::MakeBuiltinLabeler(labeler_, nlohmann::json::object());
+    if (!labeler.ok()) return labeler.status();
+    std::vector<labels::LabelInput> asks;
+    for (const auto& t : texts) asks.push_back({t, nullptr});
+    MP_ASSIGN_OR_RETURN(const auto parts, (*labeler)->Label(asks));
+    const auto columns = PartColumns();
+    auto keep = torch::zeros({1, n, kEditFeatureDim}, torch::kBool);
+    for (int64_t i = 0; i < n; ++i) {
+      const PartSet edited = parts[static_cast<size_t>(i)];
+      if (edited == 0) continue;  // nothing recognised: the whole body may change
+      for (int p = 0; p < kNumBodyParts; ++p) {
+        if (!(edited & (1u << p))) keep[0][i].logical_or_(columns[p]);
+      }
+      // A joint shared by edited and kept parts (none in SMPL-22's partition) would stay edited.
+      for (int p = 0; p < kNumBodyParts; ++p) {
+        if (edited & (1u << p)) keep[0][i].logical_and_(columns[p].logical_not());
+      }
+    }
+    const auto net = model_->net();
+    return std::function<torch::Tensor(const torch::Tensor&)>(
+        [keep, source, net](const torch::Tensor& x0) {
+          return net->Encode(torch::where(keep, source, net->Decode(x0)));
+        });
+  }
+
   Result<std::vector<Motion>> Edit(const std::vector<plugin::GenerateRequest>& requests) {
     torch::NoGradGuard no_grad;
     const EditorOptions& o = model_->options();
@@ -298,30 +328,7 @@ class EditorGenerator : public plugin::Generator {
     };
     std::function<torch::Tensor(const torch::Tensor&)> project;
     if (body_parts_) {
-      // MDM-BP: the body parts the edit text does not involve keep the source.
-      auto labeler = labels::MakeBuiltinLabeler(labeler_, nlohmann::json::object());
-      if (!labeler.ok()) return labeler.status();
-      std::vector<labels::LabelInput> asks;
-      for (const auto& t : texts) asks.push_back({t, nullptr});
-      MP_ASSIGN_OR_RETURN(const auto parts, (*labeler)->Label(asks));
-      const auto columns = PartColumns();
-      auto keep = torch::zeros({1, n, kEditFeatureDim}, torch::kBool);
-      for (int64_t i = 0; i < n; ++i) {
-        const PartSet edited = parts[static_cast<size_t>(i)];
-        if (edited == 0) continue;  // nothing recognised: the whole body may change
-        for (int p = 0; p < kNumBodyParts; ++p) {
-          if (!(edited & (1u << p))) keep[0][i].logical_or_(columns[p]);
-        }
-        // A joint shared by edited and kept parts (none in SMPL-22's partition) would stay edited.
-        for (int p = 0; p < kNumBodyParts; ++p) {
-          if (edited & (1u << p)) keep[0][i].logical_and_(columns[p].logical_not());
-        }
-      }
-      const auto kept_source = source.narrow(0, 0, tt);
-      const auto net = model_->net();
-      project = [keep, kept_source, net](const torch::Tensor& x0) {
-        return net->Encode(torch::where(keep, kept_source, net->Decode(x0)));
-      };
+      MP_ASSIGN_OR_RETURN(project, KeepUneditedParts(texts, source.narrow(0, 0, tt)));
     }
     const auto& r0 = requests[0];
     auto generator = at::make_generator<at::CPUGeneratorImpl>(r0.seed);
