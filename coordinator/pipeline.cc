@@ -1,7 +1,5 @@
 #include "pipeline.h"
 
-#include <yaml-cpp/yaml.h>
-
 #include <algorithm>
 #include <cmath>
 #include <regex>
@@ -9,6 +7,7 @@
 
 #include "cron.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/yaml.h"
 #include "motionpipe/similarity/similarity.h"
 #include "motionpipe/sinc/synth.h"
 
@@ -17,56 +16,6 @@ namespace motionpipe::coordinator {
 namespace {
 
 using Json = nlohmann::ordered_json;
-
-// A pipeline document expands to at most this many nodes: YAML aliases share nodes, and a 600-byte
-// "billion laughs" file of nested aliases expands to billions of them in JSON (issue 17).
-constexpr int64_t kMaxDocumentNodes = 200000;
-
-struct ExpansionLimit : std::length_error {
-  ExpansionLimit()
-      : std::length_error("the document expands to more than " + std::to_string(kMaxDocumentNodes) +
-                          " values (nested aliases, e.g. a \"billion laughs\" file?)") {}
-};
-
-// YAML -> JSON with scalar types inferred as YAML 1.2's core schema does; quoted scalars stay
-// strings. Counts the values made in *budget and throws ExpansionLimit past kMaxDocumentNodes.
-Json ToJson(const YAML::Node& node, int64_t* budget) {
-  if (++*budget > kMaxDocumentNodes) throw ExpansionLimit();
-  switch (node.Type()) {
-    case YAML::NodeType::Null:
-    case YAML::NodeType::Undefined:
-      return nullptr;
-    case YAML::NodeType::Sequence: {
-      Json out = Json::array();
-      for (const auto& item : node) out.push_back(ToJson(item, budget));
-      return out;
-    }
-    case YAML::NodeType::Map: {
-      Json out = Json::object();
-      for (const auto& item : node) out[item.first.as<std::string>()] = ToJson(item.second, budget);
-      return out;
-    }
-    case YAML::NodeType::Scalar: {
-      const std::string text = node.Scalar();
-      if (node.Tag() == "!") return text;  // quoted
-      if (text == "null" || text == "~" || text.empty()) return nullptr;
-      if (text == "true" || text == "True") return true;
-      if (text == "false" || text == "False") return false;
-      static const std::regex kInt("[-+]?[0-9]+");
-      static const std::regex kFloat("[-+]?([0-9]*\\.[0-9]+|[0-9]+\\.?[0-9]*)([eE][-+]?[0-9]+)?");
-      if (std::regex_match(text, kInt)) {
-        try {
-          return std::stoll(text);
-        } catch (...) {
-          return text;
-        }
-      }
-      if (std::regex_match(text, kFloat)) return std::stod(text);
-      return text;
-    }
-  }
-  return nullptr;
-}
 
 std::string PathJoin(const std::string& path, const std::string& key) {
   return path.empty() ? key : path + "." + key;
@@ -79,15 +28,9 @@ Status ApplyOverride(Json* doc, const std::string& override_text) {
     return InvalidArgument("override '" + override_text + "': expected key.sub=value");
   }
   const std::string key = override_text.substr(0, eq);
-  Json value;
-  try {
-    int64_t budget = 0;
-    value = ToJson(YAML::Load(override_text.substr(eq + 1)), &budget);
-  } catch (const YAML::Exception& error) {
-    return InvalidArgument("override '" + override_text + "': value is not YAML: " + error.what());
-  } catch (const ExpansionLimit& error) {
-    return InvalidArgument("override '" + key + "': " + error.what());
-  }
+  auto parsed = ParseYaml(override_text.substr(eq + 1), "override '" + override_text + "'");
+  if (!parsed.ok()) return parsed.status();
+  Json value = std::move(*parsed);
   Json* node = doc;
   size_t start = 0;
   while (true) {
@@ -537,17 +480,9 @@ std::vector<std::string> KindRegistry::Kinds() const {
 Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
                                    const std::vector<std::string>& overrides,
                                    const std::string& origin, const KindRegistry& kinds) {
-  Json doc;
-  try {
-    int64_t budget = 0;
-    doc = ToJson(YAML::Load(yaml_text), &budget);
-  } catch (const YAML::Exception& error) {
-    return InvalidArgument(origin + ":" + std::to_string(error.mark.line + 1) + ":" +
-                           std::to_string(error.mark.column + 1) +
-                           ": malformed YAML: " + error.msg);
-  } catch (const ExpansionLimit& error) {
-    return InvalidArgument(origin + ": " + error.what());
-  }
+  auto parsed = ParseYaml(yaml_text, origin);
+  if (!parsed.ok()) return parsed.status();
+  Json doc = std::move(*parsed);
   if (!doc.is_object())
     return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
   std::vector<std::string> errors;

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "motionpipe/base/job_layout.h"
+#include "motionpipe/base/yaml.h"
 
 namespace motionpipe {
 namespace {
@@ -89,6 +90,19 @@ TEST(JobLayout, NamesAreTheOnesJobsUse) {
   EXPECT_EQ(layout::MetricsFile("t"), "t/metrics.json");
   EXPECT_EQ(layout::ShowcaseFile("t"), "t/showcase.json");
   EXPECT_STREQ(layout::kResultDirName, "result");
+}
+
+// One YAML converter for pipelines and papers: YAML 1.2 core-schema scalars, quoted scalars stay
+// strings, keys keep the document's order, errors name origin:line:column.
+TEST(Yaml, ScalarsAsTheCoreSchemaAndErrorsWithTheirPlace) {
+  auto doc = ParseYaml("b: 2\na: [1.5, true, ~, '7', x]\n", "p.yaml");
+  ASSERT_TRUE(doc.ok()) << doc.status().ToString();
+  EXPECT_EQ(doc->dump(), R"({"b":2,"a":[1.5,true,null,"7","x"]})");
+  auto bad = ParseYaml("a: [1,\n", "p.yaml");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.status().message().rfind("p.yaml:", 0), 0u) << bad.status().message();
+  EXPECT_NE(bad.status().message().find("malformed YAML"), std::string::npos);
 }
 
 }  // namespace
