@@ -126,6 +126,10 @@ void AddModelCommands(CLI::App& app, int* exit_code) {
         ->capture_default_str()
         ->check(CLI::Range(64, 1024));
     cmd->add_flag("--no-previews", no_previews, "Skip the rendered previews");
+    cmd->add_option("--papers", options.papers,
+                    "Paper files (the format of configs/papers/*.yaml) beside the built-in ones; "
+                    "one of a built-in paper's name replaces it")
+        ->check(CLI::ExistingFile);
     cmd->callback([exit_code] {
       options.previews = !no_previews;
       const auto started = std::chrono::steady_clock::now();

@@ -19,6 +19,7 @@
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/render/chart.h"
 #include "motionpipe/render/motion_render.h"
+#include "papers.h"
 
 namespace motionpipe::worker {
 
@@ -26,58 +27,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-// ---- the papers' numbers (REFERENCE.md 3.4 and 4.6)
-// -----------------------------------------------
-
-struct PaperEditRow {
-  const char* row;                   // as the paper names it
-  std::vector<std::string> methods;  // the `method` strings of our eval stages that are this row
-  double r1, r2, r3, avg_rank;       // generated-to-target, batches of 32
-};
-
-const std::vector<PaperEditRow>& PaperTable1() {
-  static const std::vector<PaperEditRow> rows = {
-      {"MDM", {"mdm", "mdt_editor/mdm"}, 4.03, 7.56, 10.48, 15.55},
-      {"MDM-BP", {"mdm-bp"}, 39.10, 50.09, 54.84, 6.46},
-      {"TMED", {"tmed", "mdt_editor/tmed"}, 62.90, 76.51, 83.06, 2.71},
-      {"SimMotionEdit (MDT)",
-       {"mdt (simmotionedit)", "mdt", "simmotionedit", "mdt_editor/mdt"},
-       70.62,
-       82.92,
-       88.12,
-       2.38},
-      {"w/o auxiliary loss", {"w/o aux loss", "mdt_no_aux"}, 67.21, 78.75, 86.33, 2.49},
-      {"w/o SNR filtering", {"w/o snr filtering", "mdt_no_filter"}, 66.88, 80.42, 85.83, 2.46},
-  };
-  return rows;
-}
-
-struct PaperGenRow {
-  const char* row;
-  std::vector<std::string> methods;
-  double temos_score;
-};
-
-const std::vector<PaperGenRow>& PaperTables23() {
-  static const std::vector<PaperGenRow> rows = {
-      {"Single-action", {"single-action", "single"}, 0.601},
-      {"Single-action + GPT compositing",
-       {"single-action + gpt compositing", "compositing"},
-       0.618},
-      {"SINC-STE", {"sinc-ste", "ste"}, 0.614},
-      {"SINC, real singles + pairs", {"sinc (real singles + pairs)", "sinc_real"}, 0.640},
-      {"SINC + synthetic pairs (GPT labels)", {"sinc (+ synthetic, labels)", "sinc"}, 0.644},
-      {"SINC + random compositions", {"sinc (+ synthetic, random parts)", "sinc_random"}, 0.617},
-  };
-  return rows;
-}
-
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
 
 // ---- what the job directory holds
 // -----------------------------------------------------------------
@@ -90,7 +39,8 @@ struct Run {
 
 struct Method {
   std::string name;       // the `method` string
-  std::string paper_row;  // empty when the papers have no such row
+  std::string row;        // the paper row the evaluation names (params.row), or empty
+  std::string paper_row;  // the row of the paper that orders the table; empty when it has none
   int paper_index = 1000;
   std::vector<Run> runs;  // seed replicates, replicate 1 first
   bool yardstick =
@@ -333,13 +283,13 @@ std::string MetricTable(const std::string& caption, const std::vector<const Meth
   return html.str();
 }
 
-// Whether every editing run was scored in batches (the batch protocol needs at least one full
-// batch of test motions; with fewer, the tables and claims use the whole set).
-bool AllBatched(const std::vector<const Method*>& edits) {
-  for (const Method* m : edits) {
+// Whether every run was scored in batches by `key` (e.g. generated_to_target): the batch protocol
+// needs at least one full batch of test motions; with fewer, the tables and claims use the whole
+// set.
+bool AllBatched(const std::vector<const Method*>& methods, const std::string& key) {
+  for (const Method* m : methods) {
     for (const Run& r : m->runs) {
-      if (r.metrics.value(json::json_pointer("/generated_to_target/batches/queries"), 0) <= 0)
-        return false;
+      if (r.metrics.value(json::json_pointer("/" + key + "/batches/queries"), 0) <= 0) return false;
     }
   }
   return true;
@@ -643,22 +593,27 @@ ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<do
   return ClaimVerdict::kWithinErrors;
 }
 
-Result<ReportSummary> WriteReport(const ReportOptions& options) {
-  const std::string job = options.job_dir;
-  if (!fs::is_directory(job)) return NotFound(job + ": not a job directory");
-  ReportSummary summary;
-  summary.path = options.out_path.empty() ? job + "/report.html" : options.out_path;
+namespace {
 
-  // Every stage directory: evaluation metrics, training curves, showcases.
+// ---- the job's runs
+// ---------------------------------------------------------------------------------
+
+// Everything the report reads from a job directory.
+struct JobRuns {
+  std::map<std::string, Method> edits, generations;  // by `method` string
+  std::vector<TrainCurve> curves;
+  std::vector<std::pair<std::string, json>> showcases;  // stage, showcase.json
+};
+
+// Every stage directory: evaluation metrics, training curves, showcases.
+JobRuns ReadJob(const std::string& job) {
   std::vector<std::string> stages;
   for (const auto& entry : fs::directory_iterator(job)) {
     if (entry.is_directory() && entry.path().filename().string()[0] != '.')
       stages.push_back(entry.path().filename().string());
   }
   std::sort(stages.begin(), stages.end());
-  std::map<std::string, Method> edit_methods, gen_methods;
-  std::vector<TrainCurve> curves;
-  std::vector<std::pair<std::string, json>> showcases;  // stage, showcase.json
+  JobRuns runs;
   for (const std::string& stage : stages) {
     const std::string task = layout::TaskDir(job + "/" + stage);
     if (auto metrics = ReadJson(layout::MetricsFile(task))) {
@@ -666,8 +621,9 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       const bool edit = metrics->contains("generated_to_target"),
                  gen = metrics->contains("temos_score");
       if (edit || gen) {
-        Method& m = (edit ? edit_methods : gen_methods)[method];
+        Method& m = (edit ? runs.edits : runs.generations)[method];
         m.name = method;
+        if (m.row.empty()) m.row = metrics->value("row", std::string());
         if (metrics->value("yardstick", std::string()) == "untrained")
           m.untrained = m.yardstick = true;
         m.runs.push_back({stage, task, *metrics});
@@ -678,67 +634,381 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
         curve->seconds = rank->value("seconds", 0.0);
       if (auto val = ReadCurve(stage, layout::ValLossesFile(task), "val_loss"))
         curve->val_steps = val->steps, curve->val_losses = val->losses;
-      curves.push_back(std::move(*curve));
+      runs.curves.push_back(std::move(*curve));
     }
     if (auto showcase = ReadJson(layout::ShowcaseFile(task)))
-      showcases.push_back({stage, *showcase});
+      runs.showcases.push_back({stage, *showcase});
   }
-  // Paper rows, in the paper's order; other methods after them.
-  const auto order = [](std::map<std::string, Method>& methods, const auto& paper_rows) {
-    std::vector<const Method*> out;
-    for (auto& [name, m] : methods) {
-      for (size_t r = 0; r < paper_rows.size(); ++r) {
-        const auto& aliases = paper_rows[r].methods;
-        if (std::find(aliases.begin(), aliases.end(), Lower(name)) != aliases.end()) {
-          m.paper_row = paper_rows[r].row;
-          m.paper_index = static_cast<int>(r);
-        }
-      }
+  for (auto* methods : {&runs.edits, &runs.generations}) {
+    for (auto& [name, m] : *methods) {
       std::sort(m.runs.begin(), m.runs.end(),
                 [](const Run& a, const Run& b) { return a.stage < b.stage; });
-      out.push_back(&m);
     }
-    std::stable_sort(out.begin(), out.end(), [](const Method* a, const Method* b) {
-      return a->paper_index < b->paper_index;
-    });
-    return out;
-  };
-  const std::vector<const Method*> edits = order(edit_methods, PaperTable1());
-  const std::vector<const Method*> gens = order(gen_methods, PaperTables23());
-  // The tables' rows: the yardsticks first (issue 15), then the methods.
-  const std::vector<Method> edit_yardsticks = YardstickRows(
-      edits,
-      {{"copy", "source as the edit (copy)"}, {"target", "target as the edit (upper bound)"}});
-  const std::vector<Method> gen_yardsticks = YardstickRows(
-      gens, {{"truth", "ground truth"}, {"shuffled", "shuffled ground truth (same length class)"}});
-  const auto with_yardsticks = [](const std::vector<Method>& yardsticks,
-                                  const std::vector<const Method*>& methods) {
-    std::vector<const Method*> rows;
-    for (const Method& y : yardsticks) rows.push_back(&y);
-    if (const Method* u = UntrainedRow(methods)) rows.push_back(u);
-    for (const Method* m : methods) {
-      if (!m->untrained) rows.push_back(m);
-    }
-    return rows;
-  };
-  const std::vector<const Method*> edit_rows = with_yardsticks(edit_yardsticks, edits);
-  const std::vector<const Method*> gen_rows = with_yardsticks(gen_yardsticks, gens);
-  summary.edit_methods = static_cast<int>(edits.size());
-  summary.generation_methods = static_cast<int>(gens.size());
-  const auto by_row = [](const std::vector<const Method*>& methods,
-                         const std::string& row) -> const Method* {
-    for (const Method* m : methods) {
-      if (m->paper_row == row) return m;
-    }
-    return nullptr;
-  };
+  }
+  return runs;
+}
 
+// The methods in the order of `paper`'s rows (others after them), each labelled by its row there
+// (none when paper is null).
+std::vector<const Method*> ByPaper(std::map<std::string, Method>& methods, const Paper* paper) {
+  std::vector<const Method*> out;
+  for (auto& [name, m] : methods) {
+    m.paper_row.clear();
+    m.paper_index = 1000;
+    if (const PaperRow* row = paper ? paper->Find(m.row, m.name) : nullptr) {
+      m.paper_row = row->row;
+      m.paper_index = static_cast<int>(row - paper->rows.data());
+    }
+    out.push_back(&m);
+  }
+  std::stable_sort(out.begin(), out.end(), [](const Method* a, const Method* b) {
+    return a->paper_index < b->paper_index;
+  });
+  return out;
+}
+
+const Method* ByRow(const std::vector<const Method*>& methods, const std::string& row) {
+  for (const Method* m : methods) {
+    if (m->paper_row == row) return m;
+  }
+  return nullptr;
+}
+
+// A table's rows: the yardsticks first (issue 15), the untrained model, then the methods.
+std::vector<const Method*> WithYardsticks(const std::vector<Method>& yardsticks,
+                                          const std::vector<const Method*>& methods) {
+  std::vector<const Method*> rows;
+  for (const Method& y : yardsticks) rows.push_back(&y);
+  if (const Method* u = UntrainedRow(methods)) rows.push_back(u);
+  for (const Method* m : methods) {
+    if (!m->untrained) rows.push_back(m);
+  }
+  return rows;
+}
+
+// The paper's published numbers beside each row.
+std::vector<PaperCell> PaperCells(const Paper& paper, const std::vector<const Method*>& rows) {
+  std::vector<PaperCell> cells;
+  for (const Method* m : rows) {
+    PaperCell cell;
+    if (const PaperRow* row = m->paper_row.empty() ? nullptr : paper.Find(m->paper_row, ""))
+      cell.values.assign(row->values.begin(), row->values.end());
+    cells.push_back(cell);
+  }
+  return cells;
+}
+
+std::string Note(const Paper& paper) { return paper.note.empty() ? "" : " " + Escape(paper.note); }
+
+// ---- the tables of an editing paper (motion-to-motion retrieval) and of a generation paper
+// ---------
+
+std::vector<Column> Retrieval(const std::string& group, const std::string& key,
+                              const std::string& protocol) {
+  std::vector<Column> out;
+  for (const char* k : {"R@1", "R@2", "R@3"})
+    out.push_back({group, k, "/" + key + "/" + protocol + "/" + k, 2, true});
+  out.push_back({group, "AvgR", "/" + key + "/" + protocol + "/AvgR", 2, false});
+  return out;
+}
+
+// `first`: the first paper of its evaluation kind, which also draws the kind's other tables.
+std::string EditTables(const Paper& paper, const std::vector<const Method*>& edits,
+                       const std::vector<const Method*>& rows, bool first, int* tables) {
+  const bool batches = AllBatched(edits, "generated_to_target");
+  const std::string protocol = batches ? "batches" : "all";
+  std::vector<Column> columns = Retrieval("generated-to-target", "generated_to_target", protocol);
+  for (const Column& c : Retrieval("generated-to-source", "generated_to_source", protocol))
+    columns.push_back(c);
+  columns.push_back({"towards the target", "R@1 to target − to source",
+                     "/towards_target/" + protocol + "/R@1", 2, true});
+  columns.push_back({"", "motions", "/motions", 0, true, false});
+  const int64_t batch = edits.front()->runs.front().metrics.value("batch", int64_t{32});
   std::ostringstream body;
-  const std::string title =
-      options.title.empty() ? fs::path(job).lexically_normal().filename().string() : options.title;
+  body << "<h2>" << Escape(paper.title)
+       << "</h2>\n<p>Motion-to-motion retrieval with the TMR evaluator: "
+       << "each edited motion's rank among the targets (and sources) by cosine similarity, ties "
+          "averaged; R@k in percent, AvgR the "
+       << "mean rank. Protocol: "
+       << (batches
+               ? "seeded batches of " + std::to_string(batch) +
+                     ", remainder dropped (the paper's, with 32)"
+               : "the whole test set (fewer motions than a batch of " + std::to_string(batch) + ")")
+       << "." << Note(paper) << " The rows in italics are yardsticks scored in the same "
+       << "evaluation: the source as the edit (a copy moves nowhere), the target as the edit "
+          "(the upper bound) and the untrained "
+       << "editor (initial weights, same sampler). <i>Towards the target</i> is "
+          "generated-to-target minus generated-to-source R@1: "
+       << "an edit that moves towards its target scores above 0, a copy of the source far "
+          "below.</p>\n";
+  body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", rows, columns,
+                      paper.columns, PaperCells(paper, rows), paper.decimals);
+  ++*tables;
+  if (first && batches) {
+    std::vector<Column> all =
+        Retrieval("generated-to-target, whole test set", "generated_to_target", "all");
+    body << MetricTable("Editing: retrieval over the whole test set", rows, all, {}, {}, 2);
+    ++*tables;
+  }
+  return body.str();
+}
+
+std::string GenerationTables(const Paper& paper, const std::vector<const Method*>& gens,
+                             const std::vector<const Method*>& rows, bool first, int* tables) {
+  std::vector<Column> columns = {{"", "TEMOS score", "/temos_score", 3, true}};
+  for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
+    columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
+  for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
+    columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
+  columns.push_back(
+      {"TMR retrieval", "text→gen R@1 (batches)", "/text_to_generated/batches/R@1", 1, true});
+  columns.push_back({"TMR retrieval", "text→gen R@1 (all)", "/text_to_generated/all/R@1", 1, true});
+  columns.push_back({"TMR retrieval", "gen→GT R@1 (all)", "/generated_to_truth/all/R@1", 1, true});
+  columns.push_back({"", "motions", "/motions", 0, true, false});
+  std::ostringstream body;
+  body << "<h2>" << Escape(paper.title) << "</h2>\n<p>Two-action descriptions of the held-out "
+       << "test split "
+       << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) "
+          "/ 2 between the motion-encoder "
+       << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the "
+          "ground-plane trajectory, root-relative "
+       << "heading-aligned joints (local) and all joints (global); retrieval by the TMR "
+          "evaluator in seeded batches and over the "
+       << "whole test set. The rows in italics are yardsticks scored in the same evaluation: the "
+          "ground truth itself, shuffled "
+       << "ground truth (each motion replaced by the test motion nearest to it in length) and "
+          "the untrained generator."
+       << Note(paper) << "</p>\n";
+  body << MetricTable("Composition: generated motions against the ground truth", rows, columns,
+                      paper.columns, PaperCells(paper, rows), paper.decimals);
+  ++*tables;
+  if (first) {
+    std::vector<Column> more = {{"diversity", "generated", "/diversity/generated", 3, true, false},
+                                {"diversity", "ground truth", "/diversity/truth", 3, true, false},
+                                {"", "FID", "/fid", 3, false}};
+    body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more,
+                        {}, {}, 3);
+    ++*tables;
+  }
+  return body.str();
+}
+
+// ---- plausibility, claims
+// ---------------------------------------------------------------------------
+
+std::string PlausibilitySection(const std::vector<const Method*>& edits,
+                                const std::vector<const Method*>& gens, int* tables) {
+  if (edits.empty() && gens.empty()) return "";
+  std::ostringstream body;
+  body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; "
+          "these are the measurable "
+       << "proxies, for the generated motions and for their ground truth alike: the fraction of "
+          "contact frames whose foot slides, "
+       << "the mean floor penetration, the fraction of frames floating above the floor, and the "
+          "mean jerk.</p>\n<table>\n"
+       << "<caption>Plausibility (lower is better; mean over the methods' "
+          "seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
+       << "<th>foot skate</th><th>penetration "
+          "(m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
+  const auto row = [&](const std::string& name, const Method& m, const std::string& side) {
+    body << "<tr><td>" << Escape(name) << "</td><td>" << Format(Collect(m, "/motions").mean, 0)
+         << "</td>";
+    for (const char* k : {"foot_skate_ratio", "penetration_mean_m", "float_ratio", "jerk_mean"}) {
+      const Stat s = Collect(m, "/plausibility/" + side + "/" + k);
+      body << "<td>" << (s.n ? Format(s.mean, 3) : "&ndash;") << "</td>";
+    }
+    body << "</tr>\n";
+  };
+  if (!edits.empty()) row("editing targets (ground truth)", *edits.front(), "target");
+  for (const Method* m : edits) row(RowName(*m), *m, "generated");
+  if (!gens.empty()) row("composition ground truth", *gens.front(), "truth");
+  for (const Method* m : gens) row(RowName(*m), *m, "generated");
+  body << "</tbody></table>\n";
+  ++*tables;
+  return body.str();
+}
+
+// The paper's claims against the methods of its evaluation kind, ordered by it.
+std::vector<ClaimCheck> CheckClaims(const Paper& paper, const std::vector<const Method*>& methods) {
+  std::string pointer = paper.metric.pointer;
+  const size_t at = pointer.find("{protocol}");
+  if (at != std::string::npos) {
+    const std::string key =
+        paper.evaluation == "edit" ? "generated_to_target" : "text_to_generated";
+    pointer.replace(at, 10, AllBatched(methods, key) ? "batches" : "all");
+  }
+  const Method* untrained = UntrainedRow(methods);
+  std::vector<ClaimCheck> checks;
+  for (const PaperClaim& c : paper.claims) {
+    checks.push_back(Compare(paper.name, c.claim, ByRow(methods, c.better), ByRow(methods, c.worse),
+                             untrained, pointer, paper.metric.name, paper.metric.higher_is_better,
+                             paper.metric.decimals));
+  }
+  return checks;
+}
+
+std::string ClaimsSection(const std::vector<ClaimCheck>& claims, int* tables) {
+  std::ostringstream body;
+  body << "<h2>The papers' claims, checked on this job</h2>\n<p>A claim is <i>not decidable</i> "
+          "while a compared model does not "
+       << "beat its untrained row (by more than two standard errors), or with fewer than 3 seeds "
+          "a side. Otherwise it "
+       << "<i>holds</i> when the difference of the means goes the claimed way by more than two "
+          "standard errors over the seeds, "
+       << "<i>does not hold</i> when it goes the other way by as much, and is <i>not decided</i> "
+          "in between.</p>\n"
+       << "<table>\n<caption>Claims</caption>\n<thead><tr><th>paper</th><th>claim</"
+          "th><th>verdict</th><th>numbers</th></tr></thead>\n<tbody>\n";
+  for (const ClaimCheck& c : claims) {
+    const std::string cls = c.verdict.rfind("holds", 0) == 0      ? "holds"
+                            : c.verdict.rfind("does not", 0) == 0 ? "fails"
+                                                                  : "unknown";
+    body << "<tr><td>" << Escape(c.paper) << "</td><td>" << Escape(c.claim) << "</td><td class=\""
+         << cls << "\">" << Escape(c.verdict) << "</td><td>" << Escape(c.detail) << "</td></tr>\n";
+  }
+  body << "</tbody></table>\n";
+  ++*tables;
+  return body.str();
+}
+
+// ---- previews, showcases, curves, history
+// -----------------------------------------------------------
+
+Result<std::string> PreviewSection(const std::vector<const Method*>& edits,
+                                   const std::vector<const Method*>& gens, int panel_size,
+                                   const std::string& scratch, int* images) {
+  std::ostringstream body;
+  if (!edits.empty()) {
+    std::vector<render::MotionPanel> panels;
+    std::string text;
+    const std::string first = edits.front()->runs.front().dir;
+    if (auto source = PreviewMotion(first, "source", &text))
+      panels.push_back({*source, "source", text});
+    if (auto target = PreviewMotion(first, "target", nullptr))
+      panels.push_back({*target, "target", ""});
+    for (const Method* m : edits) {
+      if (auto edited = PreviewMotion(m->runs.front().dir, "edited", nullptr))
+        panels.push_back({*edited, RowName(*m), ""});
+    }
+    if (panels.size() > 2) {
+      MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
+      body << "<h2>Previews</h2>\n<figure>" << ImgTag("image/gif", gif, "editing preview", images)
+           << "<figcaption>The first test triplet: source, target and each method's edit (seed "
+              "1), instruction \""
+           << Escape(text) << "\".</figcaption></figure>\n";
+    }
+  }
+  if (!gens.empty()) {
+    std::vector<render::MotionPanel> panels;
+    std::string text;
+    if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text))
+      panels.push_back({*truth, "ground truth", text});
+    for (const Method* m : gens) {
+      if (auto g = PreviewMotion(m->runs.front().dir, "generated", nullptr))
+        panels.push_back({*g, RowName(*m), ""});
+    }
+    if (panels.size() > 1) {
+      MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
+      body << "<figure>" << ImgTag("image/gif", gif, "composition preview", images)
+           << "<figcaption>The first test pair, \"" << Escape(text)
+           << "\": ground truth and each method's generation (seed 1).</figcaption></figure>\n";
+    }
+  }
+  return body.str();
+}
+
+// A showcase stage's showcase.json: its title, text, images and table (the CMU clips).
+std::string ShowcaseSection(const std::string& job, const std::string& stage, const json& showcase,
+                            int* tables, int* images) {
+  std::ostringstream body;
+  body << "<h2>" << Escape(showcase.value("title", stage)) << "</h2>\n";
+  if (showcase.contains("text")) body << "<p>" << Escape(showcase.value("text", "")) << "</p>\n";
+  const std::string dir = layout::TaskDir(job + "/" + stage);
+  for (const json& item : showcase.value("items", json::array())) {
+    const std::string file = item.value("image", std::string());
+    auto bytes = ReadFile(dir + "/" + file);
+    if (file.empty() || !bytes.ok()) continue;
+    const std::string mime =
+        file.size() > 4 && file.substr(file.size() - 4) == ".png" ? "image/png" : "image/gif";
+    body << "<figure>" << ImgTag(mime, *bytes, item.value("caption", file), images)
+         << "<figcaption>" << Escape(item.value("caption", file)) << "</figcaption></figure>\n";
+  }
+  if (showcase.contains("table") && showcase["table"].contains("columns")) {
+    const json& table = showcase["table"];
+    body << "<table>\n<caption>" << Escape(table.value("caption", stage))
+         << "</caption>\n<thead><tr>";
+    for (const json& c : table["columns"])
+      body << "<th>" << Escape(c.get<std::string>()) << "</th>";
+    body << "</tr></thead>\n<tbody>\n";
+    for (const json& row : table.value("rows", json::array())) {
+      body << "<tr>";
+      for (const json& v : row)
+        body << "<td>"
+             << Escape(v.is_string()         ? v.get<std::string>()
+                       : v.is_number_float() ? Format(v.get<double>(), 3)
+                                             : v.dump())
+             << "</td>";
+      body << "</tr>\n";
+    }
+    body << "</tbody></table>\n";
+    ++*tables;
+  }
+  return body.str();
+}
+
+std::string CurvesSection(const std::vector<TrainCurve>& curves, int* tables, int* images) {
+  std::map<std::string, std::vector<const TrainCurve*>> groups;
+  for (const TrainCurve& c : curves) groups[BaseStage(c.stage)].push_back(&c);
+  std::ostringstream body;
+  body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), "
+          "seed replicates overlaid, and the "
+       << "loss on fixed batches of the held-out split where the stage validates "
+          "(val_losses.csv).</p>\n"
+       << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</"
+          "th><th>first loss</th><th>last loss</th>"
+       << "<th>held-out loss: last</th><th>held-out loss: best "
+          "(step)</th><th>seconds</th></tr></thead>\n<tbody>\n";
+  for (const TrainCurve& c : curves) {
+    std::string last_val = "&ndash;", best_val = "&ndash;";
+    if (!c.val_losses.empty()) {
+      const size_t best = static_cast<size_t>(
+          std::min_element(c.val_losses.begin(), c.val_losses.end()) - c.val_losses.begin());
+      last_val = Format(c.val_losses.back(), 4);
+      best_val = Format(c.val_losses[best], 4) + " (" + Format(c.val_steps[best] + 1, 0) + ")";
+    }
+    body << "<tr><td>" << Escape(c.stage) << "</td><td>" << Format(c.steps.back() + 1, 0)
+         << "</td><td>" << Format(c.losses.front(), 4) << "</td><td>" << Format(c.losses.back(), 4)
+         << "</td><td>" << last_val << "</td><td>" << best_val << "</td><td>"
+         << Format(c.seconds, 1) << "</td></tr>\n";
+  }
+  body << "</tbody></table>\n<div class=\"grid\">\n";
+  ++*tables;
+  for (const auto& [name, group] : groups)
+    body << ImgTag("image/png", CurvesPng(name, group), "training curve " + name, images) << "\n";
+  body << "</div>\n";
+  return body.str();
+}
+
+Result<std::string> HistorySection(const std::string& path, int* images) {
+  MP_ASSIGN_OR_RETURN(const std::vector<MetricRecord> history, ReadHistory(path));
+  std::map<std::string, std::map<std::string, std::vector<double>>>
+      series;  // metric -> method -> values
+  for (const MetricRecord& r : history) series[r.metric][r.method].push_back(r.value);
+  std::ostringstream body;
+  body << "<h2>Evaluation history</h2>\n<p><code>" << Escape(path) << "</code>: " << history.size()
+       << " records; each evaluation run appends its headline metrics with the checkpoint and "
+          "the config and data hashes.</p>\n<div class=\"grid\">\n";
+  for (const auto& [metric, by_method] : series)
+    body << ImgTag("image/png", HistoryPng(metric, by_method), "history " + metric, images) << "\n";
+  body << "</div>\n";
+  return body.str();
+}
+
+std::string Header(const std::string& job, const std::string& title) {
   const std::time_t now = std::time(nullptr);
   char stamp[64];
   std::strftime(stamp, sizeof stamp, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
+  std::ostringstream body;
   body << "<h1>motionpipe report: " << Escape(title) << "</h1>\n<p>Job directory <code>"
        << Escape(fs::absolute(job).string()) << "</code>, written " << stamp
        << ". Every number below comes from this job's stages; cells are the mean &plusmn; the "
@@ -747,326 +1017,84 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
        << "numbers stand in grey beside them for reference. They were measured on different data "
           "(MotionFix / BABEL with AMASS, "
        << "models trained for days); compare orderings, not values.</p>\n";
+  return body.str();
+}
 
-  // ---- SimMotionEdit Table 1.
-  if (!edits.empty()) {
-    const bool batches = AllBatched(edits);
-    const std::string protocol = batches ? "batches" : "all";
-    const auto retrieval = [&](const std::string& group, const std::string& key,
-                               const std::string& proto) {
-      std::vector<Column> out;
-      for (const char* k : {"R@1", "R@2", "R@3"})
-        out.push_back({group, k, "/" + key + "/" + proto + "/" + k, 2, true});
-      out.push_back({group, "AvgR", "/" + key + "/" + proto + "/AvgR", 2, false});
-      return out;
-    };
-    std::vector<Column> columns = retrieval("generated-to-target", "generated_to_target", protocol);
-    for (const Column& c : retrieval("generated-to-source", "generated_to_source", protocol))
-      columns.push_back(c);
-    columns.push_back({"towards the target", "R@1 to target − to source",
-                       "/towards_target/" + protocol + "/R@1", 2, true});
-    columns.push_back({"", "motions", "/motions", 0, true, false});
-    std::vector<PaperCell> paper;
-    for (const Method* m : edit_rows) {
-      PaperCell cell;
-      for (const auto& row : PaperTable1()) {
-        if (m->paper_row == row.row) cell.values = {row.r1, row.r2, row.r3, row.avg_rank};
-      }
-      paper.push_back(cell);
+}  // namespace
+
+Result<ReportSummary> WriteReport(const ReportOptions& options) {
+  const std::string job = options.job_dir;
+  if (!fs::is_directory(job)) return NotFound(job + ": not a job directory");
+  MP_ASSIGN_OR_RETURN(const std::vector<Paper> papers, LoadPapers(options.papers));
+  ReportSummary summary;
+  summary.path = options.out_path.empty() ? job + "/report.html" : options.out_path;
+  JobRuns runs = ReadJob(job);
+  const std::string title =
+      options.title.empty() ? fs::path(job).lexically_normal().filename().string() : options.title;
+  std::ostringstream body;
+  body << Header(job, title);
+
+  // Each paper's table: the yardsticks its evaluations computed, the untrained row, the methods
+  // in the paper's order. The first paper of an evaluation kind labels its methods elsewhere.
+  const auto methods_of = [&](const Paper* paper, const std::string& evaluation) {
+    return ByPaper(evaluation == "edit" ? runs.edits : runs.generations, paper);
+  };
+  const auto first_paper = [&](const std::string& evaluation) -> const Paper* {
+    for (const Paper& p : papers) {
+      if (p.evaluation == evaluation) return &p;
     }
-    const int64_t batch = edits.front()->runs.front().metrics.value("batch", int64_t{32});
-    body << "<h2>Text-based motion editing (SimMotionEdit, Table 1)</h2>\n<p>Motion-to-motion "
-            "retrieval with the TMR evaluator: "
-         << "each edited motion's rank among the targets (and sources) by cosine similarity, ties "
-            "averaged; R@k in percent, AvgR the "
-         << "mean rank. Protocol: "
-         << (batches ? "seeded batches of " + std::to_string(batch) +
-                           ", remainder dropped (the paper's, with 32)"
-                     : "the whole test set (fewer motions than a batch of " +
-                           std::to_string(batch) + ")")
-         << ". The paper's GT row is 100 / 100 / 100 / 1.00 by construction. The rows in italics "
-            "are yardsticks scored in the same "
-         << "evaluation: the source as the edit (a copy moves nowhere), the target as the edit "
-            "(the upper bound) and the untrained "
-         << "editor (initial weights, same sampler). <i>Towards the target</i> is "
-            "generated-to-target minus generated-to-source R@1: "
-         << "an edit that moves towards its target scores above 0, a copy of the source far "
-            "below.</p>\n";
-    body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", edit_rows, columns,
-                        {"R@1", "R@2", "R@3", "AvgR"}, paper, 2);
-    ++summary.tables;
-    if (batches) {
-      std::vector<Column> all =
-          retrieval("generated-to-target, whole test set", "generated_to_target", "all");
-      body << MetricTable("Editing: retrieval over the whole test set", edit_rows, all, {}, {}, 2);
-      ++summary.tables;
+    return nullptr;
+  };
+  std::set<std::string> drawn;  // evaluation kinds whose other tables are drawn
+  for (const std::string evaluation : {"edit", "generate"}) {
+    for (const Paper& paper : papers) {
+      if (paper.evaluation != evaluation) continue;
+      const std::vector<const Method*> methods = methods_of(&paper, evaluation);
+      if (methods.empty()) continue;
+      const bool first = drawn.insert(evaluation).second;
+      if (evaluation == "edit") {
+        const std::vector<Method> yardsticks =
+            YardstickRows(methods, {{"copy", "source as the edit (copy)"},
+                                    {"target", "target as the edit (upper bound)"}});
+        body << EditTables(paper, methods, WithYardsticks(yardsticks, methods), first,
+                           &summary.tables);
+      } else {
+        const std::vector<Method> yardsticks = YardstickRows(
+            methods,
+            {{"truth", "ground truth"}, {"shuffled", "shuffled ground truth (same length class)"}});
+        body << GenerationTables(paper, methods, WithYardsticks(yardsticks, methods), first,
+                                 &summary.tables);
+      }
     }
   }
-
-  // ---- SINC Tables 2-3.
-  if (!gens.empty()) {
-    std::vector<Column> columns = {{"", "TEMOS score", "/temos_score", 3, true}};
-    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
-      columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
-    for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
-      columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
-    columns.push_back(
-        {"TMR retrieval", "text→gen R@1 (batches)", "/text_to_generated/batches/R@1", 1, true});
-    columns.push_back(
-        {"TMR retrieval", "text→gen R@1 (all)", "/text_to_generated/all/R@1", 1, true});
-    columns.push_back(
-        {"TMR retrieval", "gen→GT R@1 (all)", "/generated_to_truth/all/R@1", 1, true});
-    columns.push_back({"", "motions", "/motions", 0, true, false});
-    std::vector<PaperCell> paper;
-    for (const Method* m : gen_rows) {
-      PaperCell cell;
-      for (const auto& row : PaperTables23()) {
-        if (m->paper_row == row.row) cell.values = {row.temos_score};
-      }
-      paper.push_back(cell);
-    }
-    body << "<h2>Spatial composition of actions (SINC, Tables 2-3)</h2>\n<p>Two-action "
-            "descriptions of the held-out test split "
-         << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) "
-            "/ 2 between the motion-encoder "
-         << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the "
-            "ground-plane trajectory, root-relative "
-         << "heading-aligned joints (local) and all joints (global); retrieval by the TMR "
-            "evaluator in seeded batches and over the "
-         << "whole test set. The rows in italics are yardsticks scored in the same evaluation: the "
-            "ground truth itself, shuffled "
-         << "ground truth (each motion replaced by the test motion nearest to it in length) and "
-            "the untrained generator.</p>\n";
-    body << MetricTable("Composition: generated motions against the ground truth", gen_rows,
-                        columns, {"TEMOS score"}, paper, 3);
-    ++summary.tables;
-    std::vector<Column> more = {{"diversity", "generated", "/diversity/generated", 3, true, false},
-                                {"diversity", "ground truth", "/diversity/truth", 3, true, false},
-                                {"", "FID", "/fid", 3, false}};
-    body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more,
-                        {}, {}, 3);
-    ++summary.tables;
-  }
+  for (const Paper& paper : papers)
+    for (ClaimCheck& c : CheckClaims(paper, methods_of(&paper, paper.evaluation)))
+      summary.claims.push_back(std::move(c));
+  const std::vector<const Method*> edits = methods_of(first_paper("edit"), "edit");
+  const std::vector<const Method*> gens = methods_of(first_paper("generate"), "generate");
+  summary.edit_methods = static_cast<int>(edits.size());
+  summary.generation_methods = static_cast<int>(gens.size());
 
   body << EvaluatorSection(edits, gens, &summary.tables);
-
-  // ---- plausibility of everything, ground truth included.
-  if (!edits.empty() || !gens.empty()) {
-    body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; "
-            "these are the measurable "
-         << "proxies, for the generated motions and for their ground truth alike: the fraction of "
-            "contact frames whose foot slides, "
-         << "the mean floor penetration, the fraction of frames floating above the floor, and the "
-            "mean jerk.</p>\n<table>\n"
-         << "<caption>Plausibility (lower is better; mean over the methods' "
-            "seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
-         << "<th>foot skate</th><th>penetration "
-            "(m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
-    const auto row = [&](const std::string& name, const Method& m, const std::string& side) {
-      body << "<tr><td>" << Escape(name) << "</td><td>" << Format(Collect(m, "/motions").mean, 0)
-           << "</td>";
-      for (const char* k : {"foot_skate_ratio", "penetration_mean_m", "float_ratio", "jerk_mean"}) {
-        const Stat s = Collect(m, "/plausibility/" + side + "/" + k);
-        body << "<td>" << (s.n ? Format(s.mean, 3) : "&ndash;") << "</td>";
-      }
-      body << "</tr>\n";
-    };
-    if (!edits.empty()) row("editing targets (ground truth)", *edits.front(), "target");
-    for (const Method* m : edits)
-      row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
-    if (!gens.empty()) row("composition ground truth", *gens.front(), "truth");
-    for (const Method* m : gens)
-      row(m->paper_row.empty() ? m->name : m->paper_row, *m, "generated");
-    body << "</tbody></table>\n";
-    ++summary.tables;
-  }
-
-  // ---- the papers' claims against these runs.
-  {
-    const std::string r1 = "/generated_to_target/batches/R@1";
-    const bool batches = AllBatched(edits);
-    const std::string edit_pointer = batches ? r1 : "/generated_to_target/all/R@1";
-    const Method* mdt = by_row(edits, "SimMotionEdit (MDT)");
-    const Method* edit_untrained = UntrainedRow(edits);
-    const std::string se = "SimMotionEdit", r1_name = "generated-to-target R@1";
-    summary.claims.push_back(Compare(se, "MDT beats TMED", mdt, by_row(edits, "TMED"),
-                                     edit_untrained, edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "MDT beats MDM-BP", mdt, by_row(edits, "MDM-BP"),
-                                     edit_untrained, edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "MDT beats MDM", mdt, by_row(edits, "MDM"), edit_untrained,
-                                     edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "removing the auxiliary similarity loss hurts", mdt,
-                                     by_row(edits, "w/o auxiliary loss"), edit_untrained,
-                                     edit_pointer, r1_name, true, 2));
-    summary.claims.push_back(Compare(se, "removing MotionSNR filtering hurts", mdt,
-                                     by_row(edits, "w/o SNR filtering"), edit_untrained,
-                                     edit_pointer, r1_name, true, 2));
-    const Method* sinc = by_row(gens, "SINC + synthetic pairs (GPT labels)");
-    const Method* gen_untrained = UntrainedRow(gens);
-    summary.claims.push_back(Compare("SINC", "synthetic pairs help SINC", sinc,
-                                     by_row(gens, "SINC, real singles + pairs"), gen_untrained,
-                                     "/temos_score", "TEMOS score", true, 3));
-    summary.claims.push_back(Compare("SINC", "label-guided compositions beat random ones", sinc,
-                                     by_row(gens, "SINC + random compositions"), gen_untrained,
-                                     "/temos_score", "TEMOS score", true, 3));
-    summary.claims.push_back(Compare("SINC", "GPT compositing improves the single-action model",
-                                     by_row(gens, "Single-action + GPT compositing"),
-                                     by_row(gens, "Single-action"), gen_untrained, "/temos_score",
-                                     "TEMOS score", true, 3));
-    body << "<h2>The papers' claims, checked on this job</h2>\n<p>A claim is <i>not decidable</i> "
-            "while a compared model does not "
-         << "beat its untrained row (by more than two standard errors), or with fewer than 3 seeds "
-            "a side. Otherwise it "
-         << "<i>holds</i> when the difference of the means goes the claimed way by more than two "
-            "standard errors over the seeds, "
-         << "<i>does not hold</i> when it goes the other way by as much, and is <i>not decided</i> "
-            "in between.</p>\n"
-         << "<table>\n<caption>Claims</caption>\n<thead><tr><th>paper</th><th>claim</"
-            "th><th>verdict</th><th>numbers</th></tr></thead>\n<tbody>\n";
-    for (const ClaimCheck& c : summary.claims) {
-      const std::string cls = c.verdict.rfind("holds", 0) == 0      ? "holds"
-                              : c.verdict.rfind("does not", 0) == 0 ? "fails"
-                                                                    : "unknown";
-      body << "<tr><td>" << Escape(c.paper) << "</td><td>" << Escape(c.claim) << "</td><td class=\""
-           << cls << "\">" << Escape(c.verdict) << "</td><td>" << Escape(c.detail)
-           << "</td></tr>\n";
-    }
-    body << "</tbody></table>\n";
-    ++summary.tables;
-  }
-
-  // ---- previews.
+  body << PlausibilitySection(edits, gens, &summary.tables);
+  body << ClaimsSection(summary.claims, &summary.tables);
   if (options.previews) {
-    const std::string scratch = summary.path + ".preview.tmp.gif";
-    if (!edits.empty()) {
-      std::vector<render::MotionPanel> panels;
-      std::string text;
-      const std::string first = edits.front()->runs.front().dir;
-      if (auto source = PreviewMotion(first, "source", &text))
-        panels.push_back({*source, "source", text});
-      if (auto target = PreviewMotion(first, "target", nullptr))
-        panels.push_back({*target, "target", ""});
-      for (const Method* m : edits) {
-        if (auto edited = PreviewMotion(m->runs.front().dir, "edited", nullptr))
-          panels.push_back({*edited, m->paper_row.empty() ? m->name : m->paper_row, ""});
-      }
-      if (panels.size() > 2) {
-        auto gif = PreviewGif(panels, options.panel_size, scratch);
-        if (!gif.ok()) return gif.status();
-        body << "<h2>Previews</h2>\n<figure>"
-             << ImgTag("image/gif", *gif, "editing preview", &summary.images)
-             << "<figcaption>The first test triplet: source, target and each method's edit (seed "
-                "1), instruction \""
-             << Escape(text) << "\".</figcaption></figure>\n";
-      }
-    }
-    if (!gens.empty()) {
-      std::vector<render::MotionPanel> panels;
-      std::string text;
-      if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text))
-        panels.push_back({*truth, "ground truth", text});
-      for (const Method* m : gens) {
-        if (auto g = PreviewMotion(m->runs.front().dir, "generated", nullptr))
-          panels.push_back({*g, m->paper_row.empty() ? m->name : m->paper_row, ""});
-      }
-      if (panels.size() > 1) {
-        auto gif = PreviewGif(panels, options.panel_size, scratch);
-        if (!gif.ok()) return gif.status();
-        body << "<figure>" << ImgTag("image/gif", *gif, "composition preview", &summary.images)
-             << "<figcaption>The first test pair, \"" << Escape(text)
-             << "\": ground truth and each method's generation (seed 1).</figcaption></figure>\n";
-      }
-    }
+    MP_ASSIGN_OR_RETURN(const std::string previews,
+                        PreviewSection(edits, gens, options.panel_size,
+                                       summary.path + ".preview.tmp.gif", &summary.images));
+    body << previews;
   }
-
-  // ---- showcases (the CMU clips).
-  for (const auto& [stage, showcase] : showcases) {
-    body << "<h2>" << Escape(showcase.value("title", stage)) << "</h2>\n";
-    if (showcase.contains("text")) body << "<p>" << Escape(showcase.value("text", "")) << "</p>\n";
-    const std::string dir = layout::TaskDir(job + "/" + stage);
-    for (const json& item : showcase.value("items", json::array())) {
-      const std::string file = item.value("image", std::string());
-      auto bytes = ReadFile(dir + "/" + file);
-      if (file.empty() || !bytes.ok()) continue;
-      const std::string mime =
-          file.size() > 4 && file.substr(file.size() - 4) == ".png" ? "image/png" : "image/gif";
-      body << "<figure>" << ImgTag(mime, *bytes, item.value("caption", file), &summary.images)
-           << "<figcaption>" << Escape(item.value("caption", file)) << "</figcaption></figure>\n";
-    }
-    if (showcase.contains("table") && showcase["table"].contains("columns")) {
-      const json& table = showcase["table"];
-      body << "<table>\n<caption>" << Escape(table.value("caption", stage))
-           << "</caption>\n<thead><tr>";
-      for (const json& c : table["columns"])
-        body << "<th>" << Escape(c.get<std::string>()) << "</th>";
-      body << "</tr></thead>\n<tbody>\n";
-      for (const json& row : table.value("rows", json::array())) {
-        body << "<tr>";
-        for (const json& v : row)
-          body << "<td>"
-               << Escape(v.is_string()         ? v.get<std::string>()
-                         : v.is_number_float() ? Format(v.get<double>(), 3)
-                                               : v.dump())
-               << "</td>";
-        body << "</tr>\n";
-      }
-      body << "</tbody></table>\n";
-      ++summary.tables;
-    }
+  for (const auto& [stage, showcase] : runs.showcases)
+    body << ShowcaseSection(job, stage, showcase, &summary.tables, &summary.images);
+  if (!runs.curves.empty()) {
+    summary.train_stages = static_cast<int>(runs.curves.size());
+    body << CurvesSection(runs.curves, &summary.tables, &summary.images);
   }
-
-  // ---- training curves.
-  if (!curves.empty()) {
-    std::map<std::string, std::vector<const TrainCurve*>> groups;
-    for (const TrainCurve& c : curves) groups[BaseStage(c.stage)].push_back(&c);
-    summary.train_stages = static_cast<int>(curves.size());
-    body << "<h2>Training curves</h2>\n<p>The loss of every train stage (rank 0's losses.csv), "
-            "seed replicates overlaid, and the "
-         << "loss on fixed batches of the held-out split where the stage validates "
-            "(val_losses.csv).</p>\n"
-         << "<table>\n<caption>Training</caption>\n<thead><tr><th>stage</th><th>steps</"
-            "th><th>first loss</th><th>last loss</th>"
-         << "<th>held-out loss: last</th><th>held-out loss: best "
-            "(step)</th><th>seconds</th></tr></thead>\n<tbody>\n";
-    for (const TrainCurve& c : curves) {
-      std::string last_val = "&ndash;", best_val = "&ndash;";
-      if (!c.val_losses.empty()) {
-        const size_t best = static_cast<size_t>(
-            std::min_element(c.val_losses.begin(), c.val_losses.end()) - c.val_losses.begin());
-        last_val = Format(c.val_losses.back(), 4);
-        best_val = Format(c.val_losses[best], 4) + " (" + Format(c.val_steps[best] + 1, 0) + ")";
-      }
-      body << "<tr><td>" << Escape(c.stage) << "</td><td>" << Format(c.steps.back() + 1, 0)
-           << "</td><td>" << Format(c.losses.front(), 4) << "</td><td>"
-           << Format(c.losses.back(), 4) << "</td><td>" << last_val << "</td><td>" << best_val
-           << "</td><td>" << Format(c.seconds, 1) << "</td></tr>\n";
-    }
-    body << "</tbody></table>\n<div class=\"grid\">\n";
-    ++summary.tables;
-    for (const auto& [name, group] : groups)
-      body << ImgTag("image/png", CurvesPng(name, group), "training curve " + name, &summary.images)
-           << "\n";
-    body << "</div>\n";
-  }
-
-  // ---- metric history.
   if (!options.history.empty()) {
-    auto history = ReadHistory(options.history);
-    if (!history.ok()) return history.status();
-    std::map<std::string, std::map<std::string, std::vector<double>>>
-        series;  // metric -> method -> values
-    for (const MetricRecord& r : *history) series[r.metric][r.method].push_back(r.value);
-    body << "<h2>Evaluation history</h2>\n<p><code>" << Escape(options.history)
-         << "</code>: " << history->size()
-         << " records; each evaluation run appends its headline metrics with the checkpoint and "
-            "the config and data hashes.</p>\n<div class=\"grid\">\n";
-    for (const auto& [metric, by_method] : series)
-      body << ImgTag("image/png", HistoryPng(metric, by_method), "history " + metric,
-                     &summary.images)
-           << "\n";
-    body << "</div>\n";
+    MP_ASSIGN_OR_RETURN(const std::string history,
+                        HistorySection(options.history, &summary.images));
+    body << history;
   }
-
   const std::string html =
       "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>motionpipe "
       "report: " +

@@ -1,6 +1,7 @@
 // The HTML report of a job (`motionpipe report JOB_DIR`, the `report` stage): one self-contained
-// file with the evaluation stages' metrics laid out as SimMotionEdit's Table 1 (editing: motion-to-
-// motion retrieval) and SINC's Tables 2-3 (composition: TEMOS score, APE/AVE, retrieval), methods
+// file with the evaluation stages' metrics laid out as the papers' tables (papers.h: each table's
+// rows, published numbers and claims are data, configs/papers/*.yaml; an editing table holds
+// motion-to-motion retrieval, a generation table TEMOS score, APE/AVE and retrieval), methods
 // as rows, mean ± standard deviation over seed replicates, the best of each column in bold and the
 // papers' own numbers beside them; the claims each paper makes, checked against these runs;
 // physical plausibility; training curves and the metric history as plots; rendered previews (GIFs)
@@ -22,6 +23,9 @@ struct ReportOptions {
   std::string title;     // default: the job directory's name
   bool previews = true;  // render GIF previews (the slow part: about a second per method)
   int panel_size = 200;  // preview panel width and height in pixels
+  // Paper files (configs/papers/*.yaml's format) beside the built-in ones: one of the same
+  // paper name replaces the built-in, others add a table.
+  std::vector<std::string> papers;
 };
 
 struct ClaimCheck {

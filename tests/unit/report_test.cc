@@ -1,8 +1,15 @@
 // The report's calibrated claim verdicts (issue 15): a claim is decided only between models that
-// learned (each beats the untrained row) with 3+ seeds a side, by two standard errors.
+// learned (each beats the untrained row) with 3+ seeds a side, by two standard errors. The papers'
+// tables are data (configs/papers/*.yaml): a third paper's table is one file.
 #include "report.h"
 
 #include <gtest/gtest.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "motionpipe/base/file.h"
+#include "papers.h"
 
 namespace motionpipe::worker {
 namespace {
@@ -35,6 +42,110 @@ TEST(Claims, HoldsOrFailsOnlyBeyondTwoStandardErrors) {
   EXPECT_EQ(DecideClaim({0.70, 0.71, 0.72}, {0.60, 0.61, 0.62}, {}, true), ClaimVerdict::kHolds);
   // Lower is better: 2.4 against 2.7 holds.
   EXPECT_EQ(DecideClaim({2.40, 2.41, 2.39}, {2.70, 2.71, 2.69}, {16}, false), ClaimVerdict::kHolds);
+}
+
+TEST(Papers, TheBuiltInPapersAreBothPapersTables) {
+  auto papers = LoadPapers();
+  ASSERT_TRUE(papers.ok()) << papers.status().ToString();
+  ASSERT_EQ(papers->size(), 2u);
+  const Paper& edit = (*papers)[0];
+  EXPECT_EQ(edit.name, "SimMotionEdit");
+  EXPECT_EQ(edit.evaluation, "edit");
+  EXPECT_EQ(edit.columns, (std::vector<std::string>{"R@1", "R@2", "R@3", "AvgR"}));
+  ASSERT_EQ(edit.rows.size(), 6u);
+  EXPECT_EQ(edit.claims.size(), 5u);
+  const PaperRow* mdt = edit.Find("", "MDT (SimMotionEdit)");  // an older evaluation's method
+  ASSERT_NE(mdt, nullptr);
+  EXPECT_EQ(mdt->row, "SimMotionEdit (MDT)");
+  EXPECT_EQ(mdt->values, (std::vector<double>{70.62, 82.92, 88.12, 2.38}));
+  EXPECT_EQ(edit.Find("TMED", "MDT (SimMotionEdit)")->row, "TMED");  // a named row comes first
+  EXPECT_EQ(edit.Find("", "an unknown method"), nullptr);
+  const Paper& sinc = (*papers)[1];
+  EXPECT_EQ(sinc.name, "SINC");
+  EXPECT_EQ(sinc.evaluation, "generate");
+  EXPECT_EQ(sinc.Find("", "sinc (+ synthetic, labels)")->values, (std::vector<double>{0.644}));
+  EXPECT_EQ(sinc.metric.pointer, "/temos_score");
+  EXPECT_EQ(sinc.claims.size(), 3u);
+}
+
+TEST(Papers, ErrorsNameTheFileAndTheField) {
+  const std::string head = "paper: P\nevaluation: edit\ntitle: T\ncolumns: [R@1]\n";
+  const auto error = [](const std::string& text) {
+    auto p = ParsePaper(text, "p.yaml");
+    return p.ok() ? std::string("ok") : p.status().message();
+  };
+  EXPECT_EQ(error(head + "rows: [{row: A, values: [1]}]\n"), "ok");
+  EXPECT_EQ(error(head + "rows: [{row: A, values: [1, 2]}]\n"),
+            "p.yaml: rows[0]: 'values' must list one number per column (1)");
+  EXPECT_EQ(error("paper: P\nevaluation: score\ntitle: T\nrows: []\n"),
+            "p.yaml: 'evaluation' must be edit or generate");
+  EXPECT_EQ(error(head + "rows: [{row: A}]\nclaims: [{claim: c, better: A, worse: B}]\n"),
+            "p.yaml: claims need a 'metric'");
+  EXPECT_EQ(error(head + "rows: [{row: A}]\nmetric: {name: m, pointer: /m}\n"
+                         "claims: [{claim: c, better: A, worse: B}]\n"),
+            "p.yaml: claims[0]: 'B' is not a row of the paper");
+  EXPECT_EQ(error(head + "rows: [{values: [1]}]\n"), "p.yaml: rows[0]: 'row' must be a string");
+  EXPECT_NE(error("paper: [\n").find("p.yaml:"), std::string::npos);
+}
+
+// A third paper: one YAML file, given to the report, adds its table and its claims; an evaluation
+// names its row in it; a file of a built-in paper's name replaces that paper.
+TEST(Papers, AThirdPapersTableIsOneFile) {
+  namespace fs = std::filesystem;
+  const std::string dir = ::testing::TempDir() + "/third_paper";
+  fs::remove_all(dir);
+  const auto eval = [&](const std::string& stage, const nlohmann::json& extra) {
+    nlohmann::json m = {{"method", stage},
+                        {"motions", 4},
+                        {"generated_to_target", {{"all", {{"R@1", 50.0}, {"queries", 4}}}}},
+                        {"generated_to_source", {{"all", {{"R@1", 25.0}}}}}};
+    m.update(extra);
+    fs::create_directories(dir + "/job/" + stage + "/task-00000");
+    ASSERT_TRUE(WriteFileAtomic(dir + "/job/" + stage + "/task-00000/metrics.json", m.dump()).ok());
+  };
+  eval("eval_a", {{"row", "Editor A"}});
+  eval("eval_b", {{"row", "Editor B"},
+                  {"method", "tmed"},
+                  {"generated_to_target", {{"all", {{"R@1", 40.0}, {"queries", 4}}}}}});
+  ASSERT_TRUE(
+      WriteFileAtomic(dir + "/third.yaml",
+                      "paper: Third\nevaluation: edit\ntitle: A third paper's table\n"
+                      "columns: [R@1]\nrows:\n  - {row: Editor B, values: [40.5]}\n"
+                      "  - {row: Editor A, values: [60.25]}\n"
+                      "metric: {name: R@1, pointer: \"/generated_to_target/{protocol}/R@1\"}\n"
+                      "claims: [{claim: A beats B, better: Editor A, worse: Editor B}]\n")
+          .ok());
+  ReportOptions options;
+  options.job_dir = dir + "/job";
+  options.previews = false;
+  options.papers = {dir + "/third.yaml"};
+  auto summary = WriteReport(options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  auto html = ReadFile(dir + "/job/report.html");
+  ASSERT_TRUE(html.ok());
+  EXPECT_NE(html->find("<h2>A third paper's table</h2>"), std::string::npos) << *html;
+  // Its rows in its order, its numbers beside them; the same run is TMED in SimMotionEdit's table.
+  const size_t b = html->find("<td>Editor B</td>"), a = html->find("<td>Editor A</td>");
+  ASSERT_NE(b, std::string::npos);
+  ASSERT_NE(a, std::string::npos);
+  EXPECT_LT(b, a);
+  EXPECT_NE(html->find("<td class=\"paper\">60.25</td>"), std::string::npos);
+  EXPECT_NE(html->find("<td>TMED</td>"), std::string::npos);
+  ASSERT_EQ(summary->claims.size(), 5u + 3u + 1u);
+  const ClaimCheck& third = summary->claims.back();
+  EXPECT_EQ(third.paper, "Third");
+  EXPECT_EQ(third.verdict, "not decidable: fewer than 3 seeds (the means go the claimed way)");
+  EXPECT_NE(third.detail.find("R@1: 50.00 (n=1) vs 40.00 (n=1)"), std::string::npos)
+      << third.detail;
+  // The same paper name replaces the built-in table.
+  ASSERT_TRUE(
+      WriteFileAtomic(dir + "/sinc.yaml", "paper: SINC\nevaluation: generate\ntitle: S\nrows: []\n")
+          .ok());
+  auto papers = LoadPapers({dir + "/sinc.yaml"});
+  ASSERT_TRUE(papers.ok()) << papers.status().ToString();
+  ASSERT_EQ(papers->size(), 2u);
+  EXPECT_TRUE((*papers)[1].rows.empty());
+  fs::remove_all(dir);
 }
 
 }  // namespace

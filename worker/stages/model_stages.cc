@@ -537,7 +537,8 @@ class EvalEditStage : public StageExecutor {
                     {"batch", batch},
                     {"seed", seed}});
     if (p.contains("yardstick"))
-      metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+      metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
+    if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
     // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere)
     // and the target as the edit (the upper bound).
     metrics["yardsticks"] = {{"copy", *copy}, {"target", *target}};
@@ -855,7 +856,8 @@ class EvalGenerateStage : public StageExecutor {
     metrics.update(
         {{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
     if (p.contains("yardstick"))
-      metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+      metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
+    if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
     // The yardsticks, in the same evaluation (issue 15): the ground truth itself, and shuffled
     // ground truth (each test motion stands in for the one nearest in length to it).
     const std::vector<size_t> other = SameLengthClassPartner(truth);
@@ -1158,8 +1160,15 @@ class ReportStage : public StageExecutor {
     options.title = p.value("title", ctx.spec.job_name() + "-" + std::to_string(ctx.spec.job_id()));
     options.previews = p.value("previews", true);
     options.panel_size = static_cast<int>(p.value("panel_size", int64_t{200}));
+    // Paper files beside the built-in ones (configs/papers/*.yaml's format): a path or a list.
+    const json papers = p.value("papers", json::array());
+    for (const json& file : papers.is_array() ? papers : json::array({papers})) {
+      if (!file.is_string())
+        return TaskReport::BadInput("report: params.papers must be a path or a list of paths");
+      options.papers.push_back(file.get<std::string>());
+    }
     auto summary = WriteReport(options);
-    if (!summary.ok()) return TaskReport::Error("report: " + summary.status().message());
+    if (!summary.ok()) return TaskReport::FromStatus(summary.status().WithContext("report"));
     json claims = json::array();
     for (const ClaimCheck& c : summary->claims)
       claims.push_back(

@@ -1,0 +1,148 @@
+#include "papers.h"
+
+#include <algorithm>
+#include <cctype>
+
+#include "builtin_papers.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/base/yaml.h"
+
+namespace motionpipe::worker {
+
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return s;
+}
+
+// A required string field of `j`; `where` names it in the error.
+Status GetString(const Json& j, const char* key, const std::string& where, std::string* out) {
+  if (!j.contains(key) || !j[key].is_string())
+    return InvalidArgument(where + ": '" + key + "' must be a string");
+  *out = j[key].get<std::string>();
+  return Status::Ok();
+}
+
+Status GetStrings(const Json& j, const char* key, const std::string& where,
+                  std::vector<std::string>* out) {
+  if (!j.contains(key)) return Status::Ok();
+  if (!j[key].is_array()) return InvalidArgument(where + ": '" + key + "' must be a list");
+  for (const Json& v : j[key]) {
+    if (!v.is_string()) return InvalidArgument(where + ": '" + key + "' must list strings");
+    out->push_back(v.get<std::string>());
+  }
+  return Status::Ok();
+}
+
+Status ParseRow(const Json& j, const std::string& where, size_t columns, PaperRow* row) {
+  if (!j.is_object()) return InvalidArgument(where + ": a row is a map");
+  MP_RETURN_IF_ERROR(GetString(j, "row", where, &row->row));
+  MP_RETURN_IF_ERROR(GetStrings(j, "methods", where, &row->methods));
+  for (std::string& m : row->methods) m = Lower(m);
+  if (j.contains("values")) {
+    if (!j["values"].is_array() || j["values"].size() != columns)
+      return InvalidArgument(where + ": 'values' must list one number per column (" +
+                             std::to_string(columns) + ")");
+    for (const Json& v : j["values"]) {
+      if (!v.is_number()) return InvalidArgument(where + ": 'values' must be numbers");
+      row->values.push_back(v.get<double>());
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+const PaperRow* Paper::Find(const std::string& row, const std::string& method) const {
+  for (const PaperRow& r : rows) {
+    if (!row.empty() && r.row == row) return &r;
+  }
+  const std::string lower = Lower(method);
+  for (const PaperRow& r : rows) {
+    if (std::find(r.methods.begin(), r.methods.end(), lower) != r.methods.end()) return &r;
+  }
+  return nullptr;
+}
+
+Result<Paper> ParsePaper(const std::string& yaml_text, const std::string& origin) {
+  MP_ASSIGN_OR_RETURN(const Json j, ParseYaml(yaml_text, origin));
+  if (!j.is_object()) return InvalidArgument(origin + ": a paper is a YAML map");
+  Paper p;
+  p.origin = origin;
+  MP_RETURN_IF_ERROR(GetString(j, "paper", origin, &p.name));
+  MP_RETURN_IF_ERROR(GetString(j, "evaluation", origin, &p.evaluation));
+  if (p.evaluation != "edit" && p.evaluation != "generate")
+    return InvalidArgument(origin + ": 'evaluation' must be edit or generate");
+  MP_RETURN_IF_ERROR(GetString(j, "title", origin, &p.title));
+  if (j.contains("note")) MP_RETURN_IF_ERROR(GetString(j, "note", origin, &p.note));
+  MP_RETURN_IF_ERROR(GetStrings(j, "columns", origin, &p.columns));
+  if (j.contains("decimals") && !j["decimals"].is_number_integer())
+    return InvalidArgument(origin + ": 'decimals' must be an integer");
+  p.decimals = j.value("decimals", p.decimals);
+  if (!j.contains("rows") || !j["rows"].is_array())
+    return InvalidArgument(origin + ": 'rows' must be a list");
+  for (size_t r = 0; r < j["rows"].size(); ++r) {
+    PaperRow row;
+    MP_RETURN_IF_ERROR(ParseRow(j["rows"][r], origin + ": rows[" + std::to_string(r) + "]",
+                                p.columns.size(), &row));
+    p.rows.push_back(std::move(row));
+  }
+  if (j.contains("metric")) {
+    const Json& m = j["metric"];
+    const std::string where = origin + ": metric";
+    if (!m.is_object()) return InvalidArgument(where + " must be a map");
+    MP_RETURN_IF_ERROR(GetString(m, "name", where, &p.metric.name));
+    MP_RETURN_IF_ERROR(GetString(m, "pointer", where, &p.metric.pointer));
+    if (p.metric.pointer.empty() || p.metric.pointer[0] != '/')
+      return InvalidArgument(where + ": 'pointer' must be a JSON pointer (/a/b)");
+    p.metric.higher_is_better = m.value("higher_is_better", true);
+    p.metric.decimals = m.value("decimals", p.decimals);
+  }
+  const Json claims = j.value("claims", Json::array());
+  if (!claims.is_array()) return InvalidArgument(origin + ": 'claims' must be a list");
+  if (!claims.empty() && p.metric.pointer.empty())
+    return InvalidArgument(origin + ": claims need a 'metric'");
+  for (size_t c = 0; c < claims.size(); ++c) {
+    const std::string where = origin + ": claims[" + std::to_string(c) + "]";
+    PaperClaim claim;
+    if (!claims[c].is_object()) return InvalidArgument(where + ": a claim is a map");
+    MP_RETURN_IF_ERROR(GetString(claims[c], "claim", where, &claim.claim));
+    MP_RETURN_IF_ERROR(GetString(claims[c], "better", where, &claim.better));
+    MP_RETURN_IF_ERROR(GetString(claims[c], "worse", where, &claim.worse));
+    for (const std::string* row : {&claim.better, &claim.worse}) {
+      if (!p.Find(*row, ""))
+        return InvalidArgument(where + ": '" + *row + "' is not a row of the paper");
+    }
+    p.claims.push_back(std::move(claim));
+  }
+  return p;
+}
+
+Result<std::vector<Paper>> LoadPapers(const std::vector<std::string>& files) {
+  std::vector<Paper> papers;
+  const auto add = [&](Paper paper) {
+    for (Paper& p : papers) {
+      if (p.name == paper.name) {
+        p = std::move(paper);
+        return;
+      }
+    }
+    papers.push_back(std::move(paper));
+  };
+  for (const auto& [name, text] : kBuiltinPapers) {
+    MP_ASSIGN_OR_RETURN(Paper paper, ParsePaper(text, std::string("configs/papers/") + name));
+    add(std::move(paper));
+  }
+  for (const std::string& file : files) {
+    MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(file));
+    MP_ASSIGN_OR_RETURN(Paper paper, ParsePaper(text, file));
+    add(std::move(paper));
+  }
+  return papers;
+}
+
+}  // namespace motionpipe::worker

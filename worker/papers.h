@@ -1,0 +1,57 @@
+// The papers' tables as data: each configs/papers/*.yaml names a paper's table (which evaluations
+// it holds, its rows with their published numbers) and the claims the report checks. The files are
+// built in; a user's files add papers or replace one of the same name. The engine names no paper:
+// a third paper's table is a new file.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+
+namespace motionpipe::worker {
+
+struct PaperRow {
+  std::string row;                   // as the paper names it; an evaluation's params.row
+  std::vector<std::string> methods;  // lower-case `method` strings of evaluations without a row
+  std::vector<double> values;        // the published numbers, one per Paper::columns
+};
+
+struct PaperClaim {
+  std::string claim;
+  std::string better, worse;  // rows of the paper
+};
+
+struct PaperMetric {    // what the claims compare
+  std::string name;     // as printed
+  std::string pointer;  // JSON pointer into an evaluation's metrics; {protocol} is
+                        // "batches" or "all"
+  bool higher_is_better = true;
+  int decimals = 2;
+};
+
+struct Paper {
+  std::string name;        // "SimMotionEdit"
+  std::string evaluation;  // "edit" (eval_edit metrics) or "generate" (eval_generate metrics)
+  std::string title;       // the table's heading
+  std::string note;        // appended to the table's description; may be empty
+  std::vector<std::string> columns;  // the published columns
+  int decimals = 2;
+  std::vector<PaperRow> rows;
+  PaperMetric metric;
+  std::vector<PaperClaim> claims;
+  std::string origin;  // the file it came from
+
+  // The row an evaluation belongs to: its params.row if it names one of ours, else the row whose
+  // `methods` hold its method string (any case); nullptr when neither.
+  const PaperRow* Find(const std::string& row, const std::string& method) const;
+};
+
+// One paper file; every error names `origin` and the field.
+Result<Paper> ParsePaper(const std::string& yaml_text, const std::string& origin);
+
+// The built-in papers (configs/papers at build time), then each file of `files`: a paper of a
+// name already loaded replaces it, a new one is added.
+Result<std::vector<Paper>> LoadPapers(const std::vector<std::string>& files = {});
+
+}  // namespace motionpipe::worker
