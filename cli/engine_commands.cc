@@ -92,7 +92,29 @@ struct RunOptions {
   std::vector<std::string> plugin_dirs;
   double heartbeat = 1.0;
   bool quiet = false;
+  bool dry_run = false;
 };
+
+// `run --dry-run`: the pipeline as planned (after overrides and validation), one line per stage
+// with its task count; nothing is started or written.
+int DryRun(const coordinator::PipelineSpec& spec) {
+  std::printf("pipeline '%s': %zu stage(s); outputs in %s/%s-<job id>; fingerprint %s\n",
+              spec.name.c_str(), spec.stages.size(), spec.output_root.c_str(), spec.name.c_str(),
+              spec.fingerprint.substr(0, 12).c_str());
+  std::printf("  %-28s %-16s %6s  %s\n", "stage", "kind", "tasks", "inputs");
+  int64_t total = 0;
+  for (const coordinator::StageSpec& stage : spec.stages) {
+    const int tasks = stage.shards + (stage.reduce ? 1 : 0);
+    total += tasks;
+    std::string inputs;
+    for (const std::string& input : stage.inputs) inputs += (inputs.empty() ? "" : ", ") + input;
+    if (stage.world_size > 1) inputs += " (a gang of " + std::to_string(stage.world_size) + ")";
+    std::printf("  %-28s %-16s %6d  %s\n", stage.name.c_str(), stage.kind.c_str(), tasks,
+                inputs.c_str());
+  }
+  std::printf("%lld task(s) in all\n", static_cast<long long>(total));
+  return 0;
+}
 
 int Run(const RunOptions& o) {
   auto text = ReadFile(o.pipeline);
@@ -100,6 +122,7 @@ int Run(const RunOptions& o) {
   const coordinator::KindRegistry kinds = coordinator::CoordinatorKinds(o.plugin_dirs);
   auto spec = coordinator::ParsePipeline(*text, o.overrides, o.pipeline, kinds);
   if (!spec.ok()) return Fail(spec.status());
+  if (o.dry_run) return DryRun(*spec);
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
   // A worker runs one task at a time (credit is how many it holds: the running one and those
   // prefetched behind it), so the default gives each worker's task its share of the cores.
@@ -296,6 +319,8 @@ void AddEngineCommands(CLI::App& app, int* exit_code) {
     cmd->add_option("--plugins", o.plugin_dirs, "Extra plugin directories");
     AddDurationOption(cmd, "--heartbeat", &o.heartbeat, "Heartbeat interval (default 1s)");
     cmd->add_flag("--quiet,-q", o.quiet, "No progress display");
+    cmd->add_flag("--dry-run", o.dry_run,
+                  "Validate the pipeline and print its stages and task counts; start nothing");
     cmd->callback([exit_code] { *exit_code = Run(o); });
   }
   {  // coordinator

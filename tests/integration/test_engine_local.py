@@ -59,6 +59,20 @@ class LocalRun(EngineTest):
         result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "0"], capture_output=True, text=True, timeout=60)
         self.assertEqual(result.returncode, 2)  # usage error
 
+    def test_a_dry_run_plans_and_starts_nothing(self):
+        pipeline = self.write_pipeline("p.yaml", PIPELINE)
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--dry-run", "stages.write.params.tasks=7"], capture_output=True, text=True,
+                                timeout=60)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        self.assertRegex(result.stdout, r"write +test\.write +7 ")
+        self.assertRegex(result.stdout, r"check +sample\.checksum +1 +write")
+        self.assertIn("8 task(s) in all", result.stdout)
+        self.assertFalse(os.path.exists(self.path("out")))  # no job, no journal
+        bad = self.write_pipeline("bad.yaml", PIPELINE.replace("inputs: [write]", "inputs: [wirte]"))
+        result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 1)
+        self.assertIn("stages.check.inputs[0]: unknown stage 'wirte'", result.stderr)
+
     def test_an_interrupted_run_resumes(self):
         pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 20}"))
         run = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
