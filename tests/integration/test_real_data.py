@@ -103,7 +103,7 @@ class RealDataTest(EngineTest):
 
     def test_claims_graphs(self):
         # SimMotionEdit: every row of Table 1 with its seeds, after the yardsticks.
-        job, tables = self.run_claims("claims_edit.yaml", EDITOR + ["vars.steps_tmr=2"])
+        job, tables = self.run_claims("claims_edit.yaml", EDITOR + ["vars.steps_tmr=2", "vars.triplets=120"])
         for stage in ("mdt-s2", "tmed-s2", "mdt_no_filter-s2", "eval_edit_mdm_bp-s2"):
             self.assertTrue(os.path.isdir(os.path.join(job, stage, "task-00000")), stage)
         table1 = tables["Editing: retrieval of the edits (all)"]
