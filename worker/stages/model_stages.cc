@@ -944,41 +944,10 @@ class ShowcaseStage : public StageExecutor {
     fs::create_directories(ctx.output_dir());
     const std::string out = ctx.output_dir();
     // 1. Import.
-    std::vector<std::string> files;
-    const auto add = [&](const std::string& path) {
-      if (fs::is_directory(path)) {
-        for (const auto& e : fs::directory_iterator(path)) {
-          if (e.path().extension() == ".bvh") files.push_back(e.path().string());
-        }
-      } else {
-        files.push_back(path);
-      }
-    };
-    const json clips_param = p.value("clips", json("data/mocap/cmu"));
-    if (clips_param.is_array()) {
-      for (const json& c : clips_param) add(c.get<std::string>());
-    } else {
-      add(clips_param.get<std::string>());
-    }
-    std::sort(files.begin(), files.end());
-    if (files.empty())
-      return TaskReport::BadInput("showcase: no BVH files in " + clips_param.dump());
     const int64_t max_frames = p.value("max_frames", int64_t{150});
-    std::vector<Clip> cmu;
-    for (const std::string& f : files) {
-      auto loaded = LoadMotionFile(f, 30);
-      if (!loaded.ok()) return TaskReport::BadInput("showcase: " + loaded.status().message());
-      Clip clip = std::move(loaded->front());
-      clip.id = fs::path(f).stem().string();
-      clip.source = "cmu:" + fs::path(f).filename().string();
-      if (clip.motion.num_frames() > max_frames) {  // the models' training length
-        clip.motion.poses.resize(static_cast<size_t>(max_frames) * kNumJoints * 3);
-        clip.motion.trans.resize(static_cast<size_t>(max_frames) * 3);
-      }
-      clip.joints.clear();
-      clip.segments.clear();
-      cmu.push_back(std::move(clip));
-    }
+    auto imported = ImportClips(p.value("clips", json("data/mocap/cmu")), max_frames);
+    if (!imported.ok()) return TaskReport::FromStatus(imported.status());
+    const std::vector<Clip>& cmu = *imported;
     if (Status st = WriteClips(out + "/cmu.npz", cmu); !st.ok())
       return TaskReport::Error(st.message());
     const Motion& source = cmu.front().motion;
@@ -1003,27 +972,7 @@ class ShowcaseStage : public StageExecutor {
     auto table = InputSpans(ctx);
     if (!table.ok()) return TaskReport::BadInput("showcase: " + table.status().message());
     const PartSet clip_parts = labels::LexiconParts(clip_text);
-    // The partner: params.partner_text if given, else the first test single that moves only the
-    // arms (what SINC composes with a walk), else the first compatible one.
-    const std::string wanted = p.value("partner_text", std::string());
-    const PartSet arms =
-        static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm));
-    int64_t partner = -1, fallback = -1;
-    for (int64_t i = 0; i < table->size() && partner < 0; ++i) {
-      if (!table->single(i) || table->splits[static_cast<size_t>(i)] != "test" ||
-          table->frames(i) < 30)
-        continue;
-      const PartSet parts = table->parts_a[static_cast<size_t>(i)];
-      if (!sinc::Compatible(clip_parts, parts)) continue;
-      if (!wanted.empty()) {
-        if (table->text_a[static_cast<size_t>(i)] == wanted) partner = i;
-      } else if ((parts & ~arms) == 0) {
-        partner = i;
-      } else if (fallback < 0) {
-        fallback = i;
-      }
-    }
-    if (partner < 0 && wanted.empty()) partner = fallback;
+    const int64_t partner = PickPartner(*table, clip_parts, p.value("partner_text", std::string()));
     if (partner < 0)
       return TaskReport::BadInput(
           "showcase: no test single in the spans table is compatible with '" + clip_text + "'");
@@ -1130,6 +1079,69 @@ class ShowcaseStage : public StageExecutor {
   }
 
  private:
+  // The BVH files of `clips` (files or directories), sorted, imported onto SMPL-22 at 30 fps and
+  // cut to max_frames (the models' training length).
+  static Result<std::vector<Clip>> ImportClips(const json& clips, int64_t max_frames) {
+    std::vector<std::string> files;
+    const auto add = [&](const std::string& path) {
+      if (fs::is_directory(path)) {
+        for (const auto& e : fs::directory_iterator(path)) {
+          if (e.path().extension() == ".bvh") files.push_back(e.path().string());
+        }
+      } else {
+        files.push_back(path);
+      }
+    };
+    if (clips.is_array()) {
+      for (const json& c : clips) add(c.get<std::string>());
+    } else {
+      add(clips.get<std::string>());
+    }
+    std::sort(files.begin(), files.end());
+    if (files.empty()) return InvalidArgument("showcase: no BVH files in " + clips.dump());
+    std::vector<Clip> cmu;
+    for (const std::string& f : files) {
+      auto loaded = LoadMotionFile(f, 30);
+      if (!loaded.ok()) return InvalidArgument("showcase: " + loaded.status().message());
+      Clip clip = std::move(loaded->front());
+      clip.id = fs::path(f).stem().string();
+      clip.source = "cmu:" + fs::path(f).filename().string();
+      if (clip.motion.num_frames() > max_frames) {
+        clip.motion.poses.resize(static_cast<size_t>(max_frames) * kNumJoints * 3);
+        clip.motion.trans.resize(static_cast<size_t>(max_frames) * 3);
+      }
+      clip.joints.clear();
+      clip.segments.clear();
+      cmu.push_back(std::move(clip));
+    }
+    return cmu;
+  }
+
+  // The corpus action to compose the clip with (SINC sec. 3.1): the test single `wanted` if given,
+  // else the first test single that moves only the arms (what SINC composes with a walk), else the
+  // first compatible one; -1 when none is.
+  static int64_t PickPartner(const sinc::SpanTable& table, PartSet clip_parts,
+                             const std::string& wanted) {
+    const PartSet arms =
+        static_cast<PartSet>(PartBit(BodyPart::kLeftArm) | PartBit(BodyPart::kRightArm));
+    int64_t partner = -1, fallback = -1;
+    for (int64_t i = 0; i < table.size() && partner < 0; ++i) {
+      if (!table.single(i) || table.splits[static_cast<size_t>(i)] != "test" ||
+          table.frames(i) < 30)
+        continue;
+      const PartSet parts = table.parts_a[static_cast<size_t>(i)];
+      if (!sinc::Compatible(clip_parts, parts)) continue;
+      if (!wanted.empty()) {
+        if (table.text_a[static_cast<size_t>(i)] == wanted) partner = i;
+      } else if ((parts & ~arms) == 0) {
+        partner = i;
+      } else if (fallback < 0) {
+        fallback = i;
+      }
+    }
+    return partner < 0 && wanted.empty() ? fallback : partner;
+  }
+
   const PluginHost* plugins_;
 };
 
