@@ -99,6 +99,10 @@ Result<Paper> ParsePaper(const std::string& yaml_text, const std::string& origin
     MP_RETURN_IF_ERROR(GetString(m, "pointer", where, &p.metric.pointer));
     if (p.metric.pointer.empty() || p.metric.pointer[0] != '/')
       return InvalidArgument(where + ": 'pointer' must be a JSON pointer (/a/b)");
+    if (m.contains("higher_is_better") && !m["higher_is_better"].is_boolean())
+      return InvalidArgument(where + ": 'higher_is_better' must be true or false");
+    if (m.contains("decimals") && !m["decimals"].is_number_integer())
+      return InvalidArgument(where + ": 'decimals' must be an integer");
     p.metric.higher_is_better = m.value("higher_is_better", true);
     p.metric.decimals = m.value("decimals", p.decimals);
   }

@@ -874,6 +874,15 @@ std::string ClaimsSection(const std::vector<ClaimCheck>& claims, int* tables) {
 // ---- previews, showcases, curves, history
 // -----------------------------------------------------------
 
+// Each method's `role` motion from its first run's preview, labelled by its row.
+void AppendMethodPanels(const std::vector<const Method*>& methods, const std::string& role,
+                        std::vector<render::MotionPanel>* panels) {
+  for (const Method* m : methods) {
+    if (auto motion = PreviewMotion(m->runs.front().dir, role, nullptr))
+      panels->push_back({*motion, RowName(*m), ""});
+  }
+}
+
 Result<std::string> PreviewSection(const std::vector<const Method*>& edits,
                                    const std::vector<const Method*>& gens, int panel_size,
                                    const std::string& scratch, int* images) {
@@ -886,10 +895,7 @@ Result<std::string> PreviewSection(const std::vector<const Method*>& edits,
       panels.push_back({*source, "source", text});
     if (auto target = PreviewMotion(first, "target", nullptr))
       panels.push_back({*target, "target", ""});
-    for (const Method* m : edits) {
-      if (auto edited = PreviewMotion(m->runs.front().dir, "edited", nullptr))
-        panels.push_back({*edited, RowName(*m), ""});
-    }
+    AppendMethodPanels(edits, "edited", &panels);
     if (panels.size() > 2) {
       MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
       body << "<h2>Previews</h2>\n<figure>" << ImgTag("image/gif", gif, "editing preview", images)
@@ -903,10 +909,7 @@ Result<std::string> PreviewSection(const std::vector<const Method*>& edits,
     std::string text;
     if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text))
       panels.push_back({*truth, "ground truth", text});
-    for (const Method* m : gens) {
-      if (auto g = PreviewMotion(m->runs.front().dir, "generated", nullptr))
-        panels.push_back({*g, RowName(*m), ""});
-    }
+    AppendMethodPanels(gens, "generated", &panels);
     if (panels.size() > 1) {
       MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
       body << "<figure>" << ImgTag("image/gif", gif, "composition preview", images)

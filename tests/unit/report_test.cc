@@ -85,6 +85,8 @@ TEST(Papers, ErrorsNameTheFileAndTheField) {
                          "claims: [{claim: c, better: A, worse: B}]\n"),
             "p.yaml: claims[0]: 'B' is not a row of the paper");
   EXPECT_EQ(error(head + "rows: [{values: [1]}]\n"), "p.yaml: rows[0]: 'row' must be a string");
+  EXPECT_EQ(error(head + "rows: [{row: A}]\nmetric: {name: m, pointer: /m, higher_is_better: 1}\n"),
+            "p.yaml: metric: 'higher_is_better' must be true or false");
   EXPECT_NE(error("paper: [\n").find("p.yaml:"), std::string::npos);
 }
 
