@@ -23,11 +23,6 @@ namespace motionpipe::cli {
 
 namespace {
 
-int Fail(const Status& status) {
-  std::cerr << "error: " << status.message() << "\n";
-  return kExitFailure;
-}
-
 std::string Stem(const std::string& path) { return std::filesystem::path(path).stem().string(); }
 
 // Per-frame lowest foot joint height, median over the clip (metres): ~0 when feet touch the floor.
@@ -124,11 +119,9 @@ struct ExportBvhArgs {
 int RunExportBvh(const ExportBvhArgs& a) {
   auto clips = LoadMotionFile(a.input);
   if (!clips.ok()) return Fail(clips.status());
-  const auto it = a.clip_id.empty()
-                      ? clips->begin()
-                      : std::find_if(clips->begin(), clips->end(),
-                                     [&](const Clip& c) { return c.id == a.clip_id; });
-  if (it == clips->end()) return Fail(NotFound(a.input + ": no clip '" + a.clip_id + "'"));
+  auto found = FindClip(*clips, a.clip_id, a.input);
+  if (!found.ok()) return Fail(found.status());
+  const Clip* it = *found;
   if (Status s = ExportBvhFile(a.output, it->motion, {a.units}); !s.ok()) return Fail(s);
   std::printf("%s: clip '%s', %lld frames -> %s\n", a.input.c_str(), it->id.c_str(),
               static_cast<long long>(it->motion.num_frames()), a.output.c_str());
@@ -295,8 +288,7 @@ int RunFilter(const FilterArgs& a) {
   nlohmann::json config = {{"preset", a.preset}};
   for (const std::string& set : a.sets) {
     const size_t eq = set.find('=');
-    if (eq == std::string::npos)
-      return Fail(InvalidArgument("--set " + set + ": expected key=value"));
+    if (eq == std::string::npos) return Usage("--set " + set + ": expected key=value");
     const std::string value = set.substr(eq + 1);
     const nlohmann::json parsed = nlohmann::json::parse(value, nullptr, false);
     config[set.substr(0, eq)] = parsed.is_discarded() ? nlohmann::json(value) : parsed;

@@ -28,11 +28,6 @@ namespace motionpipe::cli {
 
 namespace {
 
-int Fail(const Status& status) {
-  std::cerr << "error: " << status.message() << "\n";
-  return kExitFailure;
-}
-
 std::atomic<int> g_run_signal{0};
 extern "C" void OnRunSignal(int signal) { g_run_signal = signal; }
 

@@ -13,11 +13,6 @@ namespace motionpipe::cli {
 
 namespace {
 
-int Fail(const Status& status) {
-  std::cerr << "error: " << status.message() << "\n";
-  return kExitFailure;
-}
-
 Result<nlohmann::json> ParseConfig(const std::string& text) {
   if (text.empty()) return nlohmann::json::object();
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);

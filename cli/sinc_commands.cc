@@ -20,11 +20,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-int Fail(const Status& status) {
-  std::cerr << "error: " << status.message() << "\n";
-  return kExitFailure;
-}
-
 // "global,left leg,right leg" or "legs+global" -> parts; "" -> 0.
 Result<PartSet> ParseParts(const std::string& text) {
   PartSet parts = 0;

@@ -29,7 +29,7 @@ class RenderTest(unittest.TestCase):
 
     def test_gif_of_two_clips_side_by_side(self):
         out = os.path.join(self.dir, "two.gif")
-        self.run_cli("render", *CMU, "--title", "131_01", "--title", "131_02", "--fps", "10", "--size", "160", "--out", out)
+        self.run_cli("render", *CMU, "--title", "131_01", "--title", "131_02", "--gif-fps", "10", "--fps", "30", "--size", "160", "--out", out)
         gif = Image.open(out)
         self.assertEqual(gif.format, "GIF")
         self.assertEqual(gif.size, (320, 160))
