@@ -109,115 +109,158 @@ void PrintRow(const std::string& labeler, const std::string& data,
   std::printf(" %7.3f\n", acc.mean);
 }
 
+// "gpt-answers, lexicon, velocity, llm, random": the built-in labelers, for the help texts.
+std::string BuiltInLabelers() {
+  std::string names;
+  for (const std::string& name : labels::BuiltinLabelerNames())
+    names += (names.empty() ? "" : ", ") + name;
+  return names;
+}
+
+// ---- labels label ------------------------------------------------------------------------------
+struct LabelArgs {
+  std::string name = "lexicon", config_text;
+  std::vector<std::string> texts;
+};
+
+int RunLabel(const LabelArgs& a) {
+  auto config = ParseConfig(a.config_text);
+  if (!config.ok()) return Usage(config.status().message());
+  auto labeler = worker::MakeLabeler(a.name, *config, &Plugins());
+  if (!labeler.ok()) return Fail(labeler.status());
+  std::vector<labels::LabelInput> inputs;
+  for (const auto& t : a.texts) inputs.push_back({t, nullptr});
+  auto parts = (*labeler)->Label(inputs);
+  if (!parts.ok()) return Fail(parts.status());
+  for (size_t k = 0; k < a.texts.size(); ++k)
+    std::printf("%-40s %s\n", a.texts[k].c_str(), PartSetToString((*parts)[k]).c_str());
+  return kExitOk;
+}
+
+void AddLabel(CLI::App* group, int* exit_code) {
+  auto* cmd = group->add_subcommand("label", "Print the body parts a labeler gives each text");
+  static LabelArgs a;
+  cmd->add_option("--labeler", a.name, BuiltInLabelers() + ", or a plugin's (learned)")
+      ->capture_default_str();
+  cmd->add_option("--config", a.config_text, "The labeler's configuration as JSON");
+  cmd->add_option("texts", a.texts, "Action texts")->required();
+  cmd->callback([exit_code] { *exit_code = RunLabel(a); });
+}
+
+// ---- labels eval -------------------------------------------------------------------------------
+struct EvalArgs {
+  std::vector<std::string> names;
+  std::string config_text, gpt_file = "data/text/babel_action_labels_gpt3.json";
+  std::string split = "heldout", corpus;
+  size_t segments = 2000;
+  int show_errors = 0;
+};
+
+// The data sets a labeler is scored on: the GPT answers' split, the corpus's texts and segments.
+struct EvalData {
+  std::vector<labels::LabelledText> gpt, corpus_texts;
+  SegmentTruth corpus_segments;
+};
+
+Result<EvalData> LoadEvalData(const EvalArgs& a) {
+  EvalData data;
+  if (a.split != "none") {
+    MP_ASSIGN_OR_RETURN(data.gpt, GptTruth(a.gpt_file, a.split));
+  }
+  if (!a.corpus.empty()) {
+    MP_ASSIGN_OR_RETURN(data.corpus_texts, CorpusTextTruth(a.corpus));
+    MP_ASSIGN_OR_RETURN(data.corpus_segments, CorpusSegmentTruth(a.corpus, a.segments));
+  }
+  return data;
+}
+
+// One row of the table (and up to `show_errors` disagreements): `labeler` on `truth`.
+Status ScoreOn(labels::Labeler& labeler, const std::string& name,
+               const std::vector<labels::LabelledText>& truth, const std::string& data,
+               int show_errors) {
+  if (truth.empty()) return Status::Ok();
+  std::vector<labels::LabelInput> inputs;
+  for (const auto& t : truth) inputs.push_back({t.text, t.motion});
+  MP_ASSIGN_OR_RETURN(const std::vector<PartSet> parts, labeler.Label(inputs));
+  PrintRow(name, data, labels::ScoreLabels(truth, parts));
+  int shown = 0;
+  for (size_t k = 0; k < truth.size() && shown < show_errors; ++k) {
+    PartSet want = 0, mask = 0;
+    for (int p = 0; p < kNumBodyParts; ++p) {
+      const float t = truth[k].truth[static_cast<size_t>(p)];
+      if (t == 1.f) want |= static_cast<PartSet>(1u << p);
+      if (t == 0.f || t == 1.f) mask |= static_cast<PartSet>(1u << p);
+    }
+    if ((parts[k] & mask) == want) continue;
+    ++shown;
+    std::printf("    %-50s truth %-40s got %s\n", truth[k].text.c_str(),
+                PartSetToString(want).c_str(), PartSetToString(parts[k]).c_str());
+  }
+  return Status::Ok();
+}
+
+int RunEval(const EvalArgs& a) {
+  auto config = ParseConfig(a.config_text);
+  if (!config.ok()) return Usage(config.status().message());
+  auto data = LoadEvalData(a);
+  if (!data.ok()) return Fail(data.status());
+  const std::vector<std::string> names =
+      a.names.empty() ? std::vector<std::string>{"lexicon"} : a.names;
+  std::printf("%-14s %-26s %6s %7s %7s %7s %7s %7s %7s %7s\n", "labeler", "data", "n", "global",
+              "torso", "l.arm", "r.arm", "l.leg", "r.leg", "mean");
+  int code = kExitOk;
+  for (const std::string& name : names) {
+    auto labeler = worker::MakeLabeler(name, *config, &Plugins());
+    if (!labeler.ok()) {
+      code = Fail(labeler.status());
+      continue;
+    }
+    std::vector<std::pair<const std::vector<labels::LabelledText>*, std::string>> sets;
+    if ((*labeler)->NeedsMotion()) {
+      sets = {{&data->corpus_segments.truth, "corpus segments (motion)"}};
+    } else {
+      sets = {{&data->gpt, "GPT-3 answers (" + a.split + ")"},
+              {&data->corpus_texts, "corpus texts"},
+              {&data->corpus_segments.truth, "corpus segments (text)"}};
+    }
+    for (const auto& [truth, label] : sets) {
+      if (Status s = ScoreOn(**labeler, name, *truth, label, a.show_errors); !s.ok())
+        code = Fail(s);
+    }
+  }
+  return code;
+}
+
+void AddEval(CLI::App* group, int* exit_code) {
+  auto* cmd = group->add_subcommand("eval",
+                                    "Per-part and mean accuracy (SINC Table 1: Yes/No counted, "
+                                    "'sometimes' ignored) of labelers");
+  static EvalArgs a;
+  cmd->add_option(
+      "--labeler", a.names,
+      "Labelers to score (repeat; default lexicon): " + BuiltInLabelers() + ", or a plugin's");
+  cmd->add_option("--config", a.config_text, "JSON configuration given to every labeler");
+  cmd->add_option("--gpt", a.gpt_file, "SINC's GPT answers file: the third answer is the truth")
+      ->capture_default_str();
+  cmd->add_option("--split", a.split, "Which GPT texts: heldout (1 in 5 by hash), train, all, none")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"heldout", "train", "all", "none"}));
+  cmd->add_option("--corpus", a.corpus,
+                  "A generated corpus: its texts (known parts) and labelled segments");
+  cmd->add_option("--segments", a.segments, "Segments scored for motion-based labelers")
+      ->capture_default_str();
+  cmd->add_option("--show-errors", a.show_errors, "Print this many disagreements per data set");
+  cmd->callback([exit_code] { *exit_code = RunEval(a); });
+}
+
 }  // namespace
 
 void AddLabelsCommands(CLI::App& app, int* exit_code) {
   CLI::App* group = app.add_subcommand(
       "labels", "Body-part labels of action texts (SINC): label texts, score labelers");
   group->require_subcommand(1);
-  {  // label
-    auto* cmd = group->add_subcommand("label", "Print the body parts a labeler gives each text");
-    static std::string name = "lexicon", config_text;
-    static std::vector<std::string> texts;
-    cmd->add_option("--labeler", name, "gpt-answers, lexicon, llm, random, or a plugin's (learned)")
-        ->capture_default_str();
-    cmd->add_option("--config", config_text, "The labeler's configuration as JSON");
-    cmd->add_option("texts", texts, "Action texts")->required();
-    cmd->callback([exit_code] {
-      auto config = ParseConfig(config_text);
-      if (!config.ok()) return void(*exit_code = Fail(config.status()));
-      auto labeler = worker::MakeLabeler(name, *config, &Plugins());
-      if (!labeler.ok()) return void(*exit_code = Fail(labeler.status()));
-      std::vector<labels::LabelInput> inputs;
-      for (const auto& t : texts) inputs.push_back({t, nullptr});
-      auto parts = (*labeler)->Label(inputs);
-      if (!parts.ok()) return void(*exit_code = Fail(parts.status()));
-      for (size_t k = 0; k < texts.size(); ++k)
-        std::printf("%-40s %s\n", texts[k].c_str(), PartSetToString((*parts)[k]).c_str());
-    });
-  }
-  {  // eval
-    auto* cmd = group->add_subcommand("eval",
-                                      "Per-part and mean accuracy (SINC Table 1: Yes/No counted, "
-                                      "'sometimes' ignored) of labelers");
-    static std::vector<std::string> names;
-    static std::string config_text, gpt_file = "data/text/babel_action_labels_gpt3.json",
-                                    split = "heldout", corpus;
-    static size_t segments = 2000;
-    static int show_errors = 0;
-    cmd->add_option("--labeler", names, "Labelers to score (repeat); default: lexicon")
-        ->capture_default_str();
-    cmd->add_option("--config", config_text, "JSON configuration given to every labeler");
-    cmd->add_option("--gpt", gpt_file, "SINC's GPT answers file: the third answer is the truth")
-        ->capture_default_str();
-    cmd->add_option("--split", split, "Which GPT texts: heldout (1 in 5 by hash), train, all, none")
-        ->capture_default_str();
-    cmd->add_option("--corpus", corpus,
-                    "A generated corpus: its texts (known parts) and labelled segments");
-    cmd->add_option("--segments", segments, "Segments scored for motion-based labelers")
-        ->capture_default_str();
-    cmd->add_option("--show-errors", show_errors, "Print this many disagreements per data set");
-    cmd->callback([exit_code] {
-      auto config = ParseConfig(config_text);
-      if (!config.ok()) return void(*exit_code = Fail(config.status()));
-      if (names.empty()) names = {"lexicon"};
-      std::vector<labels::LabelledText> gpt, corpus_texts;
-      SegmentTruth corpus_segments;
-      if (split != "none") {
-        auto truth = GptTruth(gpt_file, split);
-        if (!truth.ok()) return void(*exit_code = Fail(truth.status()));
-        gpt = std::move(*truth);
-      }
-      if (!corpus.empty()) {
-        auto texts = CorpusTextTruth(corpus);
-        if (!texts.ok()) return void(*exit_code = Fail(texts.status()));
-        corpus_texts = std::move(*texts);
-        auto segs = CorpusSegmentTruth(corpus, segments);
-        if (!segs.ok()) return void(*exit_code = Fail(segs.status()));
-        corpus_segments = std::move(*segs);
-      }
-      std::printf("%-14s %-26s %6s %7s %7s %7s %7s %7s %7s %7s\n", "labeler", "data", "n", "global",
-                  "torso", "l.arm", "r.arm", "l.leg", "r.leg", "mean");
-      for (const std::string& name : names) {
-        auto labeler = worker::MakeLabeler(name, *config, &Plugins());
-        if (!labeler.ok()) {
-          *exit_code = Fail(labeler.status());
-          continue;
-        }
-        auto run = [&](const std::vector<labels::LabelledText>& truth, const std::string& data) {
-          if (truth.empty()) return;
-          std::vector<labels::LabelInput> inputs;
-          for (const auto& t : truth) inputs.push_back({t.text, t.motion});
-          auto parts = (*labeler)->Label(inputs);
-          if (!parts.ok()) {
-            *exit_code = Fail(parts.status());
-            return;
-          }
-          PrintRow(name, data, labels::ScoreLabels(truth, *parts));
-          int shown = 0;
-          for (size_t k = 0; k < truth.size() && shown < show_errors; ++k) {
-            PartSet want = 0, mask = 0;
-            for (int p = 0; p < kNumBodyParts; ++p) {
-              const float t = truth[k].truth[static_cast<size_t>(p)];
-              if (t == 1.f) want |= static_cast<PartSet>(1u << p);
-              if (t == 0.f || t == 1.f) mask |= static_cast<PartSet>(1u << p);
-            }
-            if (((*parts)[k] & mask) == want) continue;
-            ++shown;
-            std::printf("    %-50s truth %-40s got %s\n", truth[k].text.c_str(),
-                        PartSetToString(want).c_str(), PartSetToString((*parts)[k]).c_str());
-          }
-        };
-        if ((*labeler)->NeedsMotion()) {
-          run(corpus_segments.truth, "corpus segments (motion)");
-        } else {
-          run(gpt, "GPT-3 answers (" + split + ")");
-          run(corpus_texts, "corpus texts");
-          run(corpus_segments.truth, "corpus segments (text)");
-        }
-      }
-    });
-  }
+  AddLabel(group, exit_code);
+  AddEval(group, exit_code);
 }
 
 }  // namespace motionpipe::cli
