@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <regex>
 #include <set>
 
@@ -477,6 +478,242 @@ std::vector<std::string> KindRegistry::Kinds() const {
   return out;
 }
 
+namespace {
+
+// `scale: NAME` picks `scales.NAME`, a map of vars: they override the file's vars, and
+// command-line overrides (which may also pick the scale) override both.
+Status ApplyScale(Json* doc, const std::vector<std::string>& overrides, const std::string& origin,
+                  std::vector<std::string>* errors) {
+  if (!doc->contains("scale") && !doc->contains("scales")) return Status::Ok();
+  Json chosen = *doc;
+  for (const std::string& o : overrides)
+    MP_RETURN_IF_ERROR(ApplyOverride(&chosen, o).WithContext(origin));
+  const Json scale = chosen.value("scale", Json());
+  const Json scales = chosen.value("scales", Json::object());
+  if (!scale.is_string() || !scales.is_object() || !scales.contains(scale.get<std::string>()) ||
+      !scales[scale.get<std::string>()].is_object()) {
+    std::string known;
+    if (scales.is_object()) {
+      for (const auto& [name, value] : scales.items()) known += (known.empty() ? "" : ", ") + name;
+    }
+    errors->push_back("scale: must name one of scales (" +
+                      (known.empty() ? std::string("none defined") : known) + "), got " +
+                      scale.dump());
+    return Status::Ok();
+  }
+  if (!doc->contains("vars") || !(*doc)["vars"].is_object()) (*doc)["vars"] = Json::object();
+  for (const auto& [key, value] : scales[scale.get<std::string>()].items())
+    (*doc)["vars"][key] = value;
+  (*doc)["vars"]["scale"] = scale;
+  return Status::Ok();
+}
+
+// The pipeline's own fields: name, output_root, seed, schedule.
+void ReadHeader(const Json& doc, PipelineSpec* spec, std::vector<std::string>* errors) {
+  if (!doc.contains("name") || !doc["name"].is_string() ||
+      !ValidName(doc["name"].get<std::string>())) {
+    errors->push_back("name: required; letters, digits, '_', '.', '-'");
+  } else {
+    spec->name = doc["name"].get<std::string>();
+  }
+  if (doc.contains("output_root")) {
+    if (doc["output_root"].is_string() && !doc["output_root"].get<std::string>().empty()) {
+      spec->output_root = doc["output_root"].get<std::string>();
+    } else {
+      errors->push_back("output_root: must be a non-empty string");
+    }
+  }
+  if (doc.contains("seed")) {
+    if (doc["seed"].is_number_integer() && doc["seed"].get<int64_t>() >= 0) {
+      spec->seed = doc["seed"].get<uint64_t>();
+    } else {
+      errors->push_back("seed: must be a non-negative integer");
+    }
+  }
+  if (doc.contains("schedule") && !doc["schedule"].is_null()) {
+    if (!doc["schedule"].is_string()) {
+      errors->push_back("schedule: must be a cron string such as \"0 3 * * *\"");
+    } else {
+      // An empty schedule (the override `schedule=`, or `schedule=""`) runs a recurring pipeline
+      // once, now.
+      spec->schedule = doc["schedule"].get<std::string>();
+      if (!spec->schedule.empty()) {
+        auto cron = ParseCron(spec->schedule);
+        if (!cron.ok()) errors->push_back("schedule: " + cron.status().message());
+      }
+    }
+  }
+}
+
+// `defaults:`, the settings every stage starts from.
+StageSpec ReadDefaults(const Json& doc, std::vector<std::string>* errors) {
+  StageSpec defaults;
+  if (!doc.contains("defaults")) return defaults;
+  if (!doc["defaults"].is_object()) {
+    errors->push_back("defaults: must be a map");
+    return defaults;
+  }
+  CheckKeys(doc["defaults"],
+            {"max_attempts", "retry_backoff", "timeout", "poison_threshold", "threads"}, "defaults",
+            errors);
+  ReadStageSettings(doc["defaults"], "defaults", &defaults, errors);
+  return defaults;
+}
+
+void ReadInputs(const Json& node, const std::string& path, StageSpec* stage,
+                std::vector<std::string>* errors) {
+  if (!node.contains("inputs")) return;
+  const Json& inputs = node["inputs"];
+  if (inputs.is_string()) {
+    stage->inputs.push_back(inputs.get<std::string>());
+  } else if (inputs.is_array()) {
+    for (size_t k = 0; k < inputs.size(); ++k) {
+      if (!inputs[k].is_string()) {
+        errors->push_back(path + ".inputs[" + std::to_string(k) + "]: must be a stage name");
+      } else {
+        stage->inputs.push_back(inputs[k].get<std::string>());
+      }
+    }
+  } else {
+    errors->push_back(path + ".inputs: must be a list of stage names");
+  }
+}
+
+// The kind's planner checks the params and sets the task count.
+void PlanStage(const KindRegistry& kinds, const std::string& path, StageSpec* stage,
+               std::vector<std::string>* errors) {
+  if (stage->kind.empty()) return;
+  const StagePlanner* planner = kinds.Find(stage->kind);
+  if (!planner) {
+    std::string known;
+    for (const std::string& k : kinds.Kinds()) known += (known.empty() ? "" : ", ") + k;
+    errors->push_back(path + ".kind: unknown kind '" + stage->kind + "' (known: " + known +
+                      "; plugins add more)");
+    return;
+  }
+  (*planner)(stage, path, errors);
+  if (stage->world_size > 1) {  // a gang: one task per rank, no reduce
+    stage->shards = stage->world_size;
+    stage->reduce = false;
+  }
+}
+
+// One entry of `stages:`; nothing when it is not a map.
+std::optional<StageSpec> ReadStage(const std::string& name, const Json& node,
+                                   const StageSpec& defaults, const KindRegistry& kinds,
+                                   std::vector<std::string>* errors) {
+  const std::string path = "stages." + name;
+  StageSpec stage = defaults;
+  stage.name = name;
+  if (!ValidName(name))
+    errors->push_back(path + ": stage names use letters, digits, '_', '.', '-'");
+  if (!node.is_object()) {
+    errors->push_back(path + ": must be a map with at least 'kind'");
+    return std::nullopt;
+  }
+  CheckKeys(node,
+            {"kind", "inputs", "params", "shards", "reduce", "max_attempts", "retry_backoff",
+             "timeout", "poison_threshold", "threads", "world_size", "description", "replicate"},
+            path, errors);
+  if (!node.contains("kind") || !node["kind"].is_string()) {
+    errors->push_back(path + ".kind: required");
+  } else {
+    stage.kind = node["kind"].get<std::string>();
+  }
+  ReadInputs(node, path, &stage, errors);
+  if (node.contains("params")) {
+    if (!node["params"].is_object() && !node["params"].is_null()) {
+      errors->push_back(path + ".params: must be a map");
+    } else if (node["params"].is_object()) {
+      stage.params = nlohmann::json::parse(node["params"].dump());
+    }
+  }
+  if (node.contains("shards"))
+    stage.shards_set = ReadInt(node["shards"], path + ".shards", 1, &stage.shards, errors);
+  if (node.contains("reduce")) {
+    if (!node["reduce"].is_boolean())
+      errors->push_back(path + ".reduce: must be true or false");
+    else
+      stage.reduce = node["reduce"].get<bool>();
+  }
+  if (node.contains("world_size"))
+    ReadInt(node["world_size"], path + ".world_size", 1, &stage.world_size, errors);
+  ReadStageSettings(node, path, &stage, errors);
+  if (node.contains("replicate") && node["replicate"].is_number_integer())
+    stage.replicate = node["replicate"].get<int>();
+  PlanStage(kinds, path, &stage, errors);
+  return stage;
+}
+
+// Inputs must name other stages.
+void CheckInputs(const std::vector<StageSpec>& stages, std::vector<std::string>* errors) {
+  std::set<std::string> names;
+  for (const StageSpec& stage : stages) names.insert(stage.name);
+  for (const StageSpec& stage : stages) {
+    for (size_t k = 0; k < stage.inputs.size(); ++k) {
+      const std::string& input = stage.inputs[k];
+      if (input == stage.name)
+        errors->push_back("stages." + stage.name + ".inputs[" + std::to_string(k) +
+                          "]: a stage cannot be its own input");
+      else if (!names.count(input))
+        errors->push_back("stages." + stage.name + ".inputs[" + std::to_string(k) +
+                          "]: unknown stage '" + input + "'");
+    }
+  }
+}
+
+// The stages in an order where each comes after its inputs (Kahn's algorithm, stable in file
+// order); an error naming the stages of a cycle.
+std::vector<StageSpec> TopologicalOrder(const std::vector<StageSpec>& stages,
+                                        std::vector<std::string>* errors) {
+  std::vector<StageSpec> ordered;
+  std::vector<int> pending(stages.size(), 0);
+  for (size_t s = 0; s < stages.size(); ++s) pending[s] = static_cast<int>(stages[s].inputs.size());
+  std::vector<bool> done(stages.size(), false);
+  bool progress = true;
+  while (progress) {
+    progress = false;
+    for (size_t s = 0; s < stages.size(); ++s) {
+      if (done[s] || pending[s] > 0) continue;
+      done[s] = true;
+      progress = true;
+      ordered.push_back(stages[s]);
+      for (size_t t = 0; t < stages.size(); ++t) {
+        for (const std::string& input : stages[t].inputs) pending[t] -= input == stages[s].name;
+      }
+    }
+  }
+  if (ordered.size() != stages.size()) {
+    std::string cycle;
+    for (size_t s = 0; s < stages.size(); ++s) {
+      if (!done[s]) cycle += (cycle.empty() ? "" : ", ") + stages[s].name;
+    }
+    errors->push_back("stages: the inputs form a cycle among " + cycle);
+  }
+  return ordered;
+}
+
+// A job's tasks live in the coordinator's memory and journal: `shards: 1000000000` (or clips
+// counted in billions) must be an error here, not an allocation that kills the coordinator.
+void CheckTaskCount(const std::vector<StageSpec>& stages, std::vector<std::string>* errors) {
+  int64_t tasks = 0;
+  std::string largest;
+  int64_t largest_tasks = -1;
+  for (const StageSpec& stage : stages) {
+    const int64_t n = static_cast<int64_t>(stage.shards) + (stage.reduce ? 1 : 0);
+    tasks += n;
+    if (n > largest_tasks) largest_tasks = n, largest = stage.name;
+  }
+  if (tasks > kMaxJobTasks) {
+    errors->push_back("the pipeline plans " + std::to_string(tasks) + " tasks (stage " + largest +
+                      ": " + std::to_string(largest_tasks) + "); a job holds at most " +
+                      std::to_string(kMaxJobTasks));
+  }
+}
+
+}  // namespace
+
+// Every problem of the file is collected (each with its YAML path) and reported together.
 Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
                                    const std::vector<std::string>& overrides,
                                    const std::string& origin, const KindRegistry& kinds) {
@@ -486,34 +723,9 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
   if (!doc.is_object())
     return InvalidArgument(origin + ": a pipeline is a YAML map with 'name' and 'stages'");
   std::vector<std::string> errors;
-  // `scale: NAME` picks `scales.NAME`, a map of vars: they override the file's vars, and
-  // command-line overrides (which may also pick the scale) override both.
-  if (doc.contains("scale") || doc.contains("scales")) {
-    Json chosen = doc;
-    for (const std::string& o : overrides)
-      MP_RETURN_IF_ERROR(ApplyOverride(&chosen, o).WithContext(origin));
-    const Json scale = chosen.value("scale", Json());
-    const Json scales = chosen.value("scales", Json::object());
-    if (!scale.is_string() || !scales.is_object() || !scales.contains(scale.get<std::string>()) ||
-        !scales[scale.get<std::string>()].is_object()) {
-      std::string known;
-      if (scales.is_object()) {
-        for (const auto& [name, value] : scales.items())
-          known += (known.empty() ? "" : ", ") + name;
-      }
-      errors.push_back("scale: must name one of scales (" +
-                       (known.empty() ? std::string("none defined") : known) + "), got " +
-                       scale.dump());
-    } else {
-      if (!doc.contains("vars") || !doc["vars"].is_object()) doc["vars"] = Json::object();
-      for (const auto& [key, value] : scales[scale.get<std::string>()].items())
-        doc["vars"][key] = value;
-      doc["vars"]["scale"] = scale;
-    }
-  }
+  MP_RETURN_IF_ERROR(ApplyScale(&doc, overrides, origin, &errors));
   for (const std::string& o : overrides)
     MP_RETURN_IF_ERROR(ApplyOverride(&doc, o).WithContext(origin));
-
   Interpolate(&doc, Json(doc), "", &errors);
   CheckKeys(doc,
             {"name", "description", "output_root", "seed", "schedule", "scale", "scales", "vars",
@@ -521,187 +733,22 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
             "", &errors);
 
   PipelineSpec spec;
-  if (!doc.contains("name") || !doc["name"].is_string() ||
-      !ValidName(doc["name"].get<std::string>())) {
-    errors.push_back("name: required; letters, digits, '_', '.', '-'");
-  } else {
-    spec.name = doc["name"].get<std::string>();
-  }
-  if (doc.contains("output_root")) {
-    if (doc["output_root"].is_string() && !doc["output_root"].get<std::string>().empty()) {
-      spec.output_root = doc["output_root"].get<std::string>();
-    } else {
-      errors.push_back("output_root: must be a non-empty string");
-    }
-  }
-  if (doc.contains("seed")) {
-    if (doc["seed"].is_number_integer() && doc["seed"].get<int64_t>() >= 0) {
-      spec.seed = doc["seed"].get<uint64_t>();
-    } else {
-      errors.push_back("seed: must be a non-negative integer");
-    }
-  }
-  if (doc.contains("schedule") && !doc["schedule"].is_null()) {
-    if (!doc["schedule"].is_string()) {
-      errors.push_back("schedule: must be a cron string such as \"0 3 * * *\"");
-    } else {
-      // An empty schedule (the override `schedule=`, or `schedule=""`) runs a recurring pipeline
-      // once, now.
-      spec.schedule = doc["schedule"].get<std::string>();
-      if (!spec.schedule.empty()) {
-        auto cron = ParseCron(spec.schedule);
-        if (!cron.ok()) errors.push_back("schedule: " + cron.status().message());
-      }
-    }
-  }
-  StageSpec defaults;
-  if (doc.contains("defaults")) {
-    if (!doc["defaults"].is_object()) {
-      errors.push_back("defaults: must be a map");
-    } else {
-      CheckKeys(doc["defaults"],
-                {"max_attempts", "retry_backoff", "timeout", "poison_threshold", "threads"},
-                "defaults", &errors);
-      ReadStageSettings(doc["defaults"], "defaults", &defaults, &errors);
-    }
-  }
-
+  ReadHeader(doc, &spec, &errors);
+  const StageSpec defaults = ReadDefaults(doc, &errors);
   if (doc.contains("stages") && doc["stages"].is_object())
     ExpandSeeds(&doc["stages"], spec.seed, &errors);
-  std::map<std::string, size_t> index;
   if (!doc.contains("stages") || !doc["stages"].is_object() || doc["stages"].empty()) {
     errors.push_back("stages: required, a map of stage name -> stage");
   } else {
     for (const auto& [name, node] : doc["stages"].items()) {
-      const std::string path = "stages." + name;
-      StageSpec stage = defaults;
-      stage.name = name;
-      if (!ValidName(name))
-        errors.push_back(path + ": stage names use letters, digits, '_', '.', '-'");
-      if (!node.is_object()) {
-        errors.push_back(path + ": must be a map with at least 'kind'");
-        continue;
-      }
-      CheckKeys(
-          node,
-          {"kind", "inputs", "params", "shards", "reduce", "max_attempts", "retry_backoff",
-           "timeout", "poison_threshold", "threads", "world_size", "description", "replicate"},
-          path, &errors);
-      if (!node.contains("kind") || !node["kind"].is_string()) {
-        errors.push_back(path + ".kind: required");
-      } else {
-        stage.kind = node["kind"].get<std::string>();
-      }
-      if (node.contains("inputs")) {
-        const Json& inputs = node["inputs"];
-        if (inputs.is_string()) {
-          stage.inputs.push_back(inputs.get<std::string>());
-        } else if (inputs.is_array()) {
-          for (size_t k = 0; k < inputs.size(); ++k) {
-            if (!inputs[k].is_string()) {
-              errors.push_back(path + ".inputs[" + std::to_string(k) + "]: must be a stage name");
-            } else {
-              stage.inputs.push_back(inputs[k].get<std::string>());
-            }
-          }
-        } else {
-          errors.push_back(path + ".inputs: must be a list of stage names");
-        }
-      }
-      if (node.contains("params")) {
-        if (!node["params"].is_object() && !node["params"].is_null()) {
-          errors.push_back(path + ".params: must be a map");
-        } else if (node["params"].is_object()) {
-          stage.params = nlohmann::json::parse(node["params"].dump());
-        }
-      }
-      if (node.contains("shards"))
-        stage.shards_set = ReadInt(node["shards"], path + ".shards", 1, &stage.shards, &errors);
-      if (node.contains("reduce")) {
-        if (!node["reduce"].is_boolean())
-          errors.push_back(path + ".reduce: must be true or false");
-        else
-          stage.reduce = node["reduce"].get<bool>();
-      }
-      if (node.contains("world_size"))
-        ReadInt(node["world_size"], path + ".world_size", 1, &stage.world_size, &errors);
-      ReadStageSettings(node, path, &stage, &errors);
-      if (node.contains("replicate") && node["replicate"].is_number_integer())
-        stage.replicate = node["replicate"].get<int>();
-      if (!stage.kind.empty()) {
-        const StagePlanner* planner = kinds.Find(stage.kind);
-        if (!planner) {
-          std::string known;
-          for (const std::string& k : kinds.Kinds()) known += (known.empty() ? "" : ", ") + k;
-          errors.push_back(path + ".kind: unknown kind '" + stage.kind + "' (known: " + known +
-                           "; plugins add more)");
-        } else {
-          (*planner)(&stage, path, &errors);
-          if (stage.world_size > 1) {  // a gang: one task per rank, no reduce
-            stage.shards = stage.world_size;
-            stage.reduce = false;
-          }
-        }
-      }
-      index[name] = spec.stages.size();
-      spec.stages.push_back(std::move(stage));
+      std::optional<StageSpec> stage = ReadStage(name, node, defaults, kinds, &errors);
+      if (stage) spec.stages.push_back(std::move(*stage));
     }
   }
-  // Inputs must name other stages; the stages must form a DAG.
-  for (const StageSpec& stage : spec.stages) {
-    for (size_t k = 0; k < stage.inputs.size(); ++k) {
-      const std::string& input = stage.inputs[k];
-      if (input == stage.name)
-        errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) +
-                         "]: a stage cannot be its own input");
-      else if (!index.count(input))
-        errors.push_back("stages." + stage.name + ".inputs[" + std::to_string(k) +
-                         "]: unknown stage '" + input + "'");
-    }
-  }
+  CheckInputs(spec.stages, &errors);
   std::vector<StageSpec> ordered;
-  if (errors.empty()) {
-    std::vector<int> pending(spec.stages.size(), 0);
-    for (size_t s = 0; s < spec.stages.size(); ++s)
-      pending[s] = static_cast<int>(spec.stages[s].inputs.size());
-    std::vector<bool> done(spec.stages.size(), false);
-    bool progress = true;
-    while (progress) {
-      progress = false;
-      for (size_t s = 0; s < spec.stages.size(); ++s) {
-        if (done[s] || pending[s] > 0) continue;
-        done[s] = true;
-        progress = true;
-        ordered.push_back(spec.stages[s]);
-        for (size_t t = 0; t < spec.stages.size(); ++t) {
-          for (const std::string& input : spec.stages[t].inputs)
-            pending[t] -= input == spec.stages[s].name;
-        }
-      }
-    }
-    if (ordered.size() != spec.stages.size()) {
-      std::string cycle;
-      for (size_t s = 0; s < spec.stages.size(); ++s) {
-        if (!done[s]) cycle += (cycle.empty() ? "" : ", ") + spec.stages[s].name;
-      }
-      errors.push_back("stages: the inputs form a cycle among " + cycle);
-    }
-  }
-  // A job's tasks live in the coordinator's memory and journal: `shards: 1000000000` (or clips
-  // counted in billions) must be an error here, not an allocation that kills the coordinator.
-  int64_t tasks = 0;
-  std::string largest;
-  int64_t largest_tasks = -1;
-  for (const StageSpec& stage : spec.stages) {
-    const int64_t n = static_cast<int64_t>(stage.shards) + (stage.reduce ? 1 : 0);
-    tasks += n;
-    if (n > largest_tasks) largest_tasks = n, largest = stage.name;
-  }
-  if (tasks > kMaxJobTasks) {
-    errors.push_back("the pipeline plans " + std::to_string(tasks) + " tasks (stage " + largest +
-                     ": " + std::to_string(largest_tasks) + "); a job holds at most " +
-                     std::to_string(kMaxJobTasks));
-  }
+  if (errors.empty()) ordered = TopologicalOrder(spec.stages, &errors);
+  CheckTaskCount(spec.stages, &errors);
   if (!errors.empty()) {
     std::string message = origin + ": invalid pipeline:";
     for (const std::string& e : errors) message += "\n  " + origin + ": " + e;
