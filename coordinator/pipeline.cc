@@ -9,8 +9,6 @@
 #include "cron.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/yaml.h"
-#include "motionpipe/similarity/similarity.h"
-#include "motionpipe/sinc/synth.h"
 
 namespace motionpipe::coordinator {
 
@@ -151,24 +149,15 @@ void ReadStageSettings(const Json& map, const std::string& path, StageSpec* stag
   if (map.contains("retry_backoff"))
     ReadDuration(map["retry_backoff"], PathJoin(path, "retry_backoff"),
                  &stage->retry_backoff_seconds, errors);
-  if (map.contains("timeout"))
-    ReadDuration(map["timeout"], PathJoin(path, "timeout"), &stage->timeout_seconds, errors);
+  if (map.contains("timeout")) {
+    stage->timeout_set =
+        ReadDuration(map["timeout"], PathJoin(path, "timeout"), &stage->timeout_seconds, errors);
+  }
   if (map.contains("poison_threshold"))
     ReadInt(map["poison_threshold"], PathJoin(path, "poison_threshold"), 1,
             &stage->poison_threshold, errors);
   if (map.contains("threads"))
     ReadInt(map["threads"], PathJoin(path, "threads"), 0, &stage->threads, errors);
-}
-
-int IntParam(const nlohmann::json& params, const char* key, int fallback, int min,
-             const std::string& path, std::vector<std::string>* errors) {
-  if (!params.contains(key)) return fallback;
-  const auto& v = params[key];
-  if (!v.is_number_integer() || v.get<int64_t>() < min || v.get<int64_t>() > 100'000'000) {
-    errors->push_back(path + ".params." + key + ": must be an integer >= " + std::to_string(min));
-    return fallback;
-  }
-  return static_cast<int>(v.get<int64_t>());
 }
 
 // `seeds: N` on a stage replicates it N times: `name`, `name-s2`, ..., `name-sN`, replicate k with
@@ -276,185 +265,24 @@ bool ParseDuration(const std::string& text, double* seconds) {
   return true;
 }
 
-// A stage parameter naming one of the stage's inputs, or a path pattern (it has a '/').
-static bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs) {
-  if (!value.is_string()) return false;
-  const std::string name = value.get<std::string>();
-  return name.find('/') != std::string::npos ||
-         std::find(inputs.begin(), inputs.end(), name) != inputs.end();
+KindRegistry KindRegistry::FromExecutors(
+    std::shared_ptr<const worker::ExecutorRegistry> executors) {
+  KindRegistry registry;
+  for (const std::string& kind : executors->Kinds()) {
+    const worker::StageExecutor* executor = executors->Find(kind);
+    registry.Add(kind, [executors, executor](worker::StagePlan& plan, const std::string& path,
+                                             std::vector<std::string>* errors) {
+      executor->Plan(plan, path, errors);
+    });
+  }
+  return registry;
 }
 
 KindRegistry KindRegistry::WithBuiltins() {
-  KindRegistry registry;
-  // Diagnostic kinds: `tasks` map tasks each.
-  const StagePlanner by_tasks = [](StageSpec* stage, const std::string& path,
-                                   std::vector<std::string>* errors) {
-    stage->shards = IntParam(stage->params, "tasks", stage->shards, 1, path, errors);
-  };
-  for (const char* kind : {"noop", "sleep", "test.write", "test.fail", "test.crash"})
-    registry.Add(kind, by_tasks);
-  // The procedural corpus: shards of shard_size clips (and triplets), then a reduce task that
-  // merges them into one corpus directory with its annotations and manifest.
-  registry.Add(
-      "corpus", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-        const int clips = IntParam(stage->params, "clips", 1000, 1, path, errors);
-        const int triplets = IntParam(stage->params, "triplets", clips, 0, path, errors);
-        const int shard_size = IntParam(stage->params, "shard_size", 500, 1, path, errors);
-        stage->shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
-        stage->reduce = true;
-      });
-  // SimMotionEdit's dataset filter: `shards` tasks (default 8) over the triplet files of the input
-  // stage or of params.triplets, then a summary. The similarity constants are checked here, before
-  // anything runs.
-  registry.Add("filter", [](StageSpec* stage, const std::string& path,
-                            std::vector<std::string>* errors) {
-    if (!stage->shards_set) stage->shards = 8;
-    stage->reduce = true;
-    const auto& p = stage->params;
-    if (p.contains("triplets") && !p["triplets"].is_string() && !p["triplets"].is_array()) {
-      errors->push_back(path + ".params.triplets: must be a path or a list of paths");
-    }
-    if (!p.contains("triplets") && stage->inputs.empty()) {
-      errors->push_back(
-          path +
-          ": needs an input stage (inputs: [corpus]) or params.triplets (files or directories)");
-    }
-    if (p.contains("input") && (!p["input"].is_string() ||
-                                std::find(stage->inputs.begin(), stage->inputs.end(),
-                                          p["input"].get<std::string>()) == stage->inputs.end())) {
-      errors->push_back(path + ".params.input: must name one of the stage's inputs");
-    }
-    auto options = similarity::OptionsFromJson(p, path + ".params", {"triplets", "input"});
-    if (!options.ok()) errors->push_back(options.status().message());
-  });
-  // Training: one task per rank; world_size > 1 makes a gang that starts together on distinct
-  // workers and restarts together from the last checkpoint when a rank fails.
-  registry.Add(
-      "train", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-        stage->shards = std::max(1, stage->world_size);
-        stage->reduce = false;
-        const auto& p = stage->params;
-        if (!p.contains("model") || !p["model"].is_string())
-          errors->push_back(path +
-                            ".params.model: the model plugin's name is required (e.g. temos_sinc)");
-        if (stage->timeout_seconds == 3600)
-          stage->timeout_seconds = 6 * 3600;  // training runs long
-      });
-  // Editing a test split with a trained editor: `shards` tasks (default 2), each every count-th
-  // triplet.
-  registry.Add(
-      "edit", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-        if (!stage->shards_set) stage->shards = 2;
-        stage->reduce = false;
-        if (stage->inputs.empty())
-          errors->push_back(
-              path + ": needs inputs: the train stage of the editor and a stage with triplets");
-        const auto& p = stage->params;
-        if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim")
-          errors->push_back(path + ".params.sampler: ddpm or ddim");
-        if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
-      });
-  // Scoring an edit stage with an evaluator checkpoint: one task.
-  registry.Add("eval_edit", [](StageSpec* stage, const std::string& path,
-                               std::vector<std::string>* errors) {
-    stage->shards = 1;
-    stage->reduce = false;
-    const auto& p = stage->params;
-    for (const char* key : {"evaluator", "edits"}) {
-      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs))
-        errors->push_back(path + ".params." + key +
-                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
-    }
-  });
-  // Text-to-motion generation of a test split (`shards` tasks, default 2) and its scoring (one
-  // task).
-  registry.Add(
-      "generate", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-        if (!stage->shards_set) stage->shards = 2;
-        stage->reduce = false;
-        if (stage->inputs.empty())
-          errors->push_back(path +
-                            ": needs inputs: the train stage of the model and a `singles` stage");
-        const auto& p = stage->params;
-        if (p.contains("spans") && p["spans"] != "pairs" && p["spans"] != "singles" &&
-            p["spans"] != "all") {
-          errors->push_back(path + ".params.spans: pairs, singles or all");
-        }
-        if (stage->timeout_seconds == 3600) stage->timeout_seconds = 6 * 3600;
-      });
-  registry.Add("eval_generate", [](StageSpec* stage, const std::string& path,
-                                   std::vector<std::string>* errors) {
-    stage->shards = 1;
-    stage->reduce = false;
-    const auto& p = stage->params;
-    for (const char* key : {"evaluator", "temos", "generated"}) {
-      if (p.contains(key) && !NamesInputOrPath(p[key], stage->inputs))
-        errors->push_back(path + ".params." + key +
-                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
-    }
-  });
-  // The job's HTML report: one task after its inputs (the evaluation stages).
-  registry.Add(
-      "report", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-        stage->shards = 1;
-        stage->reduce = false;
-        if (stage->inputs.empty())
-          errors->push_back(path + ": needs inputs: the stages to wait for (the evaluations)");
-      });
-  // The CMU clips through import, composition, editing, metrics and rendering: one task.
-  registry.Add("showcase", [](StageSpec* stage, const std::string& path,
-                              std::vector<std::string>* errors) {
-    stage->shards = 1;
-    stage->reduce = false;
-    for (const char* key : {"editor", "generator", "evaluator"}) {
-      if (stage->params.contains(key) && !NamesInputOrPath(stage->params[key], stage->inputs)) {
-        errors->push_back(path + ".params." + key +
-                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
-      }
-    }
-  });
-  // Real data (converted MotionFix, BABEL + AMASS) linked in the corpus stage's layout: one task.
-  registry.Add(
-      "dataset", [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-        stage->shards = 1;
-        stage->reduce = false;
-        const auto& p = stage->params;
-        if (!p.contains("motionfix") && !p.contains("babel"))
-          errors->push_back(
-              path + ".params: give motionfix (converted .npz files) and/or babel + amass_root");
-        if (p.contains("babel") && !p.contains("amass_root"))
-          errors->push_back(path + ".params.amass_root: required with babel (the AMASS directory)");
-      });
-  // SINC: the labelled spans table (one task), then synthetic pairs in shards of shard_size.
-  registry.Add("singles",
-               [](StageSpec* stage, const std::string& path, std::vector<std::string>* errors) {
-                 stage->shards = 1;
-                 stage->reduce = false;
-                 const auto& p = stage->params;
-                 if (!p.contains("babel") && stage->inputs.empty())
-                   errors->push_back(path + ": needs an input stage (a corpus) or params.babel");
-                 if (p.contains("labeler") && !p["labeler"].is_string())
-                   errors->push_back(path + ".params.labeler: must be a labeler name");
-               });
-  registry.Add("synth", [](StageSpec* stage, const std::string& path,
-                           std::vector<std::string>* errors) {
-    const auto& p = stage->params;
-    const int64_t pairs =
-        p.contains("pairs") && p["pairs"].is_number_integer() ? p["pairs"].get<int64_t>() : 10000;
-    const int64_t shard = p.contains("shard_size") && p["shard_size"].is_number_integer()
-                              ? p["shard_size"].get<int64_t>()
-                              : 50000;
-    if (pairs < 1 || shard < 1) {
-      errors->push_back(path + ".params: pairs and shard_size must be positive integers");
-      return;
-    }
-    stage->shards = static_cast<int>((pairs + shard - 1) / shard);
-    stage->reduce = true;
-    if (!p.contains("spans") && stage->inputs.empty())
-      errors->push_back(path + ": needs an input `singles` stage or params.spans");
-    auto options = sinc::SynthOptionsFromJson(p, path + ".params");
-    if (!options.ok()) errors->push_back(options.status().message());
-  });
+  auto executors = std::make_shared<worker::ExecutorRegistry>();
+  worker::RegisterBuiltinExecutors(executors.get());
+  KindRegistry registry = FromExecutors(executors);
+  registry.Add("train", worker::PlanTrainStage);
   return registry;
 }
 
@@ -464,7 +292,7 @@ void KindRegistry::Add(const std::string& kind, StagePlanner planner) {
 
 void KindRegistry::AddGeneric(const std::string& kind) {
   if (planners_.count(kind)) return;
-  planners_[kind] = [](StageSpec*, const std::string&, std::vector<std::string>*) {};
+  planners_[kind] = [](worker::StagePlan&, const std::string&, std::vector<std::string>*) {};
 }
 
 const StagePlanner* KindRegistry::Find(const std::string& kind) const {
@@ -591,7 +419,13 @@ void PlanStage(const KindRegistry& kinds, const std::string& path, StageSpec* st
                       "; plugins add more)");
     return;
   }
-  (*planner)(stage, path, errors);
+  worker::StagePlan plan{stage->params,          stage->inputs,     stage->shards,
+                         stage->shards_set,      stage->reduce,     stage->world_size,
+                         stage->timeout_seconds, stage->timeout_set};
+  (*planner)(plan, path, errors);
+  stage->shards = plan.shards;
+  stage->reduce = plan.reduce;
+  stage->timeout_seconds = plan.timeout_seconds;
   if (stage->world_size > 1) {  // a gang: one task per rank, no reduce
     stage->shards = stage->world_size;
     stage->reduce = false;

@@ -19,10 +19,12 @@
 
 #include <functional>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "executor.h"
 #include "motionpipe/base/status.h"
 
 namespace motionpipe::coordinator {
@@ -42,6 +44,7 @@ struct StageSpec {
   int max_attempts = 3;                // task errors tolerated before the task fails
   double retry_backoff_seconds = 1.0;  // doubled after each error
   double timeout_seconds = 3600;       // lease of one attempt
+  bool timeout_set = false;            // `timeout:` given (stage or defaults): kinds keep it
   int poison_threshold = 3;            // a task that loses this many workers is quarantined
   int threads = 0;                     // per task; 0 = the worker's budget
   int world_size = 1;                  // gang size (training)
@@ -58,15 +61,17 @@ struct PipelineSpec {
   std::string fingerprint;        // sha256 of `resolved`: the same pipeline, resumed or reused
 };
 
-// How a stage kind turns its params into tasks. Validates the params (appending errors prefixed by
-// the YAML path) and sets shards/reduce.
-using StagePlanner = std::function<void(StageSpec* stage, const std::string& path,
-                                        std::vector<std::string>* errors)>;
+using worker::StagePlanner;
 
-// Kinds the coordinator can plan: the built-in ones and those that plugins declare.
+// Kinds the coordinator can plan: the built-in ones and those that plugins declare. A kind's
+// planner is its executor's Plan (worker/stages/), so planning and running a kind live together.
 class KindRegistry {
  public:
+  // Every kind of the worker's built-in executors, plus `train` (planned by the engine, run by the
+  // train plugin).
   static KindRegistry WithBuiltins();
+  // The kinds of `executors`, each planned by its executor (kept alive by the registry).
+  static KindRegistry FromExecutors(std::shared_ptr<const worker::ExecutorRegistry> executors);
   void Add(const std::string& kind, StagePlanner planner);
   // Kinds from a plugin: sharded by `shards:` (default 1) and `reduce:`.
   void AddGeneric(const std::string& kind);

@@ -2,6 +2,7 @@
 
 #include <omp.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include "motionpipe/base/file.h"
@@ -17,6 +18,35 @@ TaskReport TaskReport::FromStatus(const Status& s) {
     default:
       return Error(s.message());
   }
+}
+
+int IntParam(const nlohmann::json& params, const char* key, int fallback, int min,
+             const std::string& path, std::vector<std::string>* errors) {
+  if (!params.contains(key)) return fallback;
+  const auto& v = params[key];
+  if (!v.is_number_integer() || v.get<int64_t>() < min || v.get<int64_t>() > 100'000'000) {
+    errors->push_back(path + ".params." + key + ": must be an integer >= " + std::to_string(min));
+    return fallback;
+  }
+  return static_cast<int>(v.get<int64_t>());
+}
+
+bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs) {
+  if (!value.is_string()) return false;
+  const std::string name = value.get<std::string>();
+  return name.find('/') != std::string::npos ||
+         std::find(inputs.begin(), inputs.end(), name) != inputs.end();
+}
+
+// Training: one task per rank; world_size > 1 makes a gang that starts together on distinct
+// workers and restarts together from the last checkpoint when a rank fails.
+void PlanTrainStage(StagePlan& plan, const std::string& path, std::vector<std::string>* errors) {
+  plan.shards = std::max(1, plan.world_size);
+  plan.reduce = false;
+  if (!plan.params.contains("model") || !plan.params["model"].is_string())
+    errors->push_back(path +
+                      ".params.model: the model plugin's name is required (e.g. temos_sinc)");
+  LongLease(plan);
 }
 
 std::vector<std::string> TaskContext::InputDirs(const std::string& stage) const {

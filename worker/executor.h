@@ -50,10 +50,44 @@ struct TaskContext {
   std::string InputResult(const std::string& stage) const;
 };
 
+// What a stage kind's planner reads and sets while the coordinator plans a pipeline (the
+// coordinator's StageSpec holds these fields): the kind validates its params and inputs and says
+// how many tasks the stage has. Errors are appended, each prefixed by the stage's YAML path.
+struct StagePlan {
+  const nlohmann::json& params;
+  const std::vector<std::string>& inputs;
+  int shards = 1;              // map tasks
+  bool shards_set = false;     // `shards:` given in the YAML (the kind may pick its default)
+  bool reduce = false;         // plus one reduce task
+  int world_size = 1;          // gang size
+  double timeout_seconds = 0;  // lease of one attempt
+  bool timeout_set = false;    // `timeout:` given in the YAML (stage or defaults)
+};
+using StagePlanner =
+    std::function<void(StagePlan& plan, const std::string& path, std::vector<std::string>* errors)>;
+
+// Planning helpers: an integer param in [min, 1e8] (else an error and `fallback`); whether a param
+// names one of the stage's inputs or a path pattern (it has a '/').
+int IntParam(const nlohmann::json& params, const char* key, int fallback, int min,
+             const std::string& path, std::vector<std::string>* errors);
+bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs);
+// Long-running kinds (training, sampling) get a 6 h lease unless the YAML sets one.
+inline void LongLease(StagePlan& plan) {
+  if (!plan.timeout_set) plan.timeout_seconds = 6 * 3600;
+}
+
+// A stage kind is one unit: its executor plans the stage's tasks (in the coordinator) and runs them
+// (in the worker), so a new kind is one class registered once.
 class StageExecutor {
  public:
   virtual ~StageExecutor() = default;
   virtual std::string Description() const = 0;
+  // Plans the stage: validates params and inputs, sets shards/reduce. The default (also for plugin
+  // kinds): `shards:` tasks, 1 unless given, and `reduce:` as given.
+  virtual void Plan(StagePlan& plan, const std::string& path,
+                    std::vector<std::string>* errors) const {
+    (void)plan, (void)path, (void)errors;
+  }
   // Runs one task. Exceptions are caught by the caller and become task errors.
   virtual TaskReport Run(TaskContext& ctx) = 0;
 };
@@ -75,6 +109,11 @@ class PluginHost;
 void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins = nullptr);
 void RegisterSincExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
 void RegisterModelExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
+
+// The `train` kind's planner. Its executor is the train plugin (it links LibTorch, which the
+// engine does not); its plan is the engine's: a gang of world_size ranks, params.model naming the
+// model plugin.
+void PlanTrainStage(StagePlan& plan, const std::string& path, std::vector<std::string>* errors);
 
 // Runs `executor` on the task with its thread budget, catching exceptions.
 TaskReport RunTask(StageExecutor& executor, TaskContext& ctx);

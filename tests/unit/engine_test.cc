@@ -83,6 +83,24 @@ TEST(Pipeline, ParsesPlansAndOrdersStages) {
   EXPECT_TRUE(corpus->stages[0].reduce);
 }
 
+// Long-running kinds get a 6 h lease unless the YAML sets one, even one equal to the 1 h default
+// (a `timeout: 1h` used to be read as "not set").
+TEST(Pipeline, AnExplicitTimeoutIsKeptByLongRunningKinds) {
+  const std::string yaml =
+      "name: t\nstages:\n  a: {kind: train, params: {model: m}}\n"
+      "  b: {kind: train, timeout: 1h, params: {model: m}}\n";
+  auto spec = ParsePipeline(yaml, {}, "t.yaml", Kinds());
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  EXPECT_EQ(spec->stages[0].timeout_seconds, 6 * 3600.0);
+  EXPECT_EQ(spec->stages[1].timeout_seconds, 3600.0);
+  auto defaults = ParsePipeline(
+      "name: t\ndefaults: {timeout: 2h}\nstages:\n  a: {kind: edit, inputs: [b]}\n  b: {kind: "
+      "noop}\n",
+      {}, "t.yaml", Kinds());
+  ASSERT_TRUE(defaults.ok()) << defaults.status().ToString();
+  EXPECT_EQ(defaults->stages[1].timeout_seconds, 2 * 3600.0);
+}
+
 // Every shipped pipeline (configs/*.yaml: the demo, the claims runs, the evaluations) parses and
 // plans as it stands, so a README command never meets a YAML error.
 TEST(Pipeline, EveryShippedConfigParsesAndPlans) {
@@ -876,14 +894,40 @@ TEST(PluginHost, LoadsTheSamplePluginAndRefusesBadOnes) {
   EXPECT_NE(refused.message.find("/no/such/dir is missing"), std::string::npos);
 }
 
-TEST(Executors, BuiltinKindsAgreeWithTheCoordinatorsPlanners) {
-  ExecutorRegistry registry;
-  RegisterBuiltinExecutors(&registry);
-  // Every kind the coordinator plans runs in the worker binary, except `train`, whose executor is
-  // the train plugin (it links LibTorch, which the worker binary does not).
-  auto kinds = coordinator::KindRegistry::WithBuiltins().Kinds();
-  std::erase(kinds, std::string("train"));
-  EXPECT_EQ(registry.Kinds(), kinds);
+// A stage kind is one unit: the executor a worker runs also plans the stage in the coordinator, so
+// a new kind is one class registered once (issue 16). Here a kind unknown to the engine.
+class ThreeShardsStage : public StageExecutor {
+ public:
+  std::string Description() const override { return "test kind"; }
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = IntParam(plan.params, "parts", 3, 1, path, errors);
+    plan.reduce = true;
+  }
+  TaskReport Run(TaskContext&) override { return TaskReport::Ok(); }
+};
+
+TEST(Executors, AKindIsPlannedByTheExecutorThatRunsIt) {
+  auto executors = std::make_shared<ExecutorRegistry>();
+  executors->Register("test.three", std::make_unique<ThreeShardsStage>());
+  const auto kinds = coordinator::KindRegistry::FromExecutors(executors);
+  auto spec = coordinator::ParsePipeline("name: k\nstages:\n  a: {kind: test.three}\n", {},
+                                         "k.yaml", kinds);
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  EXPECT_EQ(spec->stages[0].shards, 3);
+  EXPECT_TRUE(spec->stages[0].reduce);
+  auto bad = coordinator::ParsePipeline(
+      "name: k\nstages:\n  a: {kind: test.three, params: {parts: 0}}\n", {}, "k.yaml", kinds);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("k.yaml: stages.a.params.parts: must be an integer >= 1"),
+            std::string::npos)
+      << bad.status().message();
+  // The built-in registry plans every kind the worker runs, and `train` (run by the train plugin).
+  ExecutorRegistry builtins;
+  RegisterBuiltinExecutors(&builtins);
+  auto planned = coordinator::KindRegistry::WithBuiltins().Kinds();
+  std::erase(planned, std::string("train"));
+  EXPECT_EQ(builtins.Kinds(), planned);
 }
 
 TEST(Executors, OutputsAreScannedWithChecksums) {

@@ -17,15 +17,24 @@ namespace motionpipe::worker {
 
 namespace {
 
+// The diagnostic kinds: `tasks` map tasks each (default: `shards:`).
+class DiagnosticStage : public StageExecutor {
+ public:
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = IntParam(plan.params, "tasks", plan.shards, 1, path, errors);
+  }
+};
+
 // Does nothing: the dispatch benchmark's task.
-class NoopStage : public StageExecutor {
+class NoopStage : public DiagnosticStage {
  public:
   std::string Description() const override { return "does nothing (dispatch benchmarks)"; }
   TaskReport Run(TaskContext&) override { return TaskReport::Ok(); }
 };
 
 // Sleeps `ms` milliseconds, stopping early when cancelled.
-class SleepStage : public StageExecutor {
+class SleepStage : public DiagnosticStage {
  public:
   std::string Description() const override { return "sleeps params.ms milliseconds"; }
   TaskReport Run(TaskContext& ctx) override {
@@ -54,7 +63,7 @@ void LogExecution(const TaskContext& ctx) {
 
 // Writes out.txt whose content depends only on (seed, stage, index): the same bytes however often
 // and wherever it runs, so chaos runs can be compared with an undisturbed one by checksum.
-class WriteStage : public StageExecutor {
+class WriteStage : public DiagnosticStage {
  public:
   std::string Description() const override {
     return "writes a deterministic file per task (tests)";
@@ -93,7 +102,7 @@ class WriteStage : public StageExecutor {
 
 // Fails its first params.fail_times attempts (ERROR), or always with BAD_INPUT when
 // params.bad_input.
-class FailStage : public StageExecutor {
+class FailStage : public DiagnosticStage {
  public:
   std::string Description() const override { return "fails on purpose (tests)"; }
   TaskReport Run(TaskContext& ctx) override {
@@ -111,7 +120,7 @@ class FailStage : public StageExecutor {
 
 // Kills the whole worker process (SIGKILL on itself) when running task params.index (default: every
 // task): a poison task.
-class CrashStage : public StageExecutor {
+class CrashStage : public DiagnosticStage {
  public:
   std::string Description() const override { return "kills its worker (poison tests)"; }
   TaskReport Run(TaskContext& ctx) override {
@@ -126,6 +135,16 @@ class CrashStage : public StageExecutor {
 // them into one corpus directory (byte-identical to `motionpipe data synth-corpus`).
 class CorpusStage : public StageExecutor {
  public:
+  // Shards of shard_size clips (and triplets), then a reduce task that merges them into one corpus
+  // directory with its annotations and manifest.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    const int clips = IntParam(plan.params, "clips", 1000, 1, path, errors);
+    const int triplets = IntParam(plan.params, "triplets", clips, 0, path, errors);
+    const int shard_size = IntParam(plan.params, "shard_size", 500, 1, path, errors);
+    plan.shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
+    plan.reduce = true;
+  }
   std::string Description() const override {
     return "generates the procedural motion corpus (sharded)";
   }
@@ -165,6 +184,29 @@ class CorpusStage : public StageExecutor {
 // their part of the triplet files; the reduce task writes the summary and its plot.
 class FilterStage : public StageExecutor {
  public:
+  // `shards` tasks (default 8) over the triplet files of the input stage or of params.triplets,
+  // then a summary. The similarity constants are checked here, before anything runs.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    if (!plan.shards_set) plan.shards = 8;
+    plan.reduce = true;
+    const auto& p = plan.params;
+    if (p.contains("triplets") && !p["triplets"].is_string() && !p["triplets"].is_array()) {
+      errors->push_back(path + ".params.triplets: must be a path or a list of paths");
+    }
+    if (!p.contains("triplets") && plan.inputs.empty()) {
+      errors->push_back(
+          path +
+          ": needs an input stage (inputs: [corpus]) or params.triplets (files or directories)");
+    }
+    if (p.contains("input") && (!p["input"].is_string() ||
+                                std::find(plan.inputs.begin(), plan.inputs.end(),
+                                          p["input"].get<std::string>()) == plan.inputs.end())) {
+      errors->push_back(path + ".params.input: must name one of the stage's inputs");
+    }
+    auto options = similarity::OptionsFromJson(p, path + ".params", {"triplets", "input"});
+    if (!options.ok()) errors->push_back(options.status().message());
+  }
   std::string Description() const override {
     return "similarity curves, MotionSNR and classes of editing triplets";
   }

@@ -186,6 +186,19 @@ void ReadSummary(const std::string& path, std::string* method, std::string* chec
 
 class EditStage : public StageExecutor {
  public:
+  // `shards` tasks (default 2), each every count-th triplet of the test split.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    if (!plan.shards_set) plan.shards = 2;
+    plan.reduce = false;
+    if (plan.inputs.empty())
+      errors->push_back(path +
+                        ": needs inputs: the train stage of the editor and a stage with triplets");
+    const auto& p = plan.params;
+    if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim")
+      errors->push_back(path + ".params.sampler: ddpm or ddim");
+    LongLease(plan);
+  }
   explicit EditStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
     return "edits the test triplets with an editing checkpoint, sharded";
@@ -460,6 +473,17 @@ Result<json> EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t,
 // scored as "jittered_copies").
 class EvalEditStage : public StageExecutor {
  public:
+  // One task.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    for (const char* key : {"evaluator", "edits"}) {
+      if (plan.params.contains(key) && !NamesInputOrPath(plan.params[key], plan.inputs))
+        errors->push_back(path + ".params." + key +
+                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
+    }
+  }
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
     return "scores edited motions: retrieval against targets and sources, plausibility";
@@ -628,6 +652,21 @@ std::string SpanText(const sinc::SpanTable& table, int64_t i) {
 // (single-action checkpoints: the GPT-compositing baseline), samples (generations per text, 1).
 class GenerateStage : public StageExecutor {
  public:
+  // `shards` tasks (default 2) over the test spans.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    if (!plan.shards_set) plan.shards = 2;
+    plan.reduce = false;
+    if (plan.inputs.empty())
+      errors->push_back(path +
+                        ": needs inputs: the train stage of the model and a `singles` stage");
+    const auto& p = plan.params;
+    if (p.contains("spans") && p["spans"] != "pairs" && p["spans"] != "singles" &&
+        p["spans"] != "all") {
+      errors->push_back(path + ".params.spans: pairs, singles or all");
+    }
+    LongLease(plan);
+  }
   explicit GenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
     return "generates the test split's action texts with a text-to-motion checkpoint, sharded";
@@ -788,6 +827,17 @@ Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& tab
 // TMR's own retrieval on the test singles and two-action spans).
 class EvalGenerateStage : public StageExecutor {
  public:
+  // One task.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    for (const char* key : {"evaluator", "temos", "generated"}) {
+      if (plan.params.contains(key) && !NamesInputOrPath(plan.params[key], plan.inputs))
+        errors->push_back(path + ".params." + key +
+                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
+    }
+  }
   explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
     return "scores generated motions against the ground truth: TEMOS score, APE/AVE, retrieval";
@@ -933,6 +983,17 @@ class EvalGenerateStage : public StageExecutor {
 // edited.npz.
 class ShowcaseStage : public StageExecutor {
  public:
+  // One task.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    for (const char* key : {"editor", "generator", "evaluator"}) {
+      if (plan.params.contains(key) && !NamesInputOrPath(plan.params[key], plan.inputs))
+        errors->push_back(path + ".params." + key +
+                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
+    }
+  }
   explicit ShowcaseStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
     return "the CMU clips through import, SINC composition, MDT editing, metrics and rendering";
@@ -1150,6 +1211,14 @@ class ShowcaseStage : public StageExecutor {
 // previews (true), panel_size (200).
 class ReportStage : public StageExecutor {
  public:
+  // One task after its inputs (the evaluation stages).
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    if (plan.inputs.empty())
+      errors->push_back(path + ": needs inputs: the stages to wait for (the evaluations)");
+  }
   std::string Description() const override {
     return "writes the job's HTML report: tables, claims, curves, previews";
   }

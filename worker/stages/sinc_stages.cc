@@ -44,6 +44,18 @@ std::vector<std::string> StringList(const json& v) {
 // holding train/val/test.json, or the files), amass_root. Either source may be absent.
 class DatasetStage : public StageExecutor {
  public:
+  // One task.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    const auto& p = plan.params;
+    if (!p.contains("motionfix") && !p.contains("babel"))
+      errors->push_back(path +
+                        ".params: give motionfix (converted .npz files) and/or babel + amass_root");
+    if (p.contains("babel") && !p.contains("amass_root"))
+      errors->push_back(path + ".params.amass_root: required with babel (the AMASS directory)");
+  }
   std::string Description() const override {
     return "links real data (converted MotionFix, BABEL + AMASS) in the corpus layout";
   }
@@ -128,6 +140,17 @@ class DatasetStage : public StageExecutor {
 // `singles`: the spans table (spans.h) of a corpus or of BABEL + AMASS, every action text labelled.
 class SinglesStage : public StageExecutor {
  public:
+  // One task.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    const auto& p = plan.params;
+    if (!p.contains("babel") && plan.inputs.empty())
+      errors->push_back(path + ": needs an input stage (a corpus) or params.babel");
+    if (p.contains("labeler") && !p["labeler"].is_string())
+      errors->push_back(path + ".params.labeler: must be a labeler name");
+  }
   explicit SinglesStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
     return "single-action and two-action spans from BABEL + AMASS, body parts labelled";
@@ -238,6 +261,26 @@ std::string FindSpans(const TaskContext& ctx, const json& p) {
 // `synth`: shard i makes pairs [i * shard_size, ...) of params.pairs; the reduce task sums up.
 class SynthStage : public StageExecutor {
  public:
+  // Shards of shard_size pairs, then a reduce task (the summary).
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    const auto& p = plan.params;
+    const int64_t pairs =
+        p.contains("pairs") && p["pairs"].is_number_integer() ? p["pairs"].get<int64_t>() : 10000;
+    const int64_t shard = p.contains("shard_size") && p["shard_size"].is_number_integer()
+                              ? p["shard_size"].get<int64_t>()
+                              : 50000;
+    if (pairs < 1 || shard < 1) {
+      errors->push_back(path + ".params: pairs and shard_size must be positive integers");
+      return;
+    }
+    plan.shards = static_cast<int>((pairs + shard - 1) / shard);
+    plan.reduce = true;
+    if (!p.contains("spans") && plan.inputs.empty())
+      errors->push_back(path + ": needs an input `singles` stage or params.spans");
+    auto options = sinc::SynthOptionsFromJson(p, path + ".params");
+    if (!options.ok()) errors->push_back(options.status().message());
+  }
   std::string Description() const override {
     return "SINC synthetic pairs: compatible singles composed, checked, stored as recipes";
   }
