@@ -389,27 +389,13 @@ Vec3 LeafDirection(const Skeleton& skeleton, int joint) {
   return {0, 0, 1};  // feet
 }
 
-}  // namespace
+using JointIndices = std::array<int, kNumJoints>;  // SMPL joint -> source joint index
 
-// Method: (1) rest alignment. Each SMPL joint s gets a constant A_s with G_smpl(s) = G_src(m(s))
-// A_s, chosen so that in the source's rest pose the SMPL bone s -> child(s) points along the source
-// bone m(s) -> m(child(s)), with the twist fixed by the body's forward/up axes (the source's body
-// frame is read off its rest pose: left = hips, up = spine). (2) Per frame, a swing correction
-// turns each SMPL bone onto the source bone between the mapped joints' actual positions (the source
-// may have joints between them, e.g. CMU's lowerneck), keeping the twist. (3) The root moves with
-// the source root, scaled by the ratio of leg lengths, and y-up becomes z-up. (4) Optionally the
-// feet are put on z = 0.
-Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
-                       const BvhImportOptions& options, const Skeleton& skeleton) {
-  if (bvh.frames < 1) return DataLoss(origin + ": the BVH has no frames");
-  JointMap map;
-  if (!options.map_path.empty()) {
-    MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(options.map_path));
-    MP_ASSIGN_OR_RETURN(map, ParseJointMap(text, options.map_path));
-  } else {
-    MP_ASSIGN_OR_RETURN(map, ChooseJointMap(bvh, origin));
-  }
-  std::array<int, kNumJoints> source_of{};
+// The source joint of each SMPL joint under `map`; the mapped joints must keep SMPL's ancestry, or
+// rotations cannot be related.
+Result<JointIndices> MapJoints(const BvhFile& bvh, const JointMap& map, const std::string& origin,
+                               const Skeleton& skeleton) {
+  JointIndices source_of{};
   std::string missing;
   for (int j = 0; j < kNumJoints; ++j) {
     source_of[static_cast<size_t>(j)] = bvh.JointIndex(map.source[static_cast<size_t>(j)]);
@@ -419,7 +405,6 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
   if (!missing.empty())
     return InvalidArgument(origin + ": joints named in map '" + map.name +
                            "' are absent: " + missing);
-  // Mapped joints must keep SMPL's ancestry, or rotations cannot be related.
   for (int j = 1; j < kNumJoints; ++j) {
     int ancestor = bvh.joints[static_cast<size_t>(source_of[static_cast<size_t>(j)])].parent;
     const int wanted = source_of[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])];
@@ -432,14 +417,27 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
           map.source[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])] + "'");
     }
   }
+  return source_of;
+}
 
-  // Source rest pose: all rotations identity, offsets only.
+// The source's rest pose: every joint's position with all rotations identity, offsets only.
+std::vector<Vec3> RestPositions(const BvhFile& bvh) {
   std::vector<Vec3> rest(bvh.joints.size());
   for (size_t k = 0; k < bvh.joints.size(); ++k) {
     const BvhJoint& joint = bvh.joints[k];
     rest[k] =
         joint.parent < 0 ? joint.offset : rest[static_cast<size_t>(joint.parent)] + joint.offset;
   }
+  return rest;
+}
+
+// Step (1): per SMPL joint, the rotation taking its rest bone onto the source's rest bone, with
+// the twist fixed by the body frame read off the rest pose (left = hips, up = spine).
+Result<std::array<Mat3, kNumJoints>> RestAlignment(const BvhFile& bvh,
+                                                   const JointIndices& source_of,
+                                                   const std::vector<Vec3>& rest,
+                                                   const std::string& origin,
+                                                   const Skeleton& skeleton) {
   const auto rest_of = [&](int smpl_joint) {
     return rest[static_cast<size_t>(source_of[static_cast<size_t>(smpl_joint)])];
   };
@@ -452,7 +450,6 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
         ": cannot read the body's orientation from the rest pose (hips or spine degenerate)");
   }
   const Mat3 body = RotationFromTwoDirections({0, 1, 0}, {1, 0, 0}, source_up, source_left);
-
   std::array<Mat3, kNumJoints> align{};
   for (int j = 0; j < kNumJoints; ++j) {
     const int child = kPrimaryChild[static_cast<size_t>(j)];
@@ -482,29 +479,39 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
     align[static_cast<size_t>(j)] =
         RotationFromTwoDirections(smpl_dir, hint, source_dir, source_hint);
   }
+  return align;
+}
 
-  // Root motion: by default scaled by the ratio of leg lengths (stride and pelvis height follow the
-  // SMPL body, so feet neither slide nor sink); optionally in true metres via the unit scale.
+// Root motion: by default scaled by the ratio of leg lengths (stride and pelvis height follow the
+// SMPL body, so feet neither slide nor sink); optionally in true metres via the unit scale.
+Result<double> RootScale(const JointIndices& source_of, const std::vector<Vec3>& rest,
+                         const JointMap& map, const BvhImportOptions& options,
+                         const std::string& origin, const Skeleton& skeleton) {
+  const auto rest_of = [&](int smpl_joint) {
+    return rest[static_cast<size_t>(source_of[static_cast<size_t>(smpl_joint)])];
+  };
   const double source_leg = Norm(rest_of(4) - rest_of(1)) + Norm(rest_of(7) - rest_of(4));
   const double smpl_leg = skeleton.bone_lengths()[4] + skeleton.bone_lengths()[7];
   if (source_leg < 1e-9)
     return InvalidArgument(origin + ": the left leg has zero length in the rest pose");
-  double root_scale = smpl_leg / source_leg;
-  if (!options.scale_root_to_leg) {
-    root_scale = options.unit_scale > 0 ? options.unit_scale : map.unit_scale;
-    if (root_scale <= 0) {
-      return InvalidArgument(
-          origin + ": the metres-per-unit scale of this rig is unknown; pass a unit scale");
-    }
+  if (options.scale_root_to_leg) return smpl_leg / source_leg;
+  const double root_scale = options.unit_scale > 0 ? options.unit_scale : map.unit_scale;
+  if (root_scale <= 0) {
+    return InvalidArgument(origin +
+                           ": the metres-per-unit scale of this rig is unknown; pass a unit scale");
   }
+  return root_scale;
+}
 
-  Clip clip;
-  clip.id = origin.substr(origin.find_last_of('/') + 1);
-  clip.source = "bvh:" + clip.id + " map=" + map.name;
-  Motion& motion = clip.motion;
-  motion.fps = 1.0 / bvh.frame_time;
-  motion.poses.resize(static_cast<size_t>(bvh.frames) * kNumJoints * 3);
-  motion.trans.resize(static_cast<size_t>(bvh.frames) * 3);
+// Steps (2) and (3), per frame: each SMPL bone swung onto the source bone between the mapped
+// joints' actual positions, keeping the twist; the root moved with the source root, scaled; y-up
+// turned into z-up.
+void RetargetFrames(const BvhFile& bvh, const JointIndices& source_of,
+                    const std::array<Mat3, kNumJoints>& align, double root_scale,
+                    const Skeleton& skeleton, Motion* motion) {
+  motion->fps = 1.0 / bvh.frame_time;
+  motion->poses.resize(static_cast<size_t>(bvh.frames) * kNumJoints * 3);
+  motion->trans.resize(static_cast<size_t>(bvh.frames) * 3);
   const Mat3 up = YUpToZUp();
   std::vector<Mat3> source_global;
   std::vector<Vec3> source_pos;
@@ -529,29 +536,64 @@ Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
               ? up * global[0]
               : Transpose(global[static_cast<size_t>(skeleton.parents()[static_cast<size_t>(j)])]) *
                     global[static_cast<size_t>(j)];
-      motion.SetLocalRotation(frame, j, local);
+      motion->SetLocalRotation(frame, j, local);
     }
-    motion.SetTranslation(frame, up * (root_scale * source_pos[static_cast<size_t>(source_of[0])]));
+    motion->SetTranslation(frame,
+                           up * (root_scale * source_pos[static_cast<size_t>(source_of[0])]));
   }
-  MP_RETURN_IF_ERROR(CheckResample(motion, options.fps, origin));
-  if (options.fps > 0) motion = Resample(motion, options.fps);
-  if (options.place_on_floor) {
-    const std::vector<float> joints = ComputeJoints(skeleton, motion);
-    std::vector<float> lowest;
-    for (int64_t frame = 0; frame < motion.num_frames(); ++frame) {
-      float low = 1e30f;
-      for (int j : {skeleton.left_foot_joints()[0], skeleton.left_foot_joints()[1],
-                    skeleton.right_foot_joints()[0], skeleton.right_foot_joints()[1]}) {
-        low = std::min(low, joints[static_cast<size_t>((frame * kNumJoints + j) * 3 + 2)]);
-      }
-      lowest.push_back(low);
+}
+
+// Step (4): the feet on z = 0, at the 5th percentile of the per-frame lowest foot joint (robust to
+// jumps and to a few bad frames).
+void PlaceOnFloor(const Skeleton& skeleton, Motion* motion) {
+  const std::vector<float> joints = ComputeJoints(skeleton, *motion);
+  std::vector<float> lowest;
+  for (int64_t frame = 0; frame < motion->num_frames(); ++frame) {
+    float low = 1e30f;
+    for (int j : {skeleton.left_foot_joints()[0], skeleton.left_foot_joints()[1],
+                  skeleton.right_foot_joints()[0], skeleton.right_foot_joints()[1]}) {
+      low = std::min(low, joints[static_cast<size_t>((frame * kNumJoints + j) * 3 + 2)]);
     }
-    // The 5th percentile of the per-frame lowest foot: robust to jumps and to a few bad frames.
-    std::sort(lowest.begin(), lowest.end());
-    const float floor = lowest[lowest.size() / 20];
-    for (int64_t frame = 0; frame < motion.num_frames(); ++frame)
-      motion.trans[static_cast<size_t>(frame * 3 + 2)] -= floor;
+    lowest.push_back(low);
   }
+  std::sort(lowest.begin(), lowest.end());
+  const float floor = lowest[lowest.size() / 20];
+  for (int64_t frame = 0; frame < motion->num_frames(); ++frame)
+    motion->trans[static_cast<size_t>(frame * 3 + 2)] -= floor;
+}
+
+}  // namespace
+
+// Method: (1) rest alignment. Each SMPL joint s gets a constant A_s with G_smpl(s) = G_src(m(s))
+// A_s, chosen so that in the source's rest pose the SMPL bone s -> child(s) points along the source
+// bone m(s) -> m(child(s)), with the twist fixed by the body's forward/up axes (the source's body
+// frame is read off its rest pose: left = hips, up = spine). (2) Per frame, a swing correction
+// turns each SMPL bone onto the source bone between the mapped joints' actual positions (the source
+// may have joints between them, e.g. CMU's lowerneck), keeping the twist. (3) The root moves with
+// the source root, scaled by the ratio of leg lengths, and y-up becomes z-up. (4) Optionally the
+// feet are put on z = 0.
+Result<Clip> ImportBvh(const BvhFile& bvh, const std::string& origin,
+                       const BvhImportOptions& options, const Skeleton& skeleton) {
+  if (bvh.frames < 1) return DataLoss(origin + ": the BVH has no frames");
+  JointMap map;
+  if (!options.map_path.empty()) {
+    MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(options.map_path));
+    MP_ASSIGN_OR_RETURN(map, ParseJointMap(text, options.map_path));
+  } else {
+    MP_ASSIGN_OR_RETURN(map, ChooseJointMap(bvh, origin));
+  }
+  MP_ASSIGN_OR_RETURN(const JointIndices source_of, MapJoints(bvh, map, origin, skeleton));
+  const std::vector<Vec3> rest = RestPositions(bvh);
+  MP_ASSIGN_OR_RETURN(const auto align, RestAlignment(bvh, source_of, rest, origin, skeleton));
+  MP_ASSIGN_OR_RETURN(const double root_scale,
+                      RootScale(source_of, rest, map, options, origin, skeleton));
+  Clip clip;
+  clip.id = origin.substr(origin.find_last_of('/') + 1);
+  clip.source = "bvh:" + clip.id + " map=" + map.name;
+  RetargetFrames(bvh, source_of, align, root_scale, skeleton, &clip.motion);
+  MP_RETURN_IF_ERROR(CheckResample(clip.motion, options.fps, origin));
+  if (options.fps > 0) clip.motion = Resample(clip.motion, options.fps);
+  if (options.place_on_floor) PlaceOnFloor(skeleton, &clip.motion);
   MP_RETURN_IF_ERROR(ValidateClip(clip, origin));
   return clip;
 }
