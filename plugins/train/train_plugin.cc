@@ -282,295 +282,366 @@ double Validate(plugin::Model& model, plugin::Dataset& val, const Options& optio
   return total / static_cast<double>(options.val_batches);
 }
 
-void Train(const Task& task) {
-  const Options options = Options::FromTask(task);
-  const int rank = task.spec.value("index", 0);
-  const int world = std::max(1, task.spec.value("world_size", 1));
-  const std::string state_dir = task.spec.value("state_dir", std::string());
-  const std::string out_dir = task.output_dir();
-  if (state_dir.empty())
-    throw plugin::BadInput("the train stage needs a state_dir (a coordinator that knows gangs)");
-  fs::create_directories(state_dir);
-  fs::create_directories(out_dir);
-  nn::SetTorchThreads(omp_get_max_threads());
-  torch::manual_seed(options.seed);
+// One rank of a training gang: the model, its data, the optimiser, the gang's process group and,
+// on rank 0, the loss logs, the best model by validation loss and the checkpoints.
+class Trainer {
+ public:
+  explicit Trainer(const Task& task)
+      : task_(task),
+        options_(Options::FromTask(task)),
+        rank_(task.spec.value("index", 0)),
+        world_(std::max(1, task.spec.value("world_size", 1))),
+        state_dir_(task.spec.value("state_dir", std::string())),
+        out_dir_(task.output_dir()),
+        csv_(layout::LossesFile(state_dir_)),
+        val_csv_(layout::ValLossesFile(state_dir_)),
+        best_dir_(state_dir_ + "/best") {}
 
-  ModelHandle handle;
-  handle.factory = task.Factory("model", options.model);
-  if (!handle.factory)
-    throw plugin::BadInput("no model plugin '" + options.model + "' is loaded on this worker");
-  char error[2048] = {0};
-  handle.model = static_cast<plugin::Model*>(
-      handle.factory->create(options.config.dump().c_str(), error, sizeof error));
-  if (!handle.model) throw plugin::BadInput(std::string("model '") + options.model + "': " + error);
-  plugin::Model& model = *handle.model;
-
-  plugin::DataContext data;
-  data.config = options.data;
-  for (const auto& input : task.spec["inputs"]) {
-    if (!input.value("result_dir", std::string()).empty())
-      data.input_dirs.push_back(input["result_dir"].get<std::string>());
-    for (const auto& dir : input["dirs"]) data.input_dirs.push_back(dir.get<std::string>());
-  }
-  data.state_dir = state_dir;
-  data.rank = rank;
-  data.world_size = world;
-  data.seed = options.seed;
-  std::unique_ptr<plugin::Dataset> dataset;
-  try {
-    dataset = model.MakeDataset(data);
-  } catch (const std::invalid_argument& e) {
-    throw plugin::BadInput(e.what());
-  }
-  // The held-out split for the validation loss (rank 0 validates; the others do not wait for it).
-  std::unique_ptr<plugin::Dataset> val_dataset;
-  if (options.validate_every > 0 && rank == 0) {
-    plugin::DataContext val = data;
-    val.split = "val";
-    try {
-      val_dataset = model.MakeDataset(val);
-    } catch (const std::invalid_argument& e) {
-      throw plugin::BadInput(std::string("validate_every: the held-out split: ") + e.what());
+  void Run() {
+    if (state_dir_.empty())
+      throw plugin::BadInput("the train stage needs a state_dir (a coordinator that knows gangs)");
+    fs::create_directories(state_dir_);
+    fs::create_directories(out_dir_);
+    nn::SetTorchThreads(omp_get_max_threads());
+    torch::manual_seed(options_.seed);
+    CreateModel();
+    MakeDatasets();
+    for (auto& p : model().Module().parameters()) {
+      if (p.requires_grad()) params_.push_back(p);
     }
-  }
-  if (options.batch_size % world != 0) {
-    throw plugin::BadInput("batch_size " + std::to_string(options.batch_size) +
-                           " must be divisible by world_size " + std::to_string(world));
+    optimizer_ =
+        std::make_unique<torch::optim::AdamW>(params_, torch::optim::AdamWOptions(options_.lr)
+                                                           .betas({options_.beta1, options_.beta2})
+                                                           .weight_decay(options_.weight_decay));
+    const int64_t start = Resume();
+    JoinGang();
+    const auto started = std::chrono::steady_clock::now();
+    model().Module().train();
+    for (int64_t step = start; step < options_.steps; ++step) {
+      if (task_.cancelled()) throw std::runtime_error("cancelled at step " + std::to_string(step));
+      Step(step);
+      if (rank_ != 0) continue;
+      if (val_dataset_ && ((step + 1) % options_.validate_every == 0 || step + 1 == options_.steps))
+        ValidateAndKeepBest(step);
+      if ((step + 1) % options_.checkpoint_every == 0 && step + 1 < options_.steps)
+        SaveCheckpoint(step);
+    }
+    if (log_.is_open()) log_.close();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    if (rank_ == 0) WriteOutputs();
+    WriteSummary(start, seconds);
   }
 
-  std::vector<torch::Tensor> params;
-  for (auto& p : model.Module().parameters()) {
-    if (p.requires_grad()) params.push_back(p);
-  }
-  torch::optim::AdamW optimizer(params, torch::optim::AdamWOptions(options.lr)
-                                            .betas({options.beta1, options.beta2})
-                                            .weight_decay(options.weight_decay));
+ private:
+  plugin::Model& model() { return *handle_.model; }
 
-  // Resume from the newest checkpoint of an earlier attempt of this gang.
-  int64_t start = 0;
-  const std::string csv = layout::LossesFile(state_dir), val_csv = layout::ValLossesFile(state_dir),
-                    best_dir = state_dir + "/best";
-  double best_val = std::numeric_limits<double>::infinity();
-  int64_t best_step = -1;
-  if (const auto latest = LatestCheckpoint(state_dir)) {
-    LoadModule(model.Module(), layout::ModelWeightsFile(latest->dir));
-    torch::load(optimizer, latest->dir + "/optimizer.pt");
-    start = latest->step;
-    task.Log(MP_LOG_INFO,
-             "rank " + std::to_string(rank) + " resumes from step " + std::to_string(start));
-    if (rank == 0) {
-      TruncateCsv(csv, start);
-      TruncateCsv(val_csv, start + 1);  // a validation row is logged at the step it follows
-      // The best model so far, if it was validated before the resumed step.
-      if (auto meta = ReadFile(best_dir + "/best.json"); meta.ok()) {
-        const json best = json::parse(*meta);
-        if (best.value("step", int64_t{-1}) <= start)
-          best_val = best.value("val_loss", best_val), best_step = best.value("step", best_step);
+  // The model through its plugin's factory.
+  void CreateModel() {
+    handle_.factory = task_.Factory("model", options_.model);
+    if (!handle_.factory)
+      throw plugin::BadInput("no model plugin '" + options_.model + "' is loaded on this worker");
+    char error[2048] = {0};
+    handle_.model = static_cast<plugin::Model*>(
+        handle_.factory->create(options_.config.dump().c_str(), error, sizeof error));
+    if (!handle_.model)
+      throw plugin::BadInput(std::string("model '") + options_.model + "': " + error);
+  }
+
+  // This rank's training data and, on rank 0 when validating, the held-out split (the other ranks
+  // do not wait for it).
+  void MakeDatasets() {
+    plugin::DataContext data;
+    data.config = options_.data;
+    for (const auto& input : task_.spec["inputs"]) {
+      if (!input.value("result_dir", std::string()).empty())
+        data.input_dirs.push_back(input["result_dir"].get<std::string>());
+      for (const auto& dir : input["dirs"]) data.input_dirs.push_back(dir.get<std::string>());
+    }
+    data.state_dir = state_dir_;
+    data.rank = rank_;
+    data.world_size = world_;
+    data.seed = options_.seed;
+    try {
+      dataset_ = model().MakeDataset(data);
+    } catch (const std::invalid_argument& e) {
+      throw plugin::BadInput(e.what());
+    }
+    if (options_.validate_every > 0 && rank_ == 0) {
+      plugin::DataContext val = data;
+      val.split = "val";
+      try {
+        val_dataset_ = model().MakeDataset(val);
+      } catch (const std::invalid_argument& e) {
+        throw plugin::BadInput(std::string("validate_every: the held-out split: ") + e.what());
       }
     }
-  } else if (rank == 0) {
-    for (const std::string& file : {csv, val_csv}) fs::remove(file);
-    fs::remove_all(best_dir);
+    if (options_.batch_size % world_ != 0) {
+      throw plugin::BadInput("batch_size " + std::to_string(options_.batch_size) +
+                             " must be divisible by world_size " + std::to_string(world_));
+    }
   }
 
-  c10::intrusive_ptr<c10d::ProcessGroupGloo> group;
-  if (world > 1) {
-    const std::string rendezvous = task.spec.value("rendezvous", std::string());
+  // Resumes from the newest checkpoint of an earlier attempt of this gang; returns its step (0 for
+  // a fresh start, whose logs and best model from earlier attempts are removed).
+  int64_t Resume() {
+    const auto latest = LatestCheckpoint(state_dir_);
+    if (!latest) {
+      if (rank_ == 0) {
+        for (const std::string& file : {csv_, val_csv_}) fs::remove(file);
+        fs::remove_all(best_dir_);
+      }
+      return 0;
+    }
+    LoadModule(model().Module(), layout::ModelWeightsFile(latest->dir));
+    torch::load(*optimizer_, latest->dir + "/optimizer.pt");
+    const int64_t start = latest->step;
+    task_.Log(MP_LOG_INFO,
+              "rank " + std::to_string(rank_) + " resumes from step " + std::to_string(start));
+    if (rank_ == 0) {
+      TruncateCsv(csv_, start);
+      TruncateCsv(val_csv_, start + 1);  // a validation row is logged at the step it follows
+      // The best model so far, if it was validated before the resumed step.
+      if (auto meta = ReadFile(best_dir_ + "/best.json"); meta.ok()) {
+        const json best = json::parse(*meta);
+        if (best.value("step", int64_t{-1}) <= start)
+          best_val_ = best.value("val_loss", best_val_),
+          best_step_ = best.value("step", best_step_);
+      }
+    }
+    return start;
+  }
+
+  // world_size > 1: the gang's Gloo process group; every rank starts from rank 0's parameters.
+  void JoinGang() {
+    if (world_ <= 1) return;
+    const std::string rendezvous = task_.spec.value("rendezvous", std::string());
     if (rendezvous.empty())
       throw plugin::BadInput(
           "world_size > 1 but no rendezvous: run this stage through a coordinator");
-    auto store = OpenStore(options, rendezvous, rank, world, task);
+    auto store = OpenStore(options_, rendezvous, rank_, world_, task_);
     auto gloo = c10d::ProcessGroupGloo::Options::create();
-    gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(options.gloo_host));
-    gloo->timeout = std::chrono::seconds(options.collective_timeout);
-    group = c10::make_intrusive<c10d::ProcessGroupGloo>(store, rank, world, gloo);
-    // Every rank starts from rank 0's parameters.
-    for (auto& p : model.Module().parameters()) {
+    gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(options_.gloo_host));
+    gloo->timeout = std::chrono::seconds(options_.collective_timeout);
+    group_ = c10::make_intrusive<c10d::ProcessGroupGloo>(store, rank_, world_, gloo);
+    for (auto& p : model().Module().parameters()) {
       std::vector<at::Tensor> t = {p.data()};
-      group->broadcast(t)->wait();
+      group_->broadcast(t)->wait();
     }
   }
 
-  const int64_t n = dataset->size();
-  const int64_t per_epoch = std::max<int64_t>(1, n / options.batch_size);
-  const int64_t local = options.batch_size / world;
-  std::vector<int64_t> order;
-  int64_t order_epoch = -1;
-  std::ofstream log;
-  std::vector<std::string> columns;
-  const auto started = std::chrono::steady_clock::now();
-  double last_loss = 0;
-  model.Module().train();
-  for (int64_t step = start; step < options.steps; ++step) {
-    if (task.cancelled()) throw std::runtime_error("cancelled at step " + std::to_string(step));
+  // This rank's part of the global batch of `step`: every world-th example of an order shuffled
+  // once per epoch, with each example's own seed (its place in the global batch) for models whose
+  // sampling must not depend on how the batch was split over ranks.
+  plugin::Batch BatchOf(int64_t step) {
+    const int64_t n = dataset_->size();
+    const int64_t per_epoch = std::max<int64_t>(1, n / options_.batch_size);
     const int64_t epoch = step / per_epoch;
-    if (epoch != order_epoch) {
-      order.resize(static_cast<size_t>(n));
-      std::iota(order.begin(), order.end(), 0);
-      std::mt19937_64 rng(MixSeed(options.seed, static_cast<uint64_t>(epoch)));
-      std::shuffle(order.begin(), order.end(), rng);
-      order_epoch = epoch;
+    if (epoch != order_epoch_) {
+      order_.resize(static_cast<size_t>(n));
+      std::iota(order_.begin(), order_.end(), 0);
+      std::mt19937_64 rng(MixSeed(options_.seed, static_cast<uint64_t>(epoch)));
+      std::shuffle(order_.begin(), order_.end(), rng);
+      order_epoch_ = epoch;
     }
-    // This rank's part of the global batch: every world-th example.
     std::vector<int64_t> indices;
-    const int64_t base = (step % per_epoch) * options.batch_size;
-    for (int64_t k = rank; k < options.batch_size; k += world)
-      indices.push_back(order[static_cast<size_t>((base + k) % n)]);
-    plugin::Batch batch = dataset->Get(indices, MixSeed(options.seed, static_cast<uint64_t>(step)));
-    // Each example's own random seed (its place in the global batch), for models whose sampling
-    // must not depend on how the batch was split over ranks.
+    const int64_t base = (step % per_epoch) * options_.batch_size;
+    for (int64_t k = rank_; k < options_.batch_size; k += world_)
+      indices.push_back(order_[static_cast<size_t>((base + k) % n)]);
+    plugin::Batch batch =
+        dataset_->Get(indices, MixSeed(options_.seed, static_cast<uint64_t>(step)));
     std::vector<int64_t> example_seeds;
-    for (int64_t k = rank; k < options.batch_size; k += world) {
+    for (int64_t k = rank_; k < options_.batch_size; k += world_) {
       example_seeds.push_back(static_cast<int64_t>(
-          MixSeed(MixSeed(options.seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >>
+          MixSeed(MixSeed(options_.seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >>
           1));
     }
     batch.tensors["example_seed"] = torch::tensor(example_seeds, torch::kInt64);
-    torch::manual_seed(MixSeed(options.seed, static_cast<uint64_t>(step * world + rank)));
-    auto losses = model.Losses(batch, step);
+    return batch;
+  }
+
+  // Averages the gradients and the logged losses over the ranks in one all-reduce; returns the
+  // averaged losses (in the order of `values`).
+  torch::Tensor AllReduce(const std::vector<float>& values) {
+    std::vector<torch::Tensor> flat;
+    for (auto& p : params_)
+      flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
+    flat.push_back(torch::tensor(values));
+    auto buffer = torch::cat(flat);
+    if (group_) {
+      std::vector<at::Tensor> t = {buffer};
+      group_->allreduce(t)->wait();
+      buffer.div_(static_cast<double>(world_));
+    }
+    int64_t offset = 0;
+    for (auto& p : params_) {
+      if (p.grad().defined())
+        p.mutable_grad().copy_(buffer.narrow(0, offset, p.numel()).view_as(p));
+      offset += p.numel();
+    }
+    return buffer.narrow(0, offset, static_cast<int64_t>(values.size()));
+  }
+
+  // One optimiser step (gradients averaged over the gang, clipped, AdamW at the scheduled rate);
+  // rank 0 logs its losses.
+  void Step(int64_t step) {
+    plugin::Batch batch = BatchOf(step);
+    torch::manual_seed(MixSeed(options_.seed, static_cast<uint64_t>(step * world_ + rank_)));
+    auto losses = model().Losses(batch, step);
     const auto loss = losses.at("loss");
     if (!std::isfinite(loss.item<double>()))
       throw std::runtime_error("loss is not finite at step " + std::to_string(step));
-    optimizer.zero_grad();
+    optimizer_->zero_grad();
     loss.backward();
-
-    // Average gradients and the logged losses over the ranks in one all-reduce.
-    std::vector<torch::Tensor> flat;
-    for (auto& p : params)
-      flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
     std::vector<std::string> names;
     std::vector<float> values;
     for (const auto& [name, value] : losses) {
       names.push_back(name);
       values.push_back(value.detach().item<float>());
     }
-    flat.push_back(torch::tensor(values));
-    auto buffer = torch::cat(flat);
-    if (group) {
-      std::vector<at::Tensor> t = {buffer};
-      group->allreduce(t)->wait();
-      buffer.div_(static_cast<double>(world));
-    }
-    int64_t offset = 0;
-    for (auto& p : params) {
-      if (p.grad().defined())
-        p.mutable_grad().copy_(buffer.narrow(0, offset, p.numel()).view_as(p));
-      offset += p.numel();
-    }
-    const auto averaged = buffer.narrow(0, offset, static_cast<int64_t>(values.size()));
-    if (options.clip_grad > 0) torch::nn::utils::clip_grad_norm_(params, options.clip_grad);
-    const double lr = LearningRate(options, step);
-    for (auto& group_options : optimizer.param_groups())
+    const torch::Tensor averaged = AllReduce(values);
+    if (options_.clip_grad > 0) torch::nn::utils::clip_grad_norm_(params_, options_.clip_grad);
+    const double lr = LearningRate(options_, step);
+    for (auto& group_options : optimizer_->param_groups())
       static_cast<torch::optim::AdamWOptions&>(group_options.options()).lr(lr);
-    optimizer.step();
+    optimizer_->step();
+    last_loss_ = averaged[static_cast<int64_t>(std::find(names.begin(), names.end(), "loss") -
+                                               names.begin())]
+                     .item<double>();
+    if (rank_ == 0) LogStep(step, lr, names, averaged);
+  }
 
-    last_loss = averaged[static_cast<int64_t>(std::find(names.begin(), names.end(), "loss") -
-                                              names.begin())]
-                    .item<double>();
-    if (rank == 0) {
-      if (!log.is_open()) {
-        const bool fresh = !fs::exists(csv);
-        log.open(csv, std::ios::app);
-        columns = names;
-        if (fresh) {
-          log << "step,epoch,lr";
-          for (const auto& c : columns) log << "," << c;
-          log << "\n";
-        }
+  // Rank 0: a row of losses.csv per step, flushed (and the live metrics set) every log_every.
+  void LogStep(int64_t step, double lr, const std::vector<std::string>& names,
+               const torch::Tensor& averaged) {
+    if (!log_.is_open()) {
+      const bool fresh = !fs::exists(csv_);
+      log_.open(csv_, std::ios::app);
+      if (fresh) {
+        log_ << "step,epoch,lr";
+        for (const auto& c : names) log_ << "," << c;
+        log_ << "\n";
       }
-      log << step << "," << epoch << "," << lr;
-      for (int64_t k = 0; k < static_cast<int64_t>(names.size()); ++k)
-        log << "," << averaged[k].item<float>();
-      log << "\n";
-      if ((step + 1) % options.log_every == 0 || step + 1 == options.steps) {
-        log.flush();
-        task.Metric("loss", last_loss);
-        task.Metric("step", static_cast<double>(step + 1));
-        task.Metric("lr", lr);
-      }
-      if (val_dataset && ((step + 1) % options.validate_every == 0 || step + 1 == options.steps)) {
-        const double val_loss = Validate(model, *val_dataset, options);
-        const bool fresh = !fs::exists(val_csv);
-        std::ofstream val_log(val_csv, std::ios::app);
-        if (fresh) val_log << "step,val_loss\n";
-        val_log << step << "," << val_loss << "\n";
-        task.Metric("val_loss", val_loss);
-        if (val_loss < best_val) {
-          best_val = val_loss, best_step = step + 1;
-          fs::remove_all(best_dir + ".tmp");
-          WriteModelDir(model, options, best_step, best_dir + ".tmp");
-          const Status s =
-              WriteFileAtomic(best_dir + ".tmp/best.json",
-                              json({{"step", best_step}, {"val_loss", best_val}}).dump() + "\n");
-          if (!s.ok()) throw std::runtime_error(s.message());
-          fs::remove_all(best_dir);
-          fs::rename(best_dir + ".tmp", best_dir);
-        }
-      }
-      if ((step + 1) % options.checkpoint_every == 0 && step + 1 < options.steps) {
-        log.flush();
-        const std::string name = "ckpt-" + std::to_string(100000000 + step + 1).substr(1);
-        const std::string tmp = state_dir + "/" + name + ".tmp";
-        fs::remove_all(tmp);
-        fs::create_directories(tmp);
-        SaveModule(model.Module(), layout::ModelWeightsFile(tmp));
-        torch::save(optimizer, tmp + "/optimizer.pt");
-        const Status s = WriteFileAtomic(
-            tmp + "/trainer.json",
-            json({{"step", step + 1}, {"epoch", epoch}, {"world_size", world}}).dump() + "\n");
-        if (!s.ok()) throw std::runtime_error(s.message());
-        fs::remove_all(state_dir + "/" + name);
-        fs::rename(tmp, state_dir + "/" + name);
-        const Status latest = WriteFileAtomic(state_dir + "/latest", name + "\n");
-        if (!latest.ok()) throw std::runtime_error(latest.message());
-        // Older checkpoints beyond keep_checkpoints go.
-        std::vector<std::string> all;
-        for (const auto& entry : fs::directory_iterator(state_dir)) {
-          const std::string file = entry.path().filename().string();
-          if (file.rfind("ckpt-", 0) == 0 && file.find(".tmp") == std::string::npos)
-            all.push_back(file);
-        }
-        std::sort(all.begin(), all.end());
-        for (size_t k = 0; k + static_cast<size_t>(options.keep_checkpoints) < all.size(); ++k)
-          fs::remove_all(state_dir + "/" + all[k]);
-      }
+    }
+    const int64_t per_epoch = std::max<int64_t>(1, dataset_->size() / options_.batch_size);
+    log_ << step << "," << step / per_epoch << "," << lr;
+    for (int64_t k = 0; k < static_cast<int64_t>(names.size()); ++k)
+      log_ << "," << averaged[k].item<float>();
+    log_ << "\n";
+    if ((step + 1) % options_.log_every == 0 || step + 1 == options_.steps) {
+      log_.flush();
+      task_.Metric("loss", last_loss_);
+      task_.Metric("step", static_cast<double>(step + 1));
+      task_.Metric("lr", lr);
     }
   }
-  if (log.is_open()) log.close();
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-  if (rank == 0) {
-    model.Module().eval();
-    if (options.keep == "best" && best_step >= 0 && best_step < options.steps) {
-      // The lowest validation loss: that model is the output (its weights, extras and step).
-      LoadModule(model.Module(), layout::ModelWeightsFile(best_dir));
-      WriteModelDir(model, options, best_step, layout::CheckpointDir(out_dir));
-    } else {
-      WriteModelDir(model, options, options.steps, layout::CheckpointDir(out_dir));
+
+  // Rank 0: the held-out loss after `step`, logged; a new lowest one writes best/ (atomically).
+  void ValidateAndKeepBest(int64_t step) {
+    const double val_loss = Validate(model(), *val_dataset_, options_);
+    const bool fresh = !fs::exists(val_csv_);
+    std::ofstream val_log(val_csv_, std::ios::app);
+    if (fresh) val_log << "step,val_loss\n";
+    val_log << step << "," << val_loss << "\n";
+    task_.Metric("val_loss", val_loss);
+    if (val_loss >= best_val_) return;
+    best_val_ = val_loss, best_step_ = step + 1;
+    fs::remove_all(best_dir_ + ".tmp");
+    WriteModelDir(model(), options_, best_step_, best_dir_ + ".tmp");
+    const Status s =
+        WriteFileAtomic(best_dir_ + ".tmp/best.json",
+                        json({{"step", best_step_}, {"val_loss", best_val_}}).dump() + "\n");
+    if (!s.ok()) throw std::runtime_error(s.message());
+    fs::remove_all(best_dir_);
+    fs::rename(best_dir_ + ".tmp", best_dir_);
+  }
+
+  // Rank 0: state_dir/ckpt-NNNNNNNN (weights, optimiser, trainer.json) written under a temporary
+  // name and renamed, `latest` pointed at it, checkpoints beyond keep_checkpoints removed.
+  void SaveCheckpoint(int64_t step) {
+    log_.flush();
+    const int64_t per_epoch = std::max<int64_t>(1, dataset_->size() / options_.batch_size);
+    const std::string name = "ckpt-" + std::to_string(100000000 + step + 1).substr(1);
+    const std::string tmp = state_dir_ + "/" + name + ".tmp";
+    fs::remove_all(tmp);
+    fs::create_directories(tmp);
+    SaveModule(model().Module(), layout::ModelWeightsFile(tmp));
+    torch::save(*optimizer_, tmp + "/optimizer.pt");
+    const Status s = WriteFileAtomic(
+        tmp + "/trainer.json",
+        json({{"step", step + 1}, {"epoch", step / per_epoch}, {"world_size", world_}}).dump() +
+            "\n");
+    if (!s.ok()) throw std::runtime_error(s.message());
+    fs::remove_all(state_dir_ + "/" + name);
+    fs::rename(tmp, state_dir_ + "/" + name);
+    const Status latest = WriteFileAtomic(state_dir_ + "/latest", name + "\n");
+    if (!latest.ok()) throw std::runtime_error(latest.message());
+    std::vector<std::string> all;
+    for (const auto& entry : fs::directory_iterator(state_dir_)) {
+      const std::string file = entry.path().filename().string();
+      if (file.rfind("ckpt-", 0) == 0 && file.find(".tmp") == std::string::npos)
+        all.push_back(file);
     }
-    ExportStateDict(model.Module(), out_dir + "/state_dict.pt");
-    for (const std::string& file : {csv, val_csv}) {
+    std::sort(all.begin(), all.end());
+    for (size_t k = 0; k + static_cast<size_t>(options_.keep_checkpoints) < all.size(); ++k)
+      fs::remove_all(state_dir_ + "/" + all[k]);
+  }
+
+  // Rank 0: the output model (with keep: best, the lowest validation loss's), state_dict.pt and
+  // the loss curves.
+  void WriteOutputs() {
+    model().Module().eval();
+    if (options_.keep == "best" && best_step_ >= 0 && best_step_ < options_.steps) {
+      LoadModule(model().Module(), layout::ModelWeightsFile(best_dir_));
+      WriteModelDir(model(), options_, best_step_, layout::CheckpointDir(out_dir_));
+    } else {
+      WriteModelDir(model(), options_, options_.steps, layout::CheckpointDir(out_dir_));
+    }
+    ExportStateDict(model().Module(), out_dir_ + "/state_dict.pt");
+    for (const std::string& file : {csv_, val_csv_}) {
       if (fs::exists(file))
-        fs::copy_file(file, out_dir + "/" + fs::path(file).filename().string(),
+        fs::copy_file(file, out_dir_ + "/" + fs::path(file).filename().string(),
                       fs::copy_options::overwrite_existing);
     }
   }
-  const int64_t trained = options.steps - start;
-  json summary = {
-      {"rank", rank},
-      {"world_size", world},
-      {"resumed_from", start},
-      {"steps", trained},
-      {"seconds", seconds},
-      {"samples_per_second", static_cast<double>(trained * local) / std::max(seconds, 1e-9)},
-      {"final_loss", last_loss}};
-  if (rank == 0 && best_step >= 0)
-    summary["best"] = {{"step", best_step}, {"val_loss", best_val}, {"kept", options.keep}};
-  const Status s = WriteFileAtomic(layout::RankSummaryFile(out_dir, rank), summary.dump(1) + "\n");
-  if (!s.ok()) throw std::runtime_error(s.message());
-  task.Metric("final_loss", last_loss);
-  task.Metric("samples_per_second", static_cast<double>(trained * local) / std::max(seconds, 1e-9));
-}
+
+  // Every rank: rank-R.json (steps, time, throughput, final loss; rank 0 adds the best model).
+  void WriteSummary(int64_t start, double seconds) {
+    const int64_t trained = options_.steps - start;
+    const int64_t local = options_.batch_size / world_;
+    const double samples_per_second =
+        static_cast<double>(trained * local) / std::max(seconds, 1e-9);
+    json summary = {{"rank", rank_},           {"world_size", world_},
+                    {"resumed_from", start},   {"steps", trained},
+                    {"seconds", seconds},      {"samples_per_second", samples_per_second},
+                    {"final_loss", last_loss_}};
+    if (rank_ == 0 && best_step_ >= 0)
+      summary["best"] = {{"step", best_step_}, {"val_loss", best_val_}, {"kept", options_.keep}};
+    const Status s =
+        WriteFileAtomic(layout::RankSummaryFile(out_dir_, rank_), summary.dump(1) + "\n");
+    if (!s.ok()) throw std::runtime_error(s.message());
+    task_.Metric("final_loss", last_loss_);
+    task_.Metric("samples_per_second", samples_per_second);
+  }
+
+  const Task& task_;
+  const Options options_;
+  const int rank_, world_;
+  const std::string state_dir_, out_dir_, csv_, val_csv_, best_dir_;
+  ModelHandle handle_;
+  std::unique_ptr<plugin::Dataset> dataset_, val_dataset_;
+  std::vector<torch::Tensor> params_;
+  std::unique_ptr<torch::optim::AdamW> optimizer_;
+  c10::intrusive_ptr<c10d::ProcessGroupGloo> group_;
+  std::vector<int64_t> order_;
+  int64_t order_epoch_ = -1;
+  std::ofstream log_;
+  double last_loss_ = 0;
+  double best_val_ = std::numeric_limits<double>::infinity();
+  int64_t best_step_ = -1;
+};
+
+void Train(const Task& task) { Trainer(task).Run(); }
 
 const mp_stage_kind kKinds[] = {
     {"train", "data-parallel training of a model plugin (c10d Gloo), with checkpoints and resume",
