@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -57,158 +58,186 @@ std::vector<std::string> Texts(int64_t n) {
   return texts;
 }
 
+struct Args {
+  std::string sizes = "demo,paper";
+  int64_t steps = 8, threads = 1, batch = 32, frames = 150;
+  bool reference = true, scaling = true;
+};
+
+std::optional<Args> ParseArgs(int argc, char** argv) {
+  Args a;
+  for (int k = 1; k < argc; ++k) {
+    if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc)
+      a.sizes = argv[++k];
+    else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc)
+      a.steps = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc)
+      a.threads = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc)
+      a.batch = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc)
+      a.frames = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--no-reference"))
+      a.reference = false;
+    else if (!std::strcmp(argv[k], "--no-scaling"))
+      a.scaling = false;
+    else
+      return std::nullopt;
+  }
+  return a;
+}
+
+// The benchmark's batch: lengths between frames/2 and frames, features ~ N(0, 1) (normalised).
+struct Batch {
+  torch::Tensor features, padding;
+};
+
+Batch MakeBatch(const Args& a) {
+  std::mt19937 rng(7);
+  Batch b;
+  b.padding = torch::zeros({a.batch, a.frames}, torch::kBool);
+  for (int64_t i = 0; i < a.batch; ++i) {
+    const int64_t length =
+        a.frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(a.frames / 2 + 1));
+    b.padding[i].narrow(0, length, a.frames - length).fill_(true);
+  }
+  b.features = torch::randn({a.frames, a.batch, temos::kFeatureDim})
+                   .masked_fill(b.padding.t().unsqueeze(2), 0.0);
+  return b;
+}
+
+// The PyTorch-Python reference (bench/reference/temos_ref.py) trained on the same batch: its
+// samples per second.
+double PythonReference(const Args& a, const Size& size, temos::Temos& net,
+                       const std::vector<std::string>& texts, const Batch& b) {
+  const std::string dir = "/tmp/motionpipe_train_bench";
+  fs::create_directories(dir);
+  const auto tokens = net->text_encoder()->TokenIds(texts).contiguous();
+  bench::SaveNpy(
+      dir + "/tokens.npy",
+      NpyArray::Int64({tokens.size(0), tokens.size(1)},
+                      std::vector<int64_t>(tokens.data_ptr<int64_t>(),
+                                           tokens.data_ptr<int64_t>() + tokens.numel())));
+  const auto f = b.features.contiguous();
+  bench::SaveNpy(
+      dir + "/features.npy",
+      NpyArray::Float32({a.frames, a.batch, temos::kFeatureDim},
+                        std::vector<float>(f.data_ptr<float>(), f.data_ptr<float>() + f.numel())));
+  const auto pad = b.padding.to(torch::kUInt8).contiguous();
+  bench::SaveNpy(dir + "/padding.npy",
+                 NpyArray::Bool({a.batch, a.frames},
+                                std::vector<uint8_t>(pad.data_ptr<uint8_t>(),
+                                                     pad.data_ptr<uint8_t>() + pad.numel())));
+  std::ostringstream command;
+  command << "OMP_NUM_THREADS=" << a.threads << " OPENBLAS_NUM_THREADS=" << a.threads
+          << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
+          << "/bench/reference/temos_ref.py --batch-dir " << dir << " --latent " << size.latent
+          << " --layers " << size.layers << " --heads " << size.heads << " --ff " << size.ff
+          << " --text-layers " << size.text_layers << " --vocab 1000 --steps " << a.steps
+          << " --threads " << a.threads;
+  const std::string out = Run(command.str());
+  return json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
+}
+
+// One size: our training step's samples per second against the reference's, on the same batch.
+void BenchSize(const Args& a, const Size& size) {
+  const json config = {
+      {"latent", size.latent},
+      {"layers", size.layers},
+      {"heads", size.heads},
+      {"ff", size.ff},
+      {"dropout", 0.1},
+      {"text_encoder", {{"layers", size.text_layers}, {"vocab", 1000}, {"ff", size.ff}}}};
+  torch::manual_seed(1);
+  temos::Temos net(temos::TemosOptions::FromJson(config));
+  const std::vector<std::string> texts = Texts(a.batch);
+  net->text_encoder()->Fit(Texts(72));
+  const Batch b = MakeBatch(a);
+  std::vector<std::vector<std::string>> groups;
+  for (const auto& t : texts) groups.push_back({t});
+  int64_t parameters = 0;
+  for (const auto& p : net->parameters()) parameters += p.numel();
+  torch::optim::AdamW optimizer(net->parameters(),
+                                torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
+  net->train();
+  const auto step = [&] {
+    auto losses = net->Losses(groups, b.features, b.padding);
+    optimizer.zero_grad();
+    losses.at("loss").backward();
+    torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
+    optimizer.step();
+    return losses.at("loss").item<double>();
+  };
+  for (int k = 0; k < 2; ++k) step();
+  const auto started = Clock::now();
+  for (int64_t k = 0; k < a.steps; ++k) step();
+  const double cpp = static_cast<double>(a.steps * a.batch) / Since(started);
+  const double python = a.reference ? PythonReference(a, size, net, texts, b) : 0;
+  std::printf("%-6s %10lld %12.1f %12.1f %8.2f\n", size.name.c_str(),
+              static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0);
+  std::fflush(stdout);
+}
+
+// The train stage through workers, one thread each: 1 rank on 1 worker, then 2 ranks on 2.
+void BenchScaling() {
+  std::printf(
+      "\ntrain stage (SINC, demo size, batch 32, 40 steps, on-the-fly data) through workers, 1 "
+      "thread per worker\n");
+  std::printf("%-8s %12s %12s %10s\n", "ranks", "samples/s", "wall s", "vs 1 rank");
+  const std::string root = "/tmp/motionpipe_train_bench_runs";
+  const std::string pipeline = root + ".yaml";
+  std::ofstream(pipeline)
+      << "name: train_bench\noutput_root: " << root << "\nseed: 1\nvars: {world: 1}\nstages:\n"
+      << "  corpus: {kind: corpus, params: {clips: 200, triplets: 0, shard_size: 100}}\n"
+      << "  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}\n"
+      << "  sinc:\n    kind: train\n    inputs: [singles]\n    world_size: \"${vars.world}\"\n"
+      << "    params:\n      model: temos_sinc\n"
+      << "      config: {variant: sinc, model: {latent: 128, layers: 2, heads: 4, ff: 512, "
+         "text_encoder: {layers: 1, vocab: 800}}}\n"
+      << "      data: {synthetic_p: 0.5, max_frames: 150}\n"
+      << "      steps: 40\n      batch_size: 32\n      warmup: 5\n      checkpoint_every: 1000\n";
+  double one = 0;
+  for (int world : {1, 2}) {
+    fs::remove_all(root);
+    const auto started = Clock::now();
+    Run(std::string(MOTIONPIPE_BINARY) + " run " + pipeline + " --workers " +
+        std::to_string(world) + " --threads 1 vars.world=" + std::to_string(world) + " 2>&1");
+    const double wall = Since(started);
+    double total = 0;
+    for (const auto& entry : fs::recursive_directory_iterator(root)) {
+      const std::string name = entry.path().filename().string();
+      if (name.rfind("rank-", 0) == 0 &&
+          entry.path().string().find("/sinc/") != std::string::npos) {
+        std::ifstream in(entry.path());
+        total += json::parse(in).at("samples_per_second").get<double>();
+      }
+    }
+    if (world == 1) one = total;
+    std::printf("%-8d %12.1f %12.1f %10.2f\n", world, total, wall, one > 0 ? total / one : 0.0);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string sizes_arg = "demo,paper";
-  int64_t steps = 8, threads = 1, batch = 32, frames = 150;
-  bool reference = true, scaling = true;
-  for (int k = 1; k < argc; ++k) {
-    if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc)
-      sizes_arg = argv[++k];
-    else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc)
-      steps = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc)
-      threads = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc)
-      batch = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc)
-      frames = std::atoll(argv[++k]);
-    else if (!std::strcmp(argv[k], "--no-reference"))
-      reference = false;
-    else if (!std::strcmp(argv[k], "--no-scaling"))
-      scaling = false;
-    else {
-      std::fprintf(stderr,
-                   "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
-                   "[--frames F] [--no-reference] [--no-scaling]\n");
-      return 2;
-    }
+  const std::optional<Args> args = ParseArgs(argc, argv);
+  if (!args) {
+    std::fprintf(stderr,
+                 "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
+                 "[--frames F] [--no-reference] [--no-scaling]\n");
+    return 2;
   }
-  nn::SetTorchThreads(static_cast<int>(threads));
+  nn::SetTorchThreads(static_cast<int>(args->threads));
   const std::vector<Size> all = {{"demo", 128, 2, 4, 512, 1}, {"paper", 256, 6, 4, 1024, 2}};
   std::printf(
       "TEMOS training step (forward, backward, clip, AdamW), batch %lld, up to %lld frames, %lld "
       "thread(s)\n",
-      static_cast<long long>(batch), static_cast<long long>(frames),
-      static_cast<long long>(threads));
+      static_cast<long long>(args->batch), static_cast<long long>(args->frames),
+      static_cast<long long>(args->threads));
   std::printf("%-6s %10s %12s %12s %8s\n", "size", "params", "C++ samp/s", "Py samp/s", "ratio");
   for (const Size& size : all) {
-    if (sizes_arg.find(size.name) == std::string::npos) continue;
-    const json config = {
-        {"latent", size.latent},
-        {"layers", size.layers},
-        {"heads", size.heads},
-        {"ff", size.ff},
-        {"dropout", 0.1},
-        {"text_encoder", {{"layers", size.text_layers}, {"vocab", 1000}, {"ff", size.ff}}}};
-    torch::manual_seed(1);
-    temos::Temos net(temos::TemosOptions::FromJson(config));
-    const std::vector<std::string> texts = Texts(batch);
-    net->text_encoder()->Fit(Texts(72));
-    // The batch: lengths between frames/2 and frames, features ~ N(0, 1) (normalised features).
-    std::mt19937 rng(7);
-    auto padding = torch::zeros({batch, frames}, torch::kBool);
-    for (int64_t i = 0; i < batch; ++i) {
-      const int64_t length =
-          frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(frames / 2 + 1));
-      padding[i].narrow(0, length, frames - length).fill_(true);
-    }
-    const auto features = torch::randn({frames, batch, temos::kFeatureDim})
-                              .masked_fill(padding.t().unsqueeze(2), 0.0);
-    std::vector<std::vector<std::string>> groups;
-    for (const auto& t : texts) groups.push_back({t});
-    int64_t parameters = 0;
-    for (const auto& p : net->parameters()) parameters += p.numel();
-
-    torch::optim::AdamW optimizer(net->parameters(),
-                                  torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
-    net->train();
-    const auto step = [&] {
-      auto losses = net->Losses(groups, features, padding);
-      optimizer.zero_grad();
-      losses.at("loss").backward();
-      torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
-      optimizer.step();
-      return losses.at("loss").item<double>();
-    };
-    for (int k = 0; k < 2; ++k) step();
-    const auto started = Clock::now();
-    for (int64_t k = 0; k < steps; ++k) step();
-    const double cpp = static_cast<double>(steps * batch) / Since(started);
-
-    double python = 0;
-    if (reference) {
-      const std::string dir = "/tmp/motionpipe_train_bench";
-      fs::create_directories(dir);
-      const auto tokens = net->text_encoder()->TokenIds(texts).contiguous();
-      bench::SaveNpy(
-          dir + "/tokens.npy",
-          NpyArray::Int64({tokens.size(0), tokens.size(1)},
-                          std::vector<int64_t>(tokens.data_ptr<int64_t>(),
-                                               tokens.data_ptr<int64_t>() + tokens.numel())));
-      const auto f = features.contiguous();
-      bench::SaveNpy(dir + "/features.npy",
-                     NpyArray::Float32(
-                         {frames, batch, temos::kFeatureDim},
-                         std::vector<float>(f.data_ptr<float>(), f.data_ptr<float>() + f.numel())));
-      const auto pad = padding.to(torch::kUInt8).contiguous();
-      bench::SaveNpy(dir + "/padding.npy",
-                     NpyArray::Bool({batch, frames},
-                                    std::vector<uint8_t>(pad.data_ptr<uint8_t>(),
-                                                         pad.data_ptr<uint8_t>() + pad.numel())));
-      std::ostringstream command;
-      command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads
-              << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
-              << "/bench/reference/temos_ref.py --batch-dir " << dir << " --latent " << size.latent
-              << " --layers " << size.layers << " --heads " << size.heads << " --ff " << size.ff
-              << " --text-layers " << size.text_layers << " --vocab 1000 --steps " << steps
-              << " --threads " << threads;
-      const std::string out = Run(command.str());
-      python = json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
-    }
-    std::printf("%-6s %10lld %12.1f %12.1f %8.2f\n", size.name.c_str(),
-                static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0);
-    std::fflush(stdout);
+    if (args->sizes.find(size.name) != std::string::npos) BenchSize(*args, size);
   }
-
-  if (scaling) {
-    // The train stage through workers, one thread each: 1 rank on 1 worker, then 2 ranks on 2.
-    std::printf(
-        "\ntrain stage (SINC, demo size, batch 32, 40 steps, on-the-fly data) through workers, 1 "
-        "thread per worker\n");
-    std::printf("%-8s %12s %12s %10s\n", "ranks", "samples/s", "wall s", "vs 1 rank");
-    const std::string root = "/tmp/motionpipe_train_bench_runs";
-    const std::string pipeline = root + ".yaml";
-    std::ofstream(pipeline)
-        << "name: train_bench\noutput_root: " << root << "\nseed: 1\nvars: {world: 1}\nstages:\n"
-        << "  corpus: {kind: corpus, params: {clips: 200, triplets: 0, shard_size: 100}}\n"
-        << "  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}\n"
-        << "  sinc:\n    kind: train\n    inputs: [singles]\n    world_size: \"${vars.world}\"\n"
-        << "    params:\n      model: temos_sinc\n"
-        << "      config: {variant: sinc, model: {latent: 128, layers: 2, heads: 4, ff: 512, "
-           "text_encoder: {layers: 1, vocab: 800}}}\n"
-        << "      data: {synthetic_p: 0.5, max_frames: 150}\n"
-        << "      steps: 40\n      batch_size: 32\n      warmup: 5\n      checkpoint_every: 1000\n";
-    double one = 0;
-    for (int world : {1, 2}) {
-      fs::remove_all(root);
-      const auto started = Clock::now();
-      Run(std::string(MOTIONPIPE_BINARY) + " run " + pipeline + " --workers " +
-          std::to_string(world) + " --threads 1 vars.world=" + std::to_string(world) + " 2>&1");
-      const double wall = Since(started);
-      double total = 0;
-      for (const auto& entry : fs::recursive_directory_iterator(root)) {
-        const std::string name = entry.path().filename().string();
-        if (name.rfind("rank-", 0) == 0 &&
-            entry.path().string().find("/sinc/") != std::string::npos) {
-          std::ifstream in(entry.path());
-          total += json::parse(in).at("samples_per_second").get<double>();
-        }
-      }
-      if (world == 1) one = total;
-      std::printf("%-8d %12.1f %12.1f %10.2f\n", world, total, wall, one > 0 ? total / one : 0.0);
-    }
-  }
+  if (args->scaling) BenchScaling();
   return 0;
 }
