@@ -14,6 +14,7 @@
 #include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -117,183 +118,215 @@ EditorNet Build(const Size& size) {
   return net;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  std::string sizes_arg = "demo,paper";
+struct Args {
+  std::string sizes = "demo,paper";
   int64_t steps = 4, threads = 1, batch = 32, frames = 150;
   bool reference = true, latency = true;
+};
+
+std::optional<Args> ParseArgs(int argc, char** argv) {
+  Args a;
   for (int k = 1; k < argc; ++k) {
     if (!std::strcmp(argv[k], "--sizes") && k + 1 < argc)
-      sizes_arg = argv[++k];
+      a.sizes = argv[++k];
     else if (!std::strcmp(argv[k], "--steps") && k + 1 < argc)
-      steps = std::atoll(argv[++k]);
+      a.steps = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--threads") && k + 1 < argc)
-      threads = std::atoll(argv[++k]);
+      a.threads = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--batch") && k + 1 < argc)
-      batch = std::atoll(argv[++k]);
+      a.batch = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--frames") && k + 1 < argc)
-      frames = std::atoll(argv[++k]);
+      a.frames = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--no-reference"))
-      reference = false;
+      a.reference = false;
     else if (!std::strcmp(argv[k], "--no-latency"))
-      latency = false;
-    else {
-      std::fprintf(stderr,
-                   "usage: mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
-                   "[--frames F] [--no-reference] [--no-latency]\n");
-      return 2;
-    }
+      a.latency = false;
+    else
+      return std::nullopt;
   }
-  nn::SetTorchThreads(static_cast<int>(threads));
-  const std::vector<Size> all = {{"demo", 128, 2, 4, 4, 256}, {"paper", 512, 4, 8, 8, 1024}};
-  std::printf(
-      "MDT training step (diffusion x0 + similarity loss, backward, clip, AdamW), batch %lld, "
-      "source and target up to %lld frames, %lld thread(s)\n",
-      static_cast<long long>(batch), static_cast<long long>(frames),
-      static_cast<long long>(threads));
-  std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s\n", "size", "params", "C++ samp/s",
-              "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak");
-  // The batch: lengths in [frames/2, frames], features ~ N(0, 1), classes in {0, 1, 2}.
+  return a;
+}
+
+// The training batch: lengths in [frames/2, frames], features ~ N(0, 1), classes in {0, 1, 2}.
+struct TrainBatch {
+  torch::Tensor source_padding, target_padding, source, target, classes;
+  std::vector<std::string> texts;
+};
+
+TrainBatch MakeTrainBatch(const Args& a) {
   std::mt19937 rng(7);
   const auto lengths = [&](int64_t n) {
-    auto padding = torch::zeros({n, frames}, torch::kBool);
+    auto padding = torch::zeros({n, a.frames}, torch::kBool);
     for (int64_t i = 0; i < n; ++i) {
       const int64_t length =
-          frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(frames / 2 + 1));
-      padding[i].narrow(0, length, frames - length).fill_(true);
+          a.frames / 2 + static_cast<int64_t>(rng() % static_cast<uint32_t>(a.frames / 2 + 1));
+      padding[i].narrow(0, length, a.frames - length).fill_(true);
     }
     return padding;
   };
   torch::manual_seed(1);
-  const auto source_padding = lengths(batch), target_padding = lengths(batch);
-  const auto source = torch::randn({frames, batch, kEditFeatureDim}),
-             target = torch::randn({frames, batch, kEditFeatureDim});
-  const auto classes =
-      torch::randint(0, 3, {batch, frames}, torch::kInt64).masked_fill(source_padding, -1);
-  const std::vector<std::string> texts = Texts(batch);
-  for (const Size& size : all) {
-    if (sizes_arg.find(size.name) == std::string::npos) continue;
-    torch::manual_seed(1);
-    EditorNet net = Build(size);
-    const CosineSchedule schedule(300);
-    int64_t parameters = 0;
-    for (const auto& p : net->parameters()) parameters += p.numel();
-    torch::optim::AdamW optimizer(net->parameters(),
-                                  torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
-    net->train();
-    const auto step = [&] {
-      const auto t = torch::randint(0, 300, {batch}, torch::kInt64);
-      const auto u = torch::rand({batch});
-      Condition c{texts, source, source_padding, u.lt(0.2),
-                  u.lt(0.15).logical_or(u.ge(0.2).logical_and(u.lt(0.25)))};
-      const auto xt = schedule.QSample(target, t, torch::randn_like(target));
-      const Prediction p = net->forward(xt, t, target_padding, c);
-      const auto loss = GroupedMaskedMse(p.x0, target, target_padding) +
-                        0.05 * SimilarityLoss(p.similarity, classes, torch::zeros({batch, frames}),
-                                              source_padding, c.drop_source, net->options())
-                                   .at("aux");
-      optimizer.zero_grad();
-      loss.backward();
-      torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
-      optimizer.step();
-      return loss.item<double>();
-    };
-    for (int k = 0; k < 2; ++k) step();
-    const auto started = Clock::now();
-    for (int64_t k = 0; k < steps; ++k) step();
-    const double cpp = static_cast<double>(steps * batch) / Since(started);
-    double python = 0;
-    if (reference) {
-      const std::string dir = "/tmp/motionpipe_mdt_bench";
-      fs::create_directories(dir);
-      const auto token_ids = net->text_encoder()->TokenIds(texts);
-      bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({token_ids.size(0), token_ids.size(1)},
-                                                          Values<int64_t>(token_ids)));
-      bench::SaveNpy(dir + "/source.npy",
-                     NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(source)));
-      bench::SaveNpy(dir + "/target.npy",
-                     NpyArray::Float32({frames, batch, kEditFeatureDim}, Values<float>(target)));
-      bench::SaveNpy(dir + "/classes.npy",
-                     NpyArray::Int64({batch, frames}, Values<int64_t>(classes)));
-      for (const auto& [name, pad] : {std::pair{"source_padding", source_padding},
-                                      std::pair{"target_padding", target_padding}}) {
-        bench::SaveNpy(dir + "/" + name + ".npy",
-                       NpyArray::Bool({batch, frames}, Values<uint8_t>(pad.to(torch::kUInt8))));
-      }
-      std::ostringstream command;
-      command << "OMP_NUM_THREADS=" << threads << " OPENBLAS_NUM_THREADS=" << threads
-              << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
-              << "/bench/reference/mdt_ref.py --batch-dir " << dir << " --dim " << size.dim
-              << " --cond-layers " << size.cond_layers << " --layers " << size.layers << " --heads "
-              << size.heads << " --ff " << size.ff << " --steps " << steps << " --threads "
-              << threads;
-      const std::string out = Run(command.str());
-      python = json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
+  TrainBatch b;
+  b.source_padding = lengths(a.batch);
+  b.target_padding = lengths(a.batch);
+  b.source = torch::randn({a.frames, a.batch, kEditFeatureDim});
+  b.target = torch::randn({a.frames, a.batch, kEditFeatureDim});
+  b.classes =
+      torch::randint(0, 3, {a.batch, a.frames}, torch::kInt64).masked_fill(b.source_padding, -1);
+  b.texts = Texts(a.batch);
+  return b;
+}
+
+// The PyTorch-Python reference (bench/reference/mdt_ref.py) on the same batch: its samples per
+// second.
+double PythonReference(const Args& a, const Size& size, EditorNet& net, const TrainBatch& b) {
+  const std::string dir = "/tmp/motionpipe_mdt_bench";
+  fs::create_directories(dir);
+  const auto token_ids = net->text_encoder()->TokenIds(b.texts);
+  bench::SaveNpy(dir + "/tokens.npy", NpyArray::Int64({token_ids.size(0), token_ids.size(1)},
+                                                      Values<int64_t>(token_ids)));
+  bench::SaveNpy(dir + "/source.npy",
+                 NpyArray::Float32({a.frames, a.batch, kEditFeatureDim}, Values<float>(b.source)));
+  bench::SaveNpy(dir + "/target.npy",
+                 NpyArray::Float32({a.frames, a.batch, kEditFeatureDim}, Values<float>(b.target)));
+  bench::SaveNpy(dir + "/classes.npy",
+                 NpyArray::Int64({a.batch, a.frames}, Values<int64_t>(b.classes)));
+  for (const auto& [name, pad] : {std::pair{"source_padding", b.source_padding},
+                                  std::pair{"target_padding", b.target_padding}}) {
+    bench::SaveNpy(dir + "/" + name + ".npy",
+                   NpyArray::Bool({a.batch, a.frames}, Values<uint8_t>(pad.to(torch::kUInt8))));
+  }
+  std::ostringstream command;
+  command << "OMP_NUM_THREADS=" << a.threads << " OPENBLAS_NUM_THREADS=" << a.threads
+          << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR
+          << "/bench/reference/mdt_ref.py --batch-dir " << dir << " --dim " << size.dim
+          << " --cond-layers " << size.cond_layers << " --layers " << size.layers << " --heads "
+          << size.heads << " --ff " << size.ff << " --steps " << a.steps << " --threads "
+          << a.threads;
+  const std::string out = Run(command.str());
+  return json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
+}
+
+// One size: our training step's samples/s, the reference's, and our GFLOP/s against the sgemm
+// rate measured here.
+void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
+  torch::manual_seed(1);
+  EditorNet net = Build(size);
+  const CosineSchedule schedule(300);
+  int64_t parameters = 0;
+  for (const auto& p : net->parameters()) parameters += p.numel();
+  torch::optim::AdamW optimizer(net->parameters(),
+                                torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
+  net->train();
+  const int64_t batch = a.batch;
+  const auto step = [&] {
+    const auto t = torch::randint(0, 300, {batch}, torch::kInt64);
+    const auto u = torch::rand({batch});
+    Condition c{b.texts, b.source, b.source_padding, u.lt(0.2),
+                u.lt(0.15).logical_or(u.ge(0.2).logical_and(u.lt(0.25)))};
+    const auto xt = schedule.QSample(b.target, t, torch::randn_like(b.target));
+    const Prediction p = net->forward(xt, t, b.target_padding, c);
+    const auto loss =
+        GroupedMaskedMse(p.x0, b.target, b.target_padding) +
+        0.05 * SimilarityLoss(p.similarity, b.classes, torch::zeros({batch, a.frames}),
+                              b.source_padding, c.drop_source, net->options())
+                   .at("aux");
+    optimizer.zero_grad();
+    loss.backward();
+    torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
+    optimizer.step();
+    return loss.item<double>();
+  };
+  for (int k = 0; k < 2; ++k) step();
+  const auto started = Clock::now();
+  for (int64_t k = 0; k < a.steps; ++k) step();
+  const double cpp = static_cast<double>(a.steps * batch) / Since(started);
+  const double python = a.reference ? PythonReference(a, size, net, b) : 0;
+  const auto tokens = net->text_encoder()->TokenIds(b.texts);
+  const double flops =
+      TrainingStepFlops(size, static_cast<double>(batch), static_cast<double>(a.frames),
+                        static_cast<double>(tokens.size(1)), net->options().text);
+  const double achieved = flops * cpp / static_cast<double>(batch) / 1e9,
+               peak = SgemmGflops(size.dim);
+  std::printf("%-6s %10lld %12.2f %12.2f %8.2f %11.1f %11.1f %8.0f%%\n", size.name.c_str(),
+              static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0,
+              achieved, peak, 100 * achieved / peak);
+  std::fflush(stdout);
+}
+
+// Editing: three guidance branches per motion in one batch; 150-frame sources and targets.
+void BenchLatency(const Args& a, const Size& size, const std::vector<std::string>& texts) {
+  std::printf(
+      "\nediting latency, demo size, 150-frame source and target, three-way guidance, %lld "
+      "thread(s)\n",
+      static_cast<long long>(a.threads));
+  std::printf("%-10s %6s %14s %16s %s\n", "sampler", "batch", "s per batch", "s per motion", "");
+  torch::manual_seed(2);
+  EditorNet net = Build(size);
+  net->eval();
+  torch::NoGradGuard no_grad;
+  for (int64_t n : {int64_t{1}, int64_t{32}}) {
+    std::vector<std::string> t3;
+    for (int b = 0; b < 3; ++b) {
+      for (int64_t i = 0; i < n; ++i) t3.push_back(texts[static_cast<size_t>(i % a.batch)]);
     }
-    const auto tokens = net->text_encoder()->TokenIds(texts);
-    const double flops =
-        TrainingStepFlops(size, static_cast<double>(batch), static_cast<double>(frames),
-                          static_cast<double>(tokens.size(1)), net->options().text);
-    const double achieved = flops * cpp / static_cast<double>(batch) / 1e9,
-                 peak = SgemmGflops(size.dim);
-    std::printf("%-6s %10lld %12.2f %12.2f %8.2f %11.1f %11.1f %8.0f%%\n", size.name.c_str(),
-                static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0,
-                achieved, peak, 100 * achieved / peak);
+    const auto src = torch::randn({150, n, kEditFeatureDim}).repeat({1, 3, 1});
+    std::vector<int64_t> dt, ds;
+    for (int b = 0; b < 3; ++b) {
+      dt.insert(dt.end(), static_cast<size_t>(n), b < 2);
+      ds.insert(ds.end(), static_cast<size_t>(n), b < 1);
+    }
+    Condition c{t3, src, torch::zeros({3 * n, 150}, torch::kBool),
+                torch::tensor(dt).to(torch::kBool), torch::tensor(ds).to(torch::kBool)};
+    const auto padding = torch::zeros({3 * n, 150}, torch::kBool);
+    const Denoise denoise = [&](const torch::Tensor& xt, int64_t step) {
+      const auto x0 =
+          net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, step, torch::kInt64), padding, c)
+              .x0.chunk(3, 1);
+      return GuideThreeWay(x0[0], x0[1], x0[2], 2.0, 2.0);
+    };
+    const CosineSchedule schedule(300);
+    auto generator = at::make_generator<at::CPUGeneratorImpl>(1);
+    // DDIM-50 in full; DDPM-300 timed over a 30-step schedule and scaled by 10 (each step is one
+    // guided forward pass of the same cost) when the batch is 32.
+    auto started = Clock::now();
+    SampleDdim(schedule, {150, n, kEditFeatureDim}, 50, denoise, generator);
+    const double ddim = Since(started);
+    const int64_t measured = n == 1 ? 300 : 30;
+    const CosineSchedule part(measured);
+    started = Clock::now();
+    SampleDdpm(part, {150, n, kEditFeatureDim}, denoise, generator);
+    const double ddpm = Since(started) * 300.0 / static_cast<double>(measured);
+    std::printf("%-10s %6lld %14.2f %16.3f\n", "DDIM-50", static_cast<long long>(n), ddim,
+                ddim / static_cast<double>(n));
+    std::printf("%-10s %6lld %14.2f %16.3f %s\n", "DDPM-300", static_cast<long long>(n), ddpm,
+                ddpm / static_cast<double>(n), measured < 300 ? "(30 steps timed, x10)" : "");
     std::fflush(stdout);
   }
+}
 
-  if (latency) {
-    // Editing: three guidance branches per motion in one batch; 150-frame sources and targets.
-    std::printf(
-        "\nediting latency, demo size, 150-frame source and target, three-way guidance, %lld "
-        "thread(s)\n",
-        static_cast<long long>(threads));
-    std::printf("%-10s %6s %14s %16s %s\n", "sampler", "batch", "s per batch", "s per motion", "");
-    torch::manual_seed(2);
-    EditorNet net = Build(all[0]);
-    net->eval();
-    torch::NoGradGuard no_grad;
-    for (int64_t n : {int64_t{1}, int64_t{32}}) {
-      std::vector<std::string> t3;
-      for (int b = 0; b < 3; ++b) {
-        for (int64_t i = 0; i < n; ++i) t3.push_back(texts[static_cast<size_t>(i % batch)]);
-      }
-      const auto src = torch::randn({150, n, kEditFeatureDim}).repeat({1, 3, 1});
-      std::vector<int64_t> dt, ds;
-      for (int b = 0; b < 3; ++b) {
-        dt.insert(dt.end(), static_cast<size_t>(n), b < 2);
-        ds.insert(ds.end(), static_cast<size_t>(n), b < 1);
-      }
-      Condition c{t3, src, torch::zeros({3 * n, 150}, torch::kBool),
-                  torch::tensor(dt).to(torch::kBool), torch::tensor(ds).to(torch::kBool)};
-      const auto padding = torch::zeros({3 * n, 150}, torch::kBool);
-      int64_t calls = 0;
-      const Denoise denoise = [&](const torch::Tensor& xt, int64_t step) {
-        ++calls;
-        const auto x0 = net->forward(xt.repeat({1, 3, 1}),
-                                     torch::full({3 * n}, step, torch::kInt64), padding, c)
-                            .x0.chunk(3, 1);
-        return GuideThreeWay(x0[0], x0[1], x0[2], 2.0, 2.0);
-      };
-      const CosineSchedule schedule(300);
-      auto generator = at::make_generator<at::CPUGeneratorImpl>(1);
-      // DDIM-50 in full; DDPM-300 timed over a 30-step schedule and scaled by 10 (each step is one
-      // guided forward pass of the same cost) when the batch is 32.
-      auto started = Clock::now();
-      SampleDdim(schedule, {150, n, kEditFeatureDim}, 50, denoise, generator);
-      const double ddim = Since(started);
-      const int64_t measured = n == 1 ? 300 : 30;
-      const CosineSchedule part(measured);
-      started = Clock::now();
-      SampleDdpm(part, {150, n, kEditFeatureDim}, denoise, generator);
-      const double ddpm = Since(started) * 300.0 / static_cast<double>(measured);
-      std::printf("%-10s %6lld %14.2f %16.3f\n", "DDIM-50", static_cast<long long>(n), ddim,
-                  ddim / static_cast<double>(n));
-      std::printf("%-10s %6lld %14.2f %16.3f %s\n", "DDPM-300", static_cast<long long>(n), ddpm,
-                  ddpm / static_cast<double>(n), measured < 300 ? "(30 steps timed, x10)" : "");
-      std::fflush(stdout);
-    }
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::optional<Args> args = ParseArgs(argc, argv);
+  if (!args) {
+    std::fprintf(stderr,
+                 "usage: mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
+                 "[--frames F] [--no-reference] [--no-latency]\n");
+    return 2;
   }
+  nn::SetTorchThreads(static_cast<int>(args->threads));
+  const std::vector<Size> all = {{"demo", 128, 2, 4, 4, 256}, {"paper", 512, 4, 8, 8, 1024}};
+  std::printf(
+      "MDT training step (diffusion x0 + similarity loss, backward, clip, AdamW), batch %lld, "
+      "source and target up to %lld frames, %lld thread(s)\n",
+      static_cast<long long>(args->batch), static_cast<long long>(args->frames),
+      static_cast<long long>(args->threads));
+  std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s\n", "size", "params", "C++ samp/s",
+              "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak");
+  const TrainBatch batch = MakeTrainBatch(*args);
+  for (const Size& size : all) {
+    if (args->sizes.find(size.name) != std::string::npos) BenchTraining(*args, size, batch);
+  }
+  if (args->latency) BenchLatency(*args, all[0], batch.texts);
   return 0;
 }
