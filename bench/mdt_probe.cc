@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -41,81 +42,84 @@ torch::Tensor Roughness(const torch::Tensor& x, const torch::Tensor& padding) {
          (keep.sum(std::vector<int64_t>{0, 2}) * x.size(2)).clamp_min(1);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  std::vector<std::string> dirs;
+struct Args {
+  std::vector<std::string> dirs;  // the checkpoint, then the filter/corpus directories
   std::string split = "test";
   int64_t n = 64, ddim = 20;
   bool sample = true;
   double g_m = -1, g_t = -1;
+};
+
+std::optional<Args> ParseArgs(int argc, char** argv) {
+  Args args;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--split" && i + 1 < argc)
-      split = argv[++i];
+      args.split = argv[++i];
     else if (a == "--n" && i + 1 < argc)
-      n = std::stoll(argv[++i]);
+      args.n = std::stoll(argv[++i]);
     else if (a == "--ddim" && i + 1 < argc)
-      ddim = std::stoll(argv[++i]);
+      args.ddim = std::stoll(argv[++i]);
     else if (a == "--no-sample")
-      sample = false;
+      args.sample = false;
     else if (a == "--guidance" && i + 1 < argc)
-      std::sscanf(argv[++i], "%lf,%lf", &g_m, &g_t);
+      std::sscanf(argv[++i], "%lf,%lf", &args.g_m, &args.g_t);
     else
-      dirs.push_back(a);
+      args.dirs.push_back(a);
   }
-  if (dirs.size() < 2) {
-    std::fprintf(stderr,
-                 "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
-                 "[--guidance gm,gt] [--no-sample]\n");
-    return 2;
-  }
-  nn::SetTorchThreads(1);
-  torch::manual_seed(0);
-  const std::string checkpoint = dirs[0];
-  auto text = ReadFile(layout::ModelConfigFile(checkpoint));
-  if (!text.ok()) return std::fprintf(stderr, "%s\n", text.status().message().c_str()), 1;
-  const auto options = EditorOptions::FromJson(nlohmann::json::parse(*text).at("config"));
-  EditorNet net(options);
-  auto mean = net->register_buffer("feature_mean", torch::zeros({kEditFeatureDim}));
-  auto stddev = net->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
-  net->text_encoder()->LoadExtras(checkpoint);
+  if (args.dirs.size() < 2) return std::nullopt;
+  return args;
+}
+
+// The checkpoint's editor with its feature statistics, and n triplets of the split.
+struct Probe {
+  EditorOptions options;
+  EditorNet net{nullptr};
+  torch::Tensor mean, stddev;
+  plugin::Batch batch;
+  Condition c;  // the batch's condition, nothing dropped
+  int64_t n = 0;
+};
+
+Result<Probe> LoadProbe(const Args& a) {
+  Probe probe;
+  const std::string checkpoint = a.dirs[0];
+  MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(layout::ModelConfigFile(checkpoint)));
+  probe.options = EditorOptions::FromJson(nlohmann::json::parse(text).at("config"));
+  probe.net = EditorNet(probe.options);
+  probe.mean = probe.net->register_buffer("feature_mean", torch::zeros({kEditFeatureDim}));
+  probe.stddev = probe.net->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
+  probe.net->text_encoder()->LoadExtras(checkpoint);
   torch::serialize::InputArchive archive;
   archive.load_from(layout::ModelWeightsFile(checkpoint));
-  net->load(archive);
-  net->eval();
-  if (g_m < 0) g_m = options.guidance_motion, g_t = options.guidance_text;
-
+  probe.net->load(archive);
+  probe.net->eval();
   EditDataOptions data;
-  data.split = split;
+  data.split = a.split;
   data.max_frames = 120;
-  EditDataset dataset(data, std::vector<std::string>(dirs.begin() + 1, dirs.end()));
-  dataset.SetStats(mean, stddev);
-  n = std::min<int64_t>(n, dataset.size());
+  EditDataset dataset(data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
+  dataset.SetStats(probe.mean, probe.stddev);
+  probe.n = std::min<int64_t>(a.n, dataset.size());
   std::vector<int64_t> indices;
-  for (int64_t i = 0; i < n; ++i) indices.push_back(i * dataset.size() / n);
-  const plugin::Batch batch = dataset.Get(indices, 0);
-  const auto& target = batch.tensors.at("target");
-  const auto& source = batch.tensors.at("source");
-  const auto& padding = batch.tensors.at("target_padding");
-  CosineSchedule schedule(options.diffusion_steps, options.snr_shift);
-  torch::NoGradGuard no_grad;
-  Condition c;
-  c.texts = batch.texts;
-  c.source = source;
-  c.source_padding = batch.tensors.at("source_padding");
-  const auto none = torch::zeros({n}, torch::kBool);
-  c.drop_text = none;
-  c.drop_source = none;
+  for (int64_t i = 0; i < probe.n; ++i) indices.push_back(i * dataset.size() / probe.n);
+  probe.batch = dataset.Get(indices, 0);
+  probe.c.texts = probe.batch.texts;
+  probe.c.source = probe.batch.tensors.at("source");
+  probe.c.source_padding = probe.batch.tensors.at("source_padding");
+  probe.c.drop_text = torch::zeros({probe.n}, torch::kBool);
+  probe.c.drop_source = torch::zeros({probe.n}, torch::kBool);
+  return probe;
+}
 
-  std::printf(
-      "%s split, %lld triplets, %lld diffusion steps; normalised features (data variance about "
-      "0.25)\n",
-      split.c_str(), static_cast<long long>(n), static_cast<long long>(options.diffusion_steps));
+// What copying the source and predicting the mean score, in all and per feature group (frame i
+// against frame i).
+void PrintYardsticks(const Probe& p) {
+  const auto& target = p.batch.tensors.at("target");
+  const auto& source = p.batch.tensors.at("source");
+  const auto& padding = p.batch.tensors.at("target_padding");
   std::printf("copy source: x0 MSE %.4f   mean (zeros): %.4f\n",
               Mse(source, target, padding).mean().item<double>(),
               Mse(torch::zeros_like(target), target, padding).mean().item<double>());
-  // How far the source is from the target, per feature group (frame i against frame i).
   for (const auto& g : MotionFixFeatureGroups()) {
     const auto slice = [&](const torch::Tensor& x) {
       return x.narrow(2, g.begin, g.end - g.begin);
@@ -125,38 +129,51 @@ int main(int argc, char** argv) {
         Mse(slice(source), slice(target), padding).mean().item<double>(),
         Mse(torch::zeros_like(slice(target)), slice(target), padding).mean().item<double>());
   }
+}
+
+// The x0 estimate's error by diffusion step, with and without text or source, beside x_t scaled.
+void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
+  const auto& target = p.batch.tensors.at("target");
+  const auto& padding = p.batch.tensors.at("target_padding");
   std::printf("%6s %10s %10s %10s %10s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)");
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
-    if (t >= options.diffusion_steps) continue;
-    const auto steps = torch::full({n}, t, torch::kInt64);
+    if (t >= p.options.diffusion_steps) continue;
+    const auto steps = torch::full({p.n}, t, torch::kInt64);
     // The diffusion's coordinates (diffusion.components); estimates are scored as 207-d frames.
-    const auto z0 = net->Encode(target);
+    const auto z0 = p.net->Encode(target);
     const auto noise = torch::randn(z0.sizes());
     const auto xt = schedule.QSample(z0, steps, noise);
     const auto estimate = [&](const Condition& condition) {
-      return net->Decode(net->forward(xt, steps, padding, condition).x0);
+      return p.net->Decode(p.net->forward(xt, steps, padding, condition).x0);
     };
-    const double model = Mse(estimate(c), target, padding).mean().item<double>();
-    Condition no_text = c, no_source = c;
-    no_text.drop_text = torch::ones({n}, torch::kBool);
-    no_source.drop_source = torch::ones({n}, torch::kBool);
+    const double model = Mse(estimate(p.c), target, padding).mean().item<double>();
+    Condition no_text = p.c, no_source = p.c;
+    no_text.drop_text = torch::ones({p.n}, torch::kBool);
+    no_source.drop_source = torch::ones({p.n}, torch::kBool);
     const double without_text = Mse(estimate(no_text), target, padding).mean().item<double>();
     const double without_source = Mse(estimate(no_source), target, padding).mean().item<double>();
     const double scaled =
-        Mse(net->Decode(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)])), target,
+        Mse(p.net->Decode(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)])), target,
             padding)
             .mean()
             .item<double>();
     std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model,
                 without_text, without_source, scaled);
   }
+}
 
-  if (!sample) return 0;
-  // Sampled edits (DDIM, three-way guidance).
+// Sampled edits (DDIM, three-way guidance) at g 1/1, traced, and at (g_m, g_t).
+void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, double g_m,
+                       double g_t) {
+  const auto& target = p.batch.tensors.at("target");
+  const auto& source = p.batch.tensors.at("source");
+  const auto& padding = p.batch.tensors.at("target_padding");
+  const int64_t n = p.n;
   Condition three;
-  for (int b = 0; b < 3; ++b) three.texts.insert(three.texts.end(), c.texts.begin(), c.texts.end());
+  for (int b = 0; b < 3; ++b)
+    three.texts.insert(three.texts.end(), p.c.texts.begin(), p.c.texts.end());
   three.source = source.repeat({1, 3, 1});
-  three.source_padding = c.source_padding.repeat({3, 1});
+  three.source_padding = p.c.source_padding.repeat({3, 1});
   const auto flags = [&](std::vector<int> v) {
     std::vector<int64_t> out;
     for (int b = 0; b < 3; ++b)
@@ -168,8 +185,9 @@ int main(int argc, char** argv) {
   const auto padding3 = padding.repeat({3, 1});
   for (auto [gm, gt] : std::vector<std::pair<double, double>>{{1, 1}, {g_m, g_t}}) {
     const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
-      const auto parts = net->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, t, torch::kInt64),
-                                      padding3, three)
+      const auto parts = p.net
+                             ->forward(xt.repeat({1, 3, 1}), torch::full({3 * n}, t, torch::kInt64),
+                                       padding3, three)
                              .x0.chunk(3, 1);
       return GuideThreeWay(parts[0], parts[1], parts[2], gm, gt);
     };
@@ -182,7 +200,7 @@ int main(int argc, char** argv) {
     const Denoise traced = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = denoise(xt, t);
       if (trace) {
-        const auto frame = net->Decode(x0);
+        const auto frame = p.net->Decode(x0);
         std::printf("  t %3lld: %.4f %.4f\n", static_cast<long long>(t),
                     Mse(frame, target, padding).mean().item<double>(),
                     Mse(frame, source, padding).mean().item<double>());
@@ -190,15 +208,43 @@ int main(int argc, char** argv) {
       return x0;
     };
     auto generator = at::make_generator<at::CPUGeneratorImpl>(7);
-    const auto x = net->Decode(
-        SampleDdim(schedule, net->Encode(target).sizes(), ddim, traced, generator, nullptr));
+    const auto x = p.net->Decode(
+        SampleDdim(schedule, p.net->Encode(target).sizes(), ddim, traced, generator, nullptr));
     std::printf(
         "DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f "
         "target %.5f source %.5f\n",
         static_cast<long long>(ddim), gm, gt, Mse(x, target, padding).mean().item<double>(),
         Mse(x, source, padding).mean().item<double>(), Roughness(x, padding).mean().item<double>(),
         Roughness(target, padding).mean().item<double>(),
-        Roughness(source, batch.tensors.at("source_padding")).mean().item<double>());
+        Roughness(source, p.c.source_padding).mean().item<double>());
   }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::optional<Args> args = ParseArgs(argc, argv);
+  if (!args) {
+    std::fprintf(stderr,
+                 "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
+                 "[--guidance gm,gt] [--no-sample]\n");
+    return 2;
+  }
+  nn::SetTorchThreads(1);
+  torch::manual_seed(0);
+  auto probe = LoadProbe(*args);
+  if (!probe.ok()) return std::fprintf(stderr, "%s\n", probe.status().message().c_str()), 1;
+  const double g_m = args->g_m < 0 ? probe->options.guidance_motion : args->g_m;
+  const double g_t = args->g_m < 0 ? probe->options.guidance_text : args->g_t;
+  const CosineSchedule schedule(probe->options.diffusion_steps, probe->options.snr_shift);
+  torch::NoGradGuard no_grad;
+  std::printf(
+      "%s split, %lld triplets, %lld diffusion steps; normalised features (data variance about "
+      "0.25)\n",
+      args->split.c_str(), static_cast<long long>(probe->n),
+      static_cast<long long>(probe->options.diffusion_steps));
+  PrintYardsticks(*probe);
+  PrintX0ByStep(*probe, schedule);
+  if (args->sample) PrintSampledEdits(*probe, schedule, args->ddim, g_m, g_t);
   return 0;
 }
