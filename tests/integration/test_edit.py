@@ -67,7 +67,8 @@ stages:
   showcase:
     kind: showcase
     inputs: [mdt, evaluator, singles]
-    params: {clips: CMU_DIR, max_frames: 40, editor: mdt, generator: evaluator, evaluator: evaluator, steps: 2, panel_size: 96}
+    params: {clips: CMU_DIR, max_frames: 40, editor: mdt, generator: evaluator, evaluator: evaluator, steps: 2, panel_size: 96,
+             clip_text: walk forward, edit_text: raise the right arm higher, clips_label: CMU, editor_label: MDT}
   report:
     kind: report
     inputs: [eval_mdt, showcase]
@@ -267,7 +268,7 @@ class EditTest(EngineTest):
         self.assertIn("editing preview", alts)
         self.assertIn("training curve mdt", alts)
         self.assertIn("history generated_to_target.all.R@1", alts)
-        self.assertTrue(any(a.startswith("SINC composition: walk forward while ") for a in alts), alts)
+        self.assertTrue(any(a.startswith("Composition by body parts: walk forward while ") for a in alts), alts)
         # The same report from the command line, elsewhere.
         out = self.path("cli-report.html")
         printed = self.cli("report", job, "--out", out, "--history", history, "--size", "80").stdout

@@ -101,6 +101,20 @@ TEST(Pipeline, AnExplicitTimeoutIsKeptByLongRunningKinds) {
   EXPECT_EQ(defaults->stages[1].timeout_seconds, 2 * 3600.0);
 }
 
+// What the showcase shows (its clips, the clip's action text, the edit) is the pipeline's choice:
+// the engine has no default texts or folder (issue 16).
+TEST(Pipeline, TheShowcaseIsToldItsClipsAndTexts) {
+  auto spec =
+      ParsePipeline("name: s\nstages:\n  a: {kind: noop}\n  show: {kind: showcase, inputs: [a]}\n",
+                    {}, "s.yaml", Kinds());
+  ASSERT_FALSE(spec.ok());
+  for (const char* key : {"clips", "clip_text", "edit_text"}) {
+    EXPECT_NE(spec.status().message().find(std::string("stages.show.params.") + key + ": required"),
+              std::string::npos)
+        << spec.status().message();
+  }
+}
+
 // Every shipped pipeline (configs/*.yaml: the demo, the claims runs, the evaluations) parses and
 // plans as it stands, so a README command never meets a YAML error.
 TEST(Pipeline, EveryShippedConfigParsesAndPlans) {

@@ -993,10 +993,18 @@ class ShowcaseStage : public StageExecutor {
         errors->push_back(path + ".params." + key +
                           ": must name one of the stage's inputs (or a checkpoint path pattern)");
     }
+    // What the showcase shows is the pipeline's choice, not the engine's.
+    for (const char* key : {"clips", "clip_text", "edit_text"}) {
+      if (!plan.params.contains(key))
+        errors->push_back(path + ".params." + key +
+                          ": required (the clips to import, the first clip's action text, the edit "
+                          "instruction)");
+    }
   }
   explicit ShowcaseStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
-    return "the CMU clips through import, SINC composition, MDT editing, metrics and rendering";
+    return "real clips through import, body-part composition, generation, editing, metrics and "
+           "rendering";
   }
 
   TaskReport Run(TaskContext& ctx) override {
@@ -1006,14 +1014,22 @@ class ShowcaseStage : public StageExecutor {
     const std::string out = ctx.output_dir();
     // 1. Import.
     const int64_t max_frames = p.value("max_frames", int64_t{150});
-    auto imported = ImportClips(p.value("clips", json("data/mocap/cmu")), max_frames);
+    auto imported = ImportClips(p.at("clips"), max_frames);
     if (!imported.ok()) return TaskReport::FromStatus(imported.status());
     const std::vector<Clip>& cmu = *imported;
     if (Status st = WriteClips(out + "/cmu.npz", cmu); !st.ok())
       return TaskReport::Error(st.message());
     const Motion& source = cmu.front().motion;
-    const std::string clip_text = p.value("clip_text", std::string("walk forward"));
-    const std::string edit_text = p.value("edit_text", std::string("raise the right arm higher"));
+    const std::string clip_text = p.at("clip_text").get<std::string>();
+    const std::string edit_text = p.at("edit_text").get<std::string>();
+    // Panel and row labels: the clips' (params.clips_label, default "clip"), the generator's and
+    // the editor's (default: their stage names).
+    const std::string clips_label = p.value("clips_label", std::string("clip"));
+    const std::string generator_label =
+        p.value("generator_label", p.value("generator", std::string("generator")));
+    const std::string editor_label =
+        p.value("editor_label", p.value("editor", std::string("editor")));
+    const std::string first = clips_label + " " + cmu.front().id;
     const auto load = [&](const char* key) -> Result<GeneratorPtr> {
       const std::string stage = p.value(key, std::string(key));
       const std::string dir = FindCheckpoint(ctx, stage);
@@ -1043,7 +1059,7 @@ class ShowcaseStage : public StageExecutor {
     const Motion composed =
         sinc::Compose(source, clip_parts, corpus_motion, partner_parts, sinc::CropMode::kFirst);
     const std::string pair_text = sinc::EvalPairText(clip_text, partner_text);
-    // 3. The SINC model's own motion for the pair's text, and the MDT's edit of the clip.
+    // 3. The generator's own motion for the pair's text, and the editor's edit of the clip.
     plugin::GenerateRequest gen_request;
     gen_request.texts = {pair_text};
     gen_request.frames = composed.num_frames();
@@ -1071,13 +1087,13 @@ class ShowcaseStage : public StageExecutor {
       if (Status st = WriteClips(out + "/" + name, {clip}); !st.ok())
         return TaskReport::Error(st.message());
     }
-    // 4. Metrics: plausibility, and the evaluator's cosine similarity to the CMU source.
+    // 4. Metrics: plausibility, and the evaluator's cosine similarity to the first clip.
     std::vector<std::pair<std::string, const Motion*>> rows = {};
-    for (const Clip& c : cmu) rows.push_back({"CMU " + c.id + " (imported)", &c.motion});
+    for (const Clip& c : cmu) rows.push_back({clips_label + " " + c.id + " (imported)", &c.motion});
     rows.push_back({"corpus: " + partner_text, &corpus_motion});
     rows.push_back({"composition: " + pair_text, &composed});
-    rows.push_back({"SINC generated: " + pair_text, &*generated});
-    rows.push_back({"MDT edit: " + edit_text, &*edited});
+    rows.push_back({generator_label + " generated: " + pair_text, &*generated});
+    rows.push_back({editor_label + " edit: " + edit_text, &*edited});
     std::vector<Motion> motions;
     for (const auto& r : rows) motions.push_back(*r.second);
     auto embeddings = (*evaluator)->EncodeMotions(motions);
@@ -1095,41 +1111,43 @@ class ShowcaseStage : public StageExecutor {
         static_cast<int>(p.value("panel_size", int64_t{200}));
     options.fps = 10;
     std::vector<render::MotionPanel> import_panels;
-    for (const Clip& c : cmu) import_panels.push_back({c.motion, "CMU " + c.id, c.source});
+    for (const Clip& c : cmu)
+      import_panels.push_back({c.motion, clips_label + " " + c.id, c.source});
     const std::vector<std::pair<std::string, std::vector<render::MotionPanel>>> gifs = {
         {"cmu_import.gif", import_panels},
         {"cmu_composition.gif",
-         {{source, "CMU " + cmu.front().id, clip_text},
+         {{source, first, clip_text},
           {corpus_motion, "corpus", partner_text},
-          {composed, "SINC composition", pair_text},
-          {*generated, "SINC model", pair_text}}},
+          {composed, "composition", pair_text},
+          {*generated, generator_label, pair_text}}},
         {"cmu_edit.gif",
-         {{source, "CMU " + cmu.front().id, "source"}, {*edited, "MDT edit", edit_text}}}};
+         {{source, first, "source"}, {*edited, editor_label + " edit", edit_text}}}};
     for (const auto& [name, panels] : gifs) {
       if (Status st = render::RenderMotionFile(out + "/" + name, panels, options); !st.ok())
         return TaskReport::Error(st.message());
     }
     const json showcase = {
-        {"title", "Real data: the CMU clips through the system"},
-        {"text",
-         "The CMU clips (BVH, 120 fps, 31 joints) imported onto SMPL-22 at 30 fps and cut to " +
-             std::to_string(max_frames) + " frames; " + cmu.front().id + " (\"" + clip_text +
-             "\", parts " + PartSetToString(clip_parts) +
-             ") composed by body parts with the corpus's test action \"" + partner_text +
-             "\" (parts " + PartSetToString(partner_parts) +
-             "), next to the SINC model's own motion for the pair's text; and edited by the MDT "
-             "with \"" +
-             edit_text + "\" (DDIM " + std::to_string(edit_request.steps) + " steps)."},
+        {"title", "Real data: the " + clips_label + " clips through the system"},
+        {"text", "The " + clips_label + " clips imported onto SMPL-22 at 30 fps and cut to " +
+                     std::to_string(max_frames) + " frames; " + cmu.front().id + " (\"" +
+                     clip_text + "\", parts " + PartSetToString(clip_parts) +
+                     ") composed by body parts with the corpus's test action \"" + partner_text +
+                     "\" (parts " + PartSetToString(partner_parts) + "), next to the " +
+                     generator_label +
+                     " model's own motion for the pair's text; and edited by the " + editor_label +
+                     " with \"" + edit_text + "\" (DDIM " + std::to_string(edit_request.steps) +
+                     " steps)."},
         {"items",
-         {{{"image", "cmu_import.gif"}, {"caption", "The imported CMU clips"}},
-          {{"image", "cmu_composition.gif"}, {"caption", "SINC composition: " + pair_text}},
+         {{{"image", "cmu_import.gif"}, {"caption", "The imported " + clips_label + " clips"}},
+          {{"image", "cmu_composition.gif"},
+           {"caption", "Composition by body parts: " + pair_text}},
           {{"image", "cmu_edit.gif"},
-           {"caption", "MDT edit of " + cmu.front().id + ": " + edit_text}}}},
+           {"caption", editor_label + " edit of " + cmu.front().id + ": " + edit_text}}}},
         {"table",
          {{"caption",
-           "Plausibility of the real, composed, generated and edited motions, and the TMR "
-           "evaluator's cosine similarity to CMU " +
-               cmu.front().id},
+           "Plausibility of the real, composed, generated and edited motions, and the "
+           "evaluator's cosine similarity to " +
+               first},
           {"columns",
            {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk",
             "cos to " + cmu.front().id}},
