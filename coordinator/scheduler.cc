@@ -497,6 +497,12 @@ void Scheduler::DropWorker(const std::string& identity, const std::string& reaso
   }
   workers_.erase(it);
   ++counters_.workers_lost;
+  // A worker that said goodbye holding nothing (a drained or stopped worker, `run` at its end) is
+  // routine; one that took tasks with it, or stopped answering, is worth a warning.
+  if (held.empty() && reason == "disconnected") {
+    MP_LOG(kInfo, "coordinator") << "worker " << name << " disconnected";
+    return;
+  }
   MP_LOG(kWarn, "coordinator") << "worker " << name << " " << reason << "; " << held.size()
                                << " task(s) re-queued";
 }
