@@ -1,10 +1,13 @@
-# Writes OUTPUT as a header defining `kBuiltinPapers`: {file name, contents} of every DIR/*.yaml,
-# sorted by name (the papers' tables, read by the report).
+# Writes OUTPUT as a header defining VAR (default `kBuiltinPapers`): {file name, contents} of every
+# DIR/*.yaml, sorted by name (the papers' tables and the evaluation layouts, read by the report).
+if(NOT VAR)
+  set(VAR kBuiltinPapers)
+endif()
 file(GLOB FILES ${DIR}/*.yaml)
 list(SORT FILES)
 set(DELIM "mp_embed_")
 set(TEXT "// Generated from ${DIR}/*.yaml; do not edit.\n#pragma once\n#include <utility>\n")
-string(APPEND TEXT "inline constexpr std::pair<const char*, const char*> kBuiltinPapers[] = {\n")
+string(APPEND TEXT "inline constexpr std::pair<const char*, const char*> ${VAR}[] = {\n")
 foreach(FILE ${FILES})
   get_filename_component(NAME ${FILE} NAME)
   file(READ ${FILE} CONTENT)

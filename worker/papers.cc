@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cctype>
+#include <stdexcept>
 
+#include "builtin_evaluations.h"
 #include "builtin_papers.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/yaml.h"
@@ -55,7 +57,110 @@ Status ParseRow(const Json& j, const std::string& where, size_t columns, PaperRo
   return Status::Ok();
 }
 
+Status GetInt(const Json& j, const char* key, const std::string& where, int* out) {
+  if (!j.contains(key)) return Status::Ok();
+  if (!j[key].is_number_integer())
+    return InvalidArgument(where + ": '" + key + "' must be an integer");
+  *out = j[key].get<int>();
+  return Status::Ok();
+}
+
+Status GetBool(const Json& j, const char* key, const std::string& where, bool* out) {
+  if (!j.contains(key)) return Status::Ok();
+  if (!j[key].is_boolean()) return InvalidArgument(where + ": '" + key + "' must be true or false");
+  *out = j[key].get<bool>();
+  return Status::Ok();
+}
+
+Status ParseColumns(const Json& j, const std::string& where, int decimals,
+                    std::vector<LayoutColumn>* out) {
+  if (!j.contains("columns") || !j["columns"].is_array() || j["columns"].empty())
+    return InvalidArgument(where + ": 'columns' must be a non-empty list");
+  for (size_t c = 0; c < j["columns"].size(); ++c) {
+    const Json& col = j["columns"][c];
+    const std::string at = where + ": columns[" + std::to_string(c) + "]";
+    if (!col.is_object()) return InvalidArgument(at + ": a column is a map");
+    LayoutColumn column;
+    column.decimals = decimals;
+    MP_RETURN_IF_ERROR(GetString(col, "group", at, &column.group));
+    MP_RETURN_IF_ERROR(GetString(col, "name", at, &column.name));
+    MP_RETURN_IF_ERROR(GetString(col, "pointer", at, &column.pointer));
+    if (column.pointer.empty() || column.pointer[0] != '/')
+      return InvalidArgument(at + ": 'pointer' must be a JSON pointer (/a/b)");
+    MP_RETURN_IF_ERROR(GetInt(col, "decimals", at, &column.decimals));
+    MP_RETURN_IF_ERROR(GetBool(col, "higher_is_better", at, &column.higher_is_better));
+    MP_RETURN_IF_ERROR(GetBool(col, "bold_best", at, &column.bold_best));
+    out->push_back(std::move(column));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
+
+Result<EvaluationLayout> ParseEvaluationLayout(const std::string& yaml_text,
+                                               const std::string& origin) {
+  MP_ASSIGN_OR_RETURN(const Json j, ParseYaml(yaml_text, origin));
+  if (!j.is_object()) return InvalidArgument(origin + ": an evaluation layout is a YAML map");
+  EvaluationLayout layout;
+  layout.origin = origin;
+  MP_RETURN_IF_ERROR(GetString(j, "evaluation", origin, &layout.evaluation));
+  if (j.contains("protocol_of"))
+    MP_RETURN_IF_ERROR(GetString(j, "protocol_of", origin, &layout.protocol_of));
+  if (j.contains("protocols")) {
+    if (!j["protocols"].is_object()) return InvalidArgument(origin + ": 'protocols' must be a map");
+    for (const char* key : {"batches", "all"}) {
+      std::string text;
+      MP_RETURN_IF_ERROR(GetString(j["protocols"], key, origin + ": protocols", &text));
+      layout.protocols.push_back({key, text});
+    }
+  }
+  if (!layout.protocol_of.empty() && layout.protocols.empty())
+    return InvalidArgument(origin + ": 'protocol_of' needs 'protocols' (batches, all)");
+  MP_RETURN_IF_ERROR(GetString(j, "intro", origin, &layout.intro));
+  MP_RETURN_IF_ERROR(GetString(j, "caption", origin, &layout.caption));
+  MP_RETURN_IF_ERROR(ParseColumns(j, origin, 2, &layout.columns));
+  const Json more = j.value("more", Json::array());
+  if (!more.is_array()) return InvalidArgument(origin + ": 'more' must be a list");
+  for (size_t t = 0; t < more.size(); ++t) {
+    const std::string where = origin + ": more[" + std::to_string(t) + "]";
+    if (!more[t].is_object()) return InvalidArgument(where + ": a table is a map");
+    LayoutTable table;
+    MP_RETURN_IF_ERROR(GetString(more[t], "caption", where, &table.caption));
+    if (more[t].contains("when"))
+      MP_RETURN_IF_ERROR(GetString(more[t], "when", where, &table.when));
+    if (!table.when.empty() && table.when != "batches")
+      return InvalidArgument(where + ": 'when' must be batches (or absent)");
+    MP_RETURN_IF_ERROR(GetBool(more[t], "with_yardsticks", where, &table.with_yardsticks));
+    int decimals = 2;
+    MP_RETURN_IF_ERROR(GetInt(more[t], "decimals", where, &decimals));
+    MP_RETURN_IF_ERROR(ParseColumns(more[t], where, decimals, &table.columns));
+    layout.more.push_back(std::move(table));
+  }
+  const Json yardsticks = j.value("yardsticks", Json::array());
+  if (!yardsticks.is_array()) return InvalidArgument(origin + ": 'yardsticks' must be a list");
+  for (size_t y = 0; y < yardsticks.size(); ++y) {
+    const std::string where = origin + ": yardsticks[" + std::to_string(y) + "]";
+    std::string key, row;
+    MP_RETURN_IF_ERROR(GetString(yardsticks[y], "key", where, &key));
+    MP_RETURN_IF_ERROR(GetString(yardsticks[y], "row", where, &row));
+    layout.yardsticks.push_back({key, row});
+  }
+  return layout;
+}
+
+const std::vector<EvaluationLayout>& EvaluationLayouts() {
+  static const std::vector<EvaluationLayout> layouts = [] {
+    std::vector<EvaluationLayout> out;
+    for (const auto& [name, text] : kBuiltinEvaluations) {
+      auto layout = ParseEvaluationLayout(text, std::string("configs/evaluations/") + name);
+      // Built in and unit-tested (Papers.TheBuiltInLayoutsParse): a failure is a build defect.
+      if (!layout.ok()) throw std::logic_error(layout.status().message());
+      out.push_back(std::move(*layout));
+    }
+    return out;
+  }();
+  return layouts;
+}
 
 const PaperRow* Paper::Find(const std::string& row, const std::string& method) const {
   for (const PaperRow& r : rows) {
@@ -75,8 +180,13 @@ Result<Paper> ParsePaper(const std::string& yaml_text, const std::string& origin
   p.origin = origin;
   MP_RETURN_IF_ERROR(GetString(j, "paper", origin, &p.name));
   MP_RETURN_IF_ERROR(GetString(j, "evaluation", origin, &p.evaluation));
-  if (p.evaluation != "edit" && p.evaluation != "generate")
-    return InvalidArgument(origin + ": 'evaluation' must be edit or generate");
+  std::string kinds;  // "edit or generate": the kinds with a layout
+  bool known = false;
+  for (const EvaluationLayout& layout : EvaluationLayouts()) {
+    known = known || layout.evaluation == p.evaluation;
+    kinds += (kinds.empty() ? "" : " or ") + layout.evaluation;
+  }
+  if (!known) return InvalidArgument(origin + ": 'evaluation' must be " + kinds);
   MP_RETURN_IF_ERROR(GetString(j, "title", origin, &p.title));
   if (j.contains("note")) MP_RETURN_IF_ERROR(GetString(j, "note", origin, &p.note));
   MP_RETURN_IF_ERROR(GetStrings(j, "columns", origin, &p.columns));

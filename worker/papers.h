@@ -5,6 +5,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "motionpipe/base/status.h"
@@ -32,7 +33,8 @@ struct PaperMetric {    // what the claims compare
 
 struct Paper {
   std::string name;        // "SimMotionEdit"
-  std::string evaluation;  // "edit" (eval_edit metrics) or "generate" (eval_generate metrics)
+  std::string evaluation;  // an evaluation kind with a layout: "edit" (eval_edit), "generate"
+                           // (eval_generate)
   std::string title;       // the table's heading
   std::string note;        // appended to the table's description; may be empty
   std::vector<std::string> columns;  // the published columns
@@ -46,6 +48,43 @@ struct Paper {
   // `methods` hold its method string (any case); nullptr when neither.
   const PaperRow* Find(const std::string& row, const std::string& method) const;
 };
+
+// How the report tabulates one evaluation kind's metrics (configs/evaluations/<kind>.yaml, built
+// in): the columns a paper's rows are drawn in, the table's description, and tables drawn once for
+// the kind. In pointers and texts, {protocol} is "batches" or "all" (see `protocol_of`).
+struct LayoutColumn {
+  std::string group, name, pointer;
+  int decimals = 2;
+  bool higher_is_better = true;
+  bool bold_best = true;
+};
+
+struct LayoutTable {
+  std::string caption;
+  std::string when;             // "" (always) or "batches" (only when the main table is in batches)
+  bool with_yardsticks = true;  // the yardstick rows too, or only the methods
+  std::vector<LayoutColumn> columns;
+};
+
+struct EvaluationLayout {
+  std::string evaluation;   // the papers' `evaluation:` value, e.g. "edit"
+  std::string protocol_of;  // metrics key whose batches decide {protocol}; "" = always "all"
+  std::vector<std::pair<std::string, std::string>> protocols;  // {protocol} -> {protocol_text}
+  std::string intro;  // HTML; {protocol_text}, {batch}, {note}
+  std::string caption;
+  std::vector<LayoutColumn> columns;
+  std::vector<LayoutTable> more;
+  // The reference rows an evaluation scores beside its method (metrics "yardsticks": key), each
+  // with the row name the tables give it.
+  std::vector<std::pair<std::string, std::string>> yardsticks;
+  std::string origin;
+};
+
+Result<EvaluationLayout> ParseEvaluationLayout(const std::string& yaml_text,
+                                               const std::string& origin);
+
+// The built-in layouts (configs/evaluations at build time), one per evaluation kind.
+const std::vector<EvaluationLayout>& EvaluationLayouts();
 
 // One paper file; every error names `origin` and the field.
 Result<Paper> ParsePaper(const std::string& yaml_text, const std::string& origin);

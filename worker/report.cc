@@ -203,12 +203,7 @@ std::string Escape(const std::string& text) {
 // ---- HTML tables
 // ----------------------------------------------------------------------------------
 
-struct Column {
-  std::string group, name, pointer;
-  int decimals = 2;
-  bool higher_is_better = true;
-  bool bold_best = true;
-};
+using Column = LayoutColumn;
 
 struct PaperCell {
   std::vector<std::optional<double>> values;  // per paper column
@@ -700,94 +695,55 @@ std::vector<PaperCell> PaperCells(const Paper& paper, const std::vector<const Me
 
 std::string Note(const Paper& paper) { return paper.note.empty() ? "" : " " + Escape(paper.note); }
 
-// ---- the tables of an editing paper (motion-to-motion retrieval) and of a generation paper
-// ---------
+// ---- a paper's tables, in its evaluation kind's layout (configs/evaluations/*.yaml) -----------
 
-std::vector<Column> Retrieval(const std::string& group, const std::string& key,
-                              const std::string& protocol) {
-  std::vector<Column> out;
-  for (const char* k : {"R@1", "R@2", "R@3"})
-    out.push_back({group, k, "/" + key + "/" + protocol + "/" + k, 2, true});
-  out.push_back({group, "AvgR", "/" + key + "/" + protocol + "/AvgR", 2, false});
-  return out;
-}
-
-// `first`: the first paper of its evaluation kind, which also draws the kind's other tables.
-std::string EditTables(const Paper& paper, const std::vector<const Method*>& edits,
-                       const std::vector<const Method*>& rows, bool first, int* tables) {
-  const bool batches = AllBatched(edits, "generated_to_target");
-  const std::string protocol = batches ? "batches" : "all";
-  std::vector<Column> columns = Retrieval("generated-to-target", "generated_to_target", protocol);
-  for (const Column& c : Retrieval("generated-to-source", "generated_to_source", protocol))
-    columns.push_back(c);
-  columns.push_back({"towards the target", "R@1 to target − to source",
-                     "/towards_target/" + protocol + "/R@1", 2, true});
-  columns.push_back({"", "motions", "/motions", 0, true, false});
-  const int64_t batch = edits.front()->runs.front().metrics.value("batch", int64_t{32});
-  std::ostringstream body;
-  body << "<h2>" << Escape(paper.title)
-       << "</h2>\n<p>Motion-to-motion retrieval with the TMR evaluator: "
-       << "each edited motion's rank among the targets (and sources) by cosine similarity, ties "
-          "averaged; R@k in percent, AvgR the "
-       << "mean rank. Protocol: "
-       << (batches
-               ? "seeded batches of " + std::to_string(batch) +
-                     ", remainder dropped (the paper's, with 32)"
-               : "the whole test set (fewer motions than a batch of " + std::to_string(batch) + ")")
-       << "." << Note(paper) << " The rows in italics are yardsticks scored in the same "
-       << "evaluation: the source as the edit (a copy moves nowhere), the target as the edit "
-          "(the upper bound) and the untrained "
-       << "editor (initial weights, same sampler). <i>Towards the target</i> is "
-          "generated-to-target minus generated-to-source R@1: "
-       << "an edit that moves towards its target scores above 0, a copy of the source far "
-          "below.</p>\n";
-  body << MetricTable("Editing: retrieval of the edits (" + protocol + ")", rows, columns,
-                      paper.columns, PaperCells(paper, rows), paper.decimals);
-  ++*tables;
-  if (first && batches) {
-    std::vector<Column> all =
-        Retrieval("generated-to-target, whole test set", "generated_to_target", "all");
-    body << MetricTable("Editing: retrieval over the whole test set", rows, all, {}, {}, 2);
-    ++*tables;
+// `text` with each {key} replaced by its value.
+std::string Fill(std::string text, const std::vector<std::pair<std::string, std::string>>& values) {
+  for (const auto& [key, value] : values) {
+    const std::string mark = "{" + key + "}";
+    for (size_t at = text.find(mark); at != std::string::npos;
+         at = text.find(mark, at + value.size()))
+      text.replace(at, mark.size(), value);
   }
-  return body.str();
+  return text;
 }
 
-std::string GenerationTables(const Paper& paper, const std::vector<const Method*>& gens,
-                             const std::vector<const Method*>& rows, bool first, int* tables) {
-  std::vector<Column> columns = {{"", "TEMOS score", "/temos_score", 3, true}};
-  for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
-    columns.push_back({"APE (m)", k, std::string("/APE/") + k, 3, false});
-  for (const char* k : {"root", "trajectory", "mean_local", "mean_global"})
-    columns.push_back({"AVE (m²)", k, std::string("/AVE/") + k, 4, false});
-  columns.push_back(
-      {"TMR retrieval", "text→gen R@1 (batches)", "/text_to_generated/batches/R@1", 1, true});
-  columns.push_back({"TMR retrieval", "text→gen R@1 (all)", "/text_to_generated/all/R@1", 1, true});
-  columns.push_back({"TMR retrieval", "gen→GT R@1 (all)", "/generated_to_truth/all/R@1", 1, true});
-  columns.push_back({"", "motions", "/motions", 0, true, false});
+const EvaluationLayout* LayoutOf(const std::string& evaluation) {
+  for (const EvaluationLayout& layout : EvaluationLayouts()) {
+    if (layout.evaluation == evaluation) return &layout;
+  }
+  return nullptr;
+}
+
+// The paper's table (its rows with the yardsticks, its published columns) and, for the first paper
+// of its evaluation kind, the kind's other tables.
+std::string PaperTables(const Paper& paper, const EvaluationLayout& layout,
+                        const std::vector<const Method*>& methods,
+                        const std::vector<const Method*>& rows, bool first, int* tables) {
+  const bool batches = !layout.protocol_of.empty() && AllBatched(methods, layout.protocol_of);
+  const std::string protocol = batches ? "batches" : "all";
+  const std::string batch =
+      std::to_string(methods.front()->runs.front().metrics.value("batch", int64_t{32}));
+  std::string protocol_text;
+  for (const auto& [key, text] : layout.protocols) {
+    if (key == protocol) protocol_text = Fill(text, {{"batch", batch}});
+  }
+  const std::vector<std::pair<std::string, std::string>> vars = {{"protocol_text", protocol_text},
+                                                                 {"protocol", protocol},
+                                                                 {"batch", batch},
+                                                                 {"note", Note(paper)}};
+  std::vector<Column> columns = layout.columns;
+  for (Column& c : columns) c.pointer = Fill(c.pointer, {{"protocol", protocol}});
   std::ostringstream body;
-  body << "<h2>" << Escape(paper.title) << "</h2>\n<p>Two-action descriptions of the held-out "
-       << "test split "
-       << "(\"A while B\"), generated at the ground truth's length. TEMOS score = mean (1 + cos) "
-          "/ 2 between the motion-encoder "
-       << "means of a TEMOS trained on real singles; APE / AVE on the root joint, the "
-          "ground-plane trajectory, root-relative "
-       << "heading-aligned joints (local) and all joints (global); retrieval by the TMR "
-          "evaluator in seeded batches and over the "
-       << "whole test set. The rows in italics are yardsticks scored in the same evaluation: the "
-          "ground truth itself, shuffled "
-       << "ground truth (each motion replaced by the test motion nearest to it in length) and "
-          "the untrained generator."
-       << Note(paper) << "</p>\n";
-  body << MetricTable("Composition: generated motions against the ground truth", rows, columns,
-                      paper.columns, PaperCells(paper, rows), paper.decimals);
+  body << "<h2>" << Escape(paper.title) << "</h2>\n<p>" << Fill(layout.intro, vars) << "</p>\n";
+  body << MetricTable(Fill(layout.caption, vars), rows, columns, paper.columns,
+                      PaperCells(paper, rows), paper.decimals);
   ++*tables;
-  if (first) {
-    std::vector<Column> more = {{"diversity", "generated", "/diversity/generated", 3, true, false},
-                                {"diversity", "ground truth", "/diversity/truth", 3, true, false},
-                                {"", "FID", "/fid", 3, false}};
-    body << MetricTable("Composition: diversity and FID in the TMR evaluator's space", gens, more,
-                        {}, {}, 3);
+  if (!first) return body.str();
+  for (const LayoutTable& table : layout.more) {
+    if (table.when == "batches" && !batches) continue;
+    body << MetricTable(Fill(table.caption, vars), table.with_yardsticks ? rows : methods,
+                        table.columns, {}, {}, 2);
     ++*tables;
   }
   return body.str();
@@ -1055,19 +1011,10 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
       const std::vector<const Method*> methods = methods_of(&paper, evaluation);
       if (methods.empty()) continue;
       const bool first = drawn.insert(evaluation).second;
-      if (evaluation == "edit") {
-        const std::vector<Method> yardsticks =
-            YardstickRows(methods, {{"copy", "source as the edit (copy)"},
-                                    {"target", "target as the edit (upper bound)"}});
-        body << EditTables(paper, methods, WithYardsticks(yardsticks, methods), first,
-                           &summary.tables);
-      } else {
-        const std::vector<Method> yardsticks = YardstickRows(
-            methods,
-            {{"truth", "ground truth"}, {"shuffled", "shuffled ground truth (same length class)"}});
-        body << GenerationTables(paper, methods, WithYardsticks(yardsticks, methods), first,
-                                 &summary.tables);
-      }
+      const EvaluationLayout* layout = LayoutOf(evaluation);
+      const std::vector<Method> yardsticks = YardstickRows(methods, layout->yardsticks);
+      body << PaperTables(paper, *layout, methods, WithYardsticks(yardsticks, methods), first,
+                          &summary.tables);
     }
   }
   for (const Paper& paper : papers)

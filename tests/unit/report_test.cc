@@ -92,6 +92,37 @@ TEST(Papers, ErrorsNameTheFileAndTheField) {
 
 // A third paper: one YAML file, given to the report, adds its table and its claims; an evaluation
 // names its row in it; a file of a built-in paper's name replaces that paper.
+// How the report tabulates each evaluation kind is data too (configs/evaluations/*.yaml): the
+// built-in layouts parse, and a broken one names its file and field.
+TEST(Papers, EvaluationLayoutsAreDataAndErrorsNameTheirField) {
+  std::vector<std::string> kinds;
+  for (const EvaluationLayout& layout : EvaluationLayouts()) kinds.push_back(layout.evaluation);
+  EXPECT_EQ(kinds, (std::vector<std::string>{"edit", "generate"}));
+  const EvaluationLayout& edit = EvaluationLayouts()[0];
+  EXPECT_EQ(edit.protocol_of, "generated_to_target");
+  EXPECT_EQ(edit.columns.front().pointer, "/generated_to_target/{protocol}/R@1");
+  EXPECT_EQ(edit.yardsticks.front(),
+            (std::pair<std::string, std::string>{"copy", "source as the edit (copy)"}));
+  const auto error = [](const std::string& text) {
+    auto layout = ParseEvaluationLayout(text, "e.yaml");
+    return layout.ok() ? std::string("ok") : layout.status().message();
+  };
+  const std::string head = "evaluation: e\nintro: I\ncaption: C\n";
+  EXPECT_EQ(error(head + "columns: [{group: g, name: n, pointer: /x}]\n"), "ok");
+  EXPECT_EQ(error(head + "columns: []\n"), "e.yaml: 'columns' must be a non-empty list");
+  EXPECT_EQ(error(head + "columns: [{group: g, name: n, pointer: x}]\n"),
+            "e.yaml: columns[0]: 'pointer' must be a JSON pointer (/a/b)");
+  EXPECT_EQ(error(head + "columns: [{group: g, name: n, pointer: /x, decimals: two}]\n"),
+            "e.yaml: columns[0]: 'decimals' must be an integer");
+  EXPECT_EQ(error(head + "protocol_of: k\ncolumns: [{group: g, name: n, pointer: /x}]\n"),
+            "e.yaml: 'protocol_of' needs 'protocols' (batches, all)");
+  EXPECT_EQ(
+      error(head +
+            "columns: [{group: g, name: n, pointer: /x}]\n"
+            "more: [{caption: M, when: always, columns: [{group: g, name: n, pointer: /y}]}]\n"),
+      "e.yaml: more[0]: 'when' must be batches (or absent)");
+}
+
 TEST(Papers, AThirdPapersTableIsOneFile) {
   namespace fs = std::filesystem;
   const std::string dir = ::testing::TempDir() + "/third_paper";
