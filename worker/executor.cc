@@ -31,11 +31,19 @@ int IntParam(const nlohmann::json& params, const char* key, int fallback, int mi
   return static_cast<int>(v.get<int64_t>());
 }
 
-bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs) {
-  if (!value.is_string()) return false;
-  const std::string name = value.get<std::string>();
-  return name.find('/') != std::string::npos ||
-         std::find(inputs.begin(), inputs.end(), name) != inputs.end();
+void CheckInputParams(const StagePlan& plan, const std::string& path,
+                      std::initializer_list<const char*> keys, std::vector<std::string>* errors) {
+  for (const char* key : keys) {
+    if (!plan.params.contains(key)) continue;
+    const nlohmann::json& value = plan.params[key];
+    const bool names =
+        value.is_string() && (value.get<std::string>().find('/') != std::string::npos ||
+                              std::find(plan.inputs.begin(), plan.inputs.end(),
+                                        value.get<std::string>()) != plan.inputs.end());
+    if (!names)
+      errors->push_back(path + ".params." + key +
+                        ": must name one of the stage's inputs (or a checkpoint path pattern)");
+  }
 }
 
 // Training: one task per rank; world_size > 1 makes a gang that starts together on distinct

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <functional>
+#include <initializer_list>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -66,11 +67,13 @@ struct StagePlan {
 using StagePlanner =
     std::function<void(StagePlan& plan, const std::string& path, std::vector<std::string>* errors)>;
 
-// Planning helpers: an integer param in [min, 1e8] (else an error and `fallback`); whether a param
-// names one of the stage's inputs or a path pattern (it has a '/').
+// Planning helpers: an integer param in [min, 1e8] (else an error and `fallback`); an error for
+// each of `keys` present in the params that names neither one of the stage's inputs nor a path
+// pattern (it has a '/').
 int IntParam(const nlohmann::json& params, const char* key, int fallback, int min,
              const std::string& path, std::vector<std::string>* errors);
-bool NamesInputOrPath(const nlohmann::json& value, const std::vector<std::string>& inputs);
+void CheckInputParams(const StagePlan& plan, const std::string& path,
+                      std::initializer_list<const char*> keys, std::vector<std::string>* errors);
 // Long-running kinds (training, sampling) get a 6 h lease unless the YAML sets one.
 inline void LongLease(StagePlan& plan) {
   if (!plan.timeout_set) plan.timeout_seconds = 6 * 3600;

@@ -478,11 +478,7 @@ class EvalEditStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     plan.shards = 1;
     plan.reduce = false;
-    for (const char* key : {"evaluator", "edits"}) {
-      if (plan.params.contains(key) && !NamesInputOrPath(plan.params[key], plan.inputs))
-        errors->push_back(path + ".params." + key +
-                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
-    }
+    CheckInputParams(plan, path, {"evaluator", "edits"}, errors);
   }
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
@@ -832,11 +828,7 @@ class EvalGenerateStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     plan.shards = 1;
     plan.reduce = false;
-    for (const char* key : {"evaluator", "temos", "generated"}) {
-      if (plan.params.contains(key) && !NamesInputOrPath(plan.params[key], plan.inputs))
-        errors->push_back(path + ".params." + key +
-                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
-    }
+    CheckInputParams(plan, path, {"evaluator", "temos", "generated"}, errors);
   }
   explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
@@ -988,11 +980,7 @@ class ShowcaseStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     plan.shards = 1;
     plan.reduce = false;
-    for (const char* key : {"editor", "generator", "evaluator"}) {
-      if (plan.params.contains(key) && !NamesInputOrPath(plan.params[key], plan.inputs))
-        errors->push_back(path + ".params." + key +
-                          ": must name one of the stage's inputs (or a checkpoint path pattern)");
-    }
+    CheckInputParams(plan, path, {"editor", "generator", "evaluator"}, errors);
     // What the showcase shows is the pipeline's choice, not the engine's.
     for (const char* key : {"clips", "clip_text", "edit_text"}) {
       if (!plan.params.contains(key))
