@@ -109,15 +109,15 @@ void AddRender(CLI::App& app, int* exit_code) {
 
 // ---- report ------------------------------------------------------------------------------------
 struct ReportArgs {
-  worker::ReportOptions options;
+  report::ReportOptions options;
   bool no_previews = false;
 };
 
 int RunReport(const ReportArgs& a) {
-  worker::ReportOptions options = a.options;
+  report::ReportOptions options = a.options;
   options.previews = !a.no_previews;
   const auto started = std::chrono::steady_clock::now();
-  auto summary = worker::WriteReport(options);
+  auto summary = report::WriteReport(options);
   if (!summary.ok()) return Fail(summary.status());
   std::printf(
       "report: %d editing and %d composition methods, %d train stages, %d tables, %d images -> "
@@ -125,7 +125,7 @@ int RunReport(const ReportArgs& a) {
       summary->edit_methods, summary->generation_methods, summary->train_stages, summary->tables,
       summary->images, summary->path.c_str(),
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
-  for (const worker::ClaimCheck& c : summary->claims) {
+  for (const report::ClaimCheck& c : summary->claims) {
     std::printf("  %-13s %-50s %-40s %s\n", c.paper.c_str(), c.claim.c_str(), c.verdict.c_str(),
                 c.detail.c_str());
   }
@@ -137,7 +137,7 @@ void AddReport(CLI::App& app, int* exit_code) {
       "report",
       "Write a job's self-contained HTML report: the papers' tables, claims, curves, previews");
   static ReportArgs a;
-  worker::ReportOptions& options = a.options;
+  report::ReportOptions& options = a.options;
   cmd->add_option("job", options.job_dir, "The job's output directory, e.g. out/demo-1")
       ->required()
       ->check(CLI::ExistingDirectory);

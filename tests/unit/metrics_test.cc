@@ -184,7 +184,7 @@ TEST(Diversity, MeasuresDistancesBetweenRowsAndWithinGroups) {
 }  // namespace
 }  // namespace motionpipe::eval
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 namespace {
 
 TEST(MetricHistory, ARegressionIsAFallOfMoreThanTheMarginBelowTheBest) {
@@ -225,4 +225,4 @@ TEST(MetricHistory, ARegressionIsAFallOfMoreThanTheMarginBelowTheBest) {
 }
 
 }  // namespace
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

@@ -11,7 +11,7 @@
 #include "motionpipe/base/file.h"
 #include "papers.h"
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 namespace {
 
 TEST(Claims, NotDecidableWhileAComparedModelDoesNotBeatItsUntrainedRow) {
@@ -182,4 +182,4 @@ TEST(Papers, AThirdPapersTableIsOneFile) {
 }
 
 }  // namespace
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

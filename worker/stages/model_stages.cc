@@ -29,8 +29,7 @@
 
 #include "../executor.h"
 #include "../generators.h"
-#include "../metric_history.h"
-#include "../report.h"
+#include "metric_history.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/base/log.h"
@@ -45,6 +44,7 @@
 #include "motionpipe/sinc/spans.h"
 #include "motionpipe/sinc/texts.h"
 #include "motionpipe/skeleton/skeleton.h"
+#include "report.h"
 
 namespace motionpipe::worker {
 
@@ -336,7 +336,7 @@ struct Tracked {
 // A gateway that cannot be reached is logged and recorded, not fatal: the metrics are on disk.
 json PushToGateway(const TaskContext& ctx, const std::string& url, const std::string& method,
                    const std::vector<Tracked>& tracked,
-                   const std::vector<Regression>& regressions) {
+                   const std::vector<report::Regression>& regressions) {
   const size_t colon = url.rfind(':');
   if (url.empty() || colon == std::string::npos || colon + 1 >= url.size() ||
       url.find("//") == std::string::npos) {
@@ -359,7 +359,7 @@ json PushToGateway(const TaskContext& ctx, const std::string& url, const std::st
   for (const Tracked& t : tracked) {
     value.Add({{"method", method}, {"metric", t.name}}).Set(t.value);
     const bool bad = std::any_of(regressions.begin(), regressions.end(),
-                                 [&](const Regression& r) { return r.metric == t.name; });
+                                 [&](const report::Regression& r) { return r.metric == t.name; });
     regressed.Add({{"method", method}, {"metric", t.name}}).Set(bad ? 1 : 0);
   }
   count.Add({{"method", method}}).Set(static_cast<double>(regressions.size()));
@@ -387,21 +387,21 @@ std::optional<TaskReport> RecordHistory(const TaskContext& ctx, json* metrics,
   std::string data;
   for (const auto& id : ids) data += id + "\n";
   auto config = ReadFile(layout::ModelConfigFile(checkpoint));
-  std::vector<MetricRecord> records;
+  std::vector<report::MetricRecord> records;
   for (const Tracked& t : tracked) {
-    MetricRecord r;
+    report::MetricRecord r;
     r.method = method;
     r.metric = t.name;
     r.value = t.value;
     r.higher_is_better = t.higher_is_better;
     r.checkpoint = checkpoint;
-    r.config_hash = config.ok() ? HashText(*config) : "";
-    r.data_hash = HashText(data);
+    r.config_hash = config.ok() ? report::HashText(*config) : "";
+    r.data_hash = report::HashText(data);
     r.job = std::to_string(ctx.spec.job_id());
     r.time_unix = static_cast<int64_t>(std::time(nullptr));
     records.push_back(r);
   }
-  auto regressions = AppendAndCompare(path, records, p.value("regression_margin", 0.0));
+  auto regressions = report::AppendAndCompare(path, records, p.value("regression_margin", 0.0));
   if (!regressions.ok()) return TaskReport::Error(regressions.status().message());
   (*metrics)["history"] = path;
   (*metrics)["regressions"] = json::array();
@@ -1238,7 +1238,7 @@ class ReportStage : public StageExecutor {
     }
     if (job.empty())
       return TaskReport::BadInput("report: needs inputs (the job's evaluation stages)");
-    ReportOptions options;
+    report::ReportOptions options;
     options.job_dir = job;
     options.out_path = ctx.output_dir() + "/report.html";
     options.history = p.value("history", std::string());
@@ -1254,10 +1254,10 @@ class ReportStage : public StageExecutor {
         return TaskReport::BadInput("report: params.papers must be a path or a list of paths");
       options.papers.push_back(file.get<std::string>());
     }
-    auto summary = WriteReport(options);
+    auto summary = report::WriteReport(options);
     if (!summary.ok()) return TaskReport::FromStatus(summary.status().WithContext("report"));
     json claims = json::array();
-    for (const ClaimCheck& c : summary->claims)
+    for (const report::ClaimCheck& c : summary->claims)
       claims.push_back(
           {{"paper", c.paper}, {"claim", c.claim}, {"verdict", c.verdict}, {"detail", c.detail}});
     const json out = {{"report", "report.html"},

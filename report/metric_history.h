@@ -11,7 +11,7 @@
 
 #include "motionpipe/base/status.h"
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 
 struct MetricRecord {
   std::string method;  // e.g. "mdt_editor/mdt"
@@ -42,4 +42,4 @@ Result<std::vector<MetricRecord>> ReadHistory(const std::string& path);
 // A short stable hash (FNV-1a 64, hex) of a file's bytes, or of a string.
 std::string HashText(const std::string& text);
 
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

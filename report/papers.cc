@@ -9,7 +9,7 @@
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/yaml.h"
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 
 namespace {
 
@@ -259,4 +259,4 @@ Result<std::vector<Paper>> LoadPapers(const std::vector<std::string>& files) {
   return papers;
 }
 
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

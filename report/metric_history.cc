@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <memory>
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 
 namespace {
 
@@ -144,4 +144,4 @@ Result<std::vector<MetricRecord>> ReadHistory(const std::string& path) {
   return out;
 }
 
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

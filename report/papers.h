@@ -10,7 +10,7 @@
 
 #include "motionpipe/base/status.h"
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 
 struct PaperRow {
   std::string row;                   // as the paper names it; an evaluation's params.row
@@ -93,4 +93,4 @@ Result<Paper> ParsePaper(const std::string& yaml_text, const std::string& origin
 // name already loaded replaces it, a new one is added.
 Result<std::vector<Paper>> LoadPapers(const std::vector<std::string>& files = {});
 
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

@@ -21,7 +21,7 @@
 #include "motionpipe/render/motion_render.h"
 #include "papers.h"
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 
 namespace {
 
@@ -1054,4 +1054,4 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   return summary;
 }
 
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report

@@ -14,7 +14,7 @@
 
 #include "motionpipe/base/status.h"
 
-namespace motionpipe::worker {
+namespace motionpipe::report {
 
 struct ReportOptions {
   std::string job_dir;   // a job's output directory (out/<name>-<id>)
@@ -63,4 +63,4 @@ ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<do
 // Base64 (RFC 4648, with padding): the report's data: URIs.
 std::string Base64(std::string_view bytes);
 
-}  // namespace motionpipe::worker
+}  // namespace motionpipe::report
