@@ -282,7 +282,7 @@ KindRegistry KindRegistry::WithBuiltins() {
   auto executors = std::make_shared<worker::ExecutorRegistry>();
   worker::RegisterBuiltinExecutors(executors.get());
   KindRegistry registry = FromExecutors(executors);
-  registry.Add("train", worker::PlanTrainStage);
+  for (const auto& [kind, planner] : worker::BuiltinPlanners()) registry.Add(kind, planner);
   return registry;
 }
 

@@ -64,11 +64,11 @@ struct PipelineSpec {
 using worker::StagePlanner;
 
 // Kinds the coordinator can plan: the built-in ones and those that plugins declare. A kind's
-// planner is its executor's Plan (worker/stages/), so planning and running a kind live together.
+// planner is its executor's Plan (stages/), so planning and running a kind live together.
 class KindRegistry {
  public:
-  // Every kind of the worker's built-in executors, plus `train` (planned by the engine, run by the
-  // train plugin).
+  // Every built-in kind (stages/): each planned by its executor, plus the planner-only kinds
+  // (`train`, run by the train plugin).
   static KindRegistry WithBuiltins();
   // The kinds of `executors`, each planned by its executor (kept alive by the registry).
   static KindRegistry FromExecutors(std::shared_ptr<const worker::ExecutorRegistry> executors);

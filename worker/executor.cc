@@ -46,17 +46,6 @@ void CheckInputParams(const StagePlan& plan, const std::string& path,
   }
 }
 
-// Training: one task per rank; world_size > 1 makes a gang that starts together on distinct
-// workers and restarts together from the last checkpoint when a rank fails.
-void PlanTrainStage(StagePlan& plan, const std::string& path, std::vector<std::string>* errors) {
-  plan.shards = std::max(1, plan.world_size);
-  plan.reduce = false;
-  if (!plan.params.contains("model") || !plan.params["model"].is_string())
-    errors->push_back(path +
-                      ".params.model: the model plugin's name is required (e.g. temos_sinc)");
-  LongLease(plan);
-}
-
 std::vector<std::string> TaskContext::InputDirs(const std::string& stage) const {
   for (const auto& input : spec.inputs()) {
     if (input.stage() == stage) return {input.dirs().begin(), input.dirs().end()};
@@ -79,6 +68,35 @@ StageExecutor* ExecutorRegistry::Find(const std::string& kind) const {
   const auto it = executors_.find(kind);
   return it == executors_.end() ? nullptr : it->second.get();
 }
+
+namespace {
+
+struct BuiltinKinds {
+  std::map<std::string, ExecutorFactory> executors;
+  std::map<std::string, StagePlanner> planners;
+};
+
+// Filled at static initialisation, before main: a function-local static has no order problem.
+BuiltinKinds& Builtins() {
+  static BuiltinKinds builtins;
+  return builtins;
+}
+
+}  // namespace
+
+bool AddBuiltinKind(const char* kind, ExecutorFactory make) {
+  return Builtins().executors.emplace(kind, make).second;
+}
+
+bool AddBuiltinPlanner(const char* kind, StagePlanner planner) {
+  return Builtins().planners.emplace(kind, std::move(planner)).second;
+}
+
+void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins) {
+  for (const auto& [kind, make] : Builtins().executors) registry->Register(kind, make(plugins));
+}
+
+const std::map<std::string, StagePlanner>& BuiltinPlanners() { return Builtins().planners; }
 
 std::vector<std::string> ExecutorRegistry::Kinds() const {
   std::vector<std::string> kinds;

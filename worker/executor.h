@@ -107,17 +107,6 @@ class ExecutorRegistry {
 
 class PluginHost;
 
-// noop, sleep, test.write, test.fail, test.crash, corpus, filter, singles, synth. `plugins` gives
-// the stages that use labelers access to plugin labelers (may be null).
-void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins = nullptr);
-void RegisterSincExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
-void RegisterModelExecutors(ExecutorRegistry* registry, const PluginHost* plugins);
-
-// The `train` kind's planner. Its executor is the train plugin (it links LibTorch, which the
-// engine does not); its plan is the engine's: a gang of world_size ranks, params.model naming the
-// model plugin.
-void PlanTrainStage(StagePlan& plan, const std::string& path, std::vector<std::string>* errors);
-
 // Runs `executor` on the task with its thread budget, catching exceptions.
 TaskReport RunTask(StageExecutor& executor, TaskContext& ctx);
 
@@ -126,5 +115,21 @@ std::vector<wire::OutputFile> ScanOutputs(const std::string& dir);
 
 // The TaskSpec as the JSON handed to plugins (see plugins/api/motionpipe_plugin.h).
 std::string TaskSpecToJson(const wire::TaskSpec& spec);
+
+// The built-in stage kinds live in stages/ (one file per kind), outside the engine. Each file
+// registers its kind at static initialisation (MP_STAGE_KIND, stages/stage.h); binaries link
+// stages/ whole (CMake: motionpipe_stages, linked by the coordinator), so adding a kind is adding
+// its file.
+using ExecutorFactory = std::unique_ptr<StageExecutor> (*)(const PluginHost* plugins);
+bool AddBuiltinKind(const char* kind, ExecutorFactory make);
+// A kind the engine plans but a plugin runs (train: its executor is the train plugin, which links
+// LibTorch; the C ABI has no planning entry).
+bool AddBuiltinPlanner(const char* kind, StagePlanner planner);
+
+// Every built-in kind's executor. `plugins` gives the stages that use labelers and generators
+// access to the plugins' (may be null: planning only).
+void RegisterBuiltinExecutors(ExecutorRegistry* registry, const PluginHost* plugins = nullptr);
+// The planner-only kinds (AddBuiltinPlanner), by kind.
+const std::map<std::string, StagePlanner>& BuiltinPlanners();
 
 }  // namespace motionpipe::worker

@@ -1,0 +1,63 @@
+// `corpus`: the embedded procedural corpus, sharded.
+#include "motionpipe/corpus/corpus.h"
+
+#include "stage.h"
+
+namespace motionpipe::stages {
+
+namespace {
+
+// The procedural corpus: each shard task generates its clips and triplets, the reduce task merges
+// them into one corpus directory (byte-identical to `motionpipe data synth-corpus`).
+class CorpusStage : public StageExecutor {
+ public:
+  // Shards of shard_size clips (and triplets), then a reduce task that merges them into one corpus
+  // directory with its annotations and manifest.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    const int clips = IntParam(plan.params, "clips", 1000, 1, path, errors);
+    const int triplets = IntParam(plan.params, "triplets", clips, 0, path, errors);
+    const int shard_size = IntParam(plan.params, "shard_size", 500, 1, path, errors);
+    plan.shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
+    plan.reduce = true;
+  }
+  std::string Description() const override {
+    return "generates the procedural motion corpus (sharded)";
+  }
+  TaskReport Run(TaskContext& ctx) override {
+    corpus::CorpusOptions options;
+    const auto& p = ctx.params;
+    options.seed = p.value("seed", ctx.spec.seed());
+    options.clips = p.value("clips", int64_t{1000});
+    options.triplets = p.value("triplets", options.clips);
+    options.shard_size = p.value("shard_size", 500);
+    options.fps = p.value("fps", 30.0);
+    options.write_amass = p.value("amass", true);
+    options.triplet_joints = p.value("triplet_joints", true);
+    options.script.min_seconds = p.value("min_seconds", options.script.min_seconds);
+    options.script.max_seconds = p.value("max_seconds", options.script.max_seconds);
+    options.threads = ctx.threads;
+    options.out_dir = ctx.output_dir();
+    if (ctx.spec.reduce()) {
+      const std::vector<std::string> shards(ctx.spec.shard_dirs().begin(),
+                                            ctx.spec.shard_dirs().end());
+      auto summary = corpus::FinalizeCorpus(options, shards);
+      if (!summary.ok()) return TaskReport::Error(summary.status().message());
+      TaskReport report;
+      report.metrics["clips"] = static_cast<double>(summary->clips);
+      report.metrics["triplets"] = static_cast<double>(summary->triplets);
+      return report;
+    }
+    if (const Status s = corpus::GenerateCorpusShard(options, ctx.spec.index(), ctx.output_dir());
+        !s.ok()) {
+      return TaskReport::FromStatus(s);
+    }
+    return TaskReport::Ok();
+  }
+};
+
+}  // namespace
+
+MP_STAGE_KIND("corpus", CorpusStage);
+
+}  // namespace motionpipe::stages

@@ -1,0 +1,164 @@
+// `edit`: edits the test split's triplets with an editing checkpoint (SimMotionEdit's MDT and its
+// baselines, through the generator interface), sharded over workers, writing the edited motions as
+// a clip file per task.
+//
+// params: model (the input stage holding the checkpoint; default: the input that has one),
+//   split (test), limit (0 = all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed,
+//   body_parts (MDM-BP), options (merged into the generator's configuration)
+#include <algorithm>
+#include <filesystem>
+
+#include "inputs.h"
+#include "motionpipe/base/file.h"
+#include "motionpipe/base/random.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/formats/motionfix.h"
+#include "stage.h"
+
+namespace motionpipe::stages {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+class EditStage : public StageExecutor {
+ public:
+  // `shards` tasks (default 2), each every count-th triplet of the test split.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    if (!plan.shards_set) plan.shards = 2;
+    plan.reduce = false;
+    if (plan.inputs.empty())
+      errors->push_back(path +
+                        ": needs inputs: the train stage of the editor and a stage with triplets");
+    const auto& p = plan.params;
+    if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim")
+      errors->push_back(path + ".params.sampler: ddpm or ddim");
+    LongLease(plan);
+  }
+  explicit EditStage(const PluginHost* plugins) : plugins_(plugins) {}
+  std::string Description() const override {
+    return "edits the test triplets with an editing checkpoint, sharded";
+  }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    if (!plugins_) return TaskReport::Error("edit: this worker has no plugin host");
+    fs::create_directories(ctx.output_dir());
+    json options = p.value("options", json::object());
+    if (p.value("body_parts", false)) options["body_parts"] = true;
+    std::string checkpoint;
+    auto generator = OpenModel(ctx, *plugins_, options, &checkpoint);
+    if (!generator.ok()) return TaskReport::BadInput("edit: " + generator.status().message());
+    const std::string split = p.value("split", std::string("test"));
+    const int64_t limit = p.value("limit", int64_t{0});
+    const int batch_size = std::max(1, p.value("batch", 8));
+    // Every triplet of the split, in file and row order; this task takes every count-th one.
+    struct Item {
+      size_t file;
+      int64_t row;
+    };
+    std::vector<TripletColumns> files;
+    std::vector<Item> items;
+    for (const std::string& path : TripletFiles(ctx)) {
+      auto columns = ReadTripletColumns(path, {0, -1, true, false});
+      if (!columns.ok()) return TaskReport::BadInput(columns.status().message());
+      for (int64_t r = 0; r < columns->rows; ++r) {
+        if (columns->splits[static_cast<size_t>(r)] == split) items.push_back({files.size(), r});
+      }
+      files.push_back(std::move(*columns));
+    }
+    if (items.empty())
+      return TaskReport::BadInput("edit: no triplets of split '" + split + "' in the inputs");
+    if (limit > 0 && static_cast<int64_t>(items.size()) > limit)
+      items.resize(static_cast<size_t>(limit));
+    std::vector<Item> mine;
+    std::vector<uint64_t>
+        place;  // each item's place in the split: its sampling seed, whatever the batching
+    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < items.size();
+         k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
+      mine.push_back(items[k]);
+      place.push_back(k);
+    }
+    // Batches of similar lengths: a batch is padded to its longest source.
+    std::vector<size_t> order(mine.size());
+    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+    const auto length = [&](size_t k) {
+      const auto& o = files[mine[k].file].source.offsets;
+      return o[mine[k].row + 1] - o[mine[k].row];
+    };
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return length(a) > length(b); });
+    {
+      std::vector<Item> sorted_items;
+      std::vector<uint64_t> sorted_places;
+      for (size_t k : order) sorted_items.push_back(mine[k]), sorted_places.push_back(place[k]);
+      mine = std::move(sorted_items);
+      place = std::move(sorted_places);
+    }
+    std::vector<Clip> clips;
+    const auto started = std::chrono::steady_clock::now();
+    for (size_t at = 0; at < mine.size(); at += static_cast<size_t>(batch_size)) {
+      if (ctx.cancelled()) return TaskReport::Error("cancelled");
+      const size_t end = std::min(mine.size(), at + static_cast<size_t>(batch_size));
+      std::vector<Motion> sources;
+      for (size_t k = at; k < end; ++k)
+        sources.push_back(SideMotion(files[mine[k].file], mine[k].row, true));
+      std::vector<plugin::GenerateRequest> requests;
+      for (size_t k = at; k < end; ++k) {
+        const TripletColumns& c = files[mine[k].file];
+        plugin::GenerateRequest r;
+        r.texts = {c.texts[static_cast<size_t>(mine[k].row)]};
+        r.source = &sources[k - at];
+        r.seed = MixSeed(ctx.spec.seed(), place[k]);
+        r.sampler = p.value("sampler", std::string("ddpm"));
+        r.steps = p.value("steps", 0);
+        requests.push_back(r);
+      }
+      auto edited = (*generator)->GenerateBatch(requests);
+      if (!edited.ok()) return TaskReport::Error(edited.status().message());
+      for (size_t k = at; k < end; ++k) {
+        const TripletColumns& c = files[mine[k].file];
+        Clip clip;
+        clip.id = c.ids[static_cast<size_t>(mine[k].row)];
+        clip.source = "edit:" + (*generator)->Name() + ":" + c.origin + "#" +
+                      std::to_string(c.first_row + mine[k].row);
+        clip.motion = std::move((*edited)[k - at]);
+        clip.texts = {c.texts[static_cast<size_t>(mine[k].row)]};
+        clips.push_back(std::move(clip));
+      }
+      if (ctx.on_metric) ctx.on_metric("edited", static_cast<double>(clips.size()));
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    if (!clips.empty()) {
+      if (Status s = WriteClips(ctx.output_dir() + "/edited.npz", clips); !s.ok())
+        return TaskReport::Error(s.message());
+    }
+    const json summary = {
+        {"model", (*generator)->Name()},
+        {"checkpoint", checkpoint},
+        {"split", split},
+        {"edited", clips.size()},
+        {"seconds", seconds},
+        {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)},
+        {"sampler", p.value("sampler", std::string("ddpm"))},
+        {"steps", p.value("steps", 0)}};
+    if (Status s = WriteFileAtomic(ctx.output_dir() + "/edits.json", summary.dump(1) + "\n");
+        !s.ok())
+      return TaskReport::Error(s.message());
+    TaskReport out = TaskReport::Ok();
+    out.metrics["edited"] = static_cast<double>(clips.size());
+    out.metrics["motions_per_second"] = summary["motions_per_second"].get<double>();
+    return out;
+  }
+
+ private:
+  const PluginHost* plugins_;
+};
+
+}  // namespace
+
+MP_STAGE_KIND("edit", EditStage);
+
+}  // namespace motionpipe::stages

@@ -1,0 +1,254 @@
+// `eval_generate`: scores generated motions against the ground truth (SINC Tables 2-3): the
+// TEMOS score, APE/AVE, text-to-motion and motion-to-motion retrieval, diversity, plausibility.
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <numeric>
+
+#include "evaluation.h"
+#include "inputs.h"
+#include "motionpipe/eval/metrics.h"
+#include "motionpipe/formats/clip.h"
+#include "motionpipe/sinc/spans.h"
+#include "stage.h"
+
+namespace motionpipe::stages {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// What eval_generate measures of motions against their ground truth (SINC Tables 2-3), from their
+// TEMOS-evaluator features and TMR embeddings: the TEMOS score, APE/AVE, and TMR retrieval
+// text-to-generated and generated-to-truth (batches and all).
+Result<json> GenerationScores(const std::vector<Motion>& generated,
+                              const std::vector<Motion>& truth,
+                              const std::vector<std::vector<float>>& g_temos,
+                              const std::vector<std::vector<float>>& t_temos,
+                              const eval::Embeddings& gen, const eval::Embeddings& gt,
+                              const eval::Embeddings& txt, int64_t batch, uint64_t seed) {
+  // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
+  double temos_score = 0;
+  for (size_t i = 0; i < generated.size(); ++i)
+    temos_score += (1 + Cosine(g_temos[i], t_temos[i])) / 2;
+  const double n = static_cast<double>(generated.size());
+  // APE / AVE on joint positions, both motions in their first frame's body frame (REFERENCE 4.5).
+  eval::PositionErrors ape, ave;
+  for (size_t i = 0; i < generated.size(); ++i) {
+    auto gj = ComputeJoints(Skeleton::Smpl22(), generated[i]),
+         tj = ComputeJoints(Skeleton::Smpl22(), truth[i]);
+    eval::Canonicalize(&gj, kNumJoints, eval::kSmpl22Hips);
+    eval::Canonicalize(&tj, kNumJoints, eval::kSmpl22Hips);
+    MP_ASSIGN_OR_RETURN(const auto a,
+                        eval::AveragePositionalError(gj, tj, kNumJoints, eval::kSmpl22Hips));
+    MP_ASSIGN_OR_RETURN(const auto v,
+                        eval::AverageVarianceError(gj, tj, kNumJoints, eval::kSmpl22Hips));
+    ape.root += a.root, ape.trajectory += a.trajectory, ape.mean_local += a.mean_local,
+        ape.mean_global += a.mean_global;
+    ave.root += v.root, ave.trajectory += v.trajectory, ave.mean_local += v.mean_local,
+        ave.mean_global += v.mean_global;
+  }
+  const auto errors_json = [n](const eval::PositionErrors& e) {
+    return json{{"root", e.root / n},
+                {"trajectory", e.trajectory / n},
+                {"mean_local", e.mean_local / n},
+                {"mean_global", e.mean_global / n}};
+  };
+  json out = {
+      {"temos_score", temos_score / n}, {"APE", errors_json(ape)}, {"AVE", errors_json(ave)}};
+  for (const auto& [key, queries, gallery] :
+       {std::tuple{"text_to_generated", &txt, &gen}, std::tuple{"generated_to_truth", &gen, &gt}}) {
+    MP_ASSIGN_OR_RETURN(const auto batches, eval::Retrieval(*queries, *gallery, batch, seed));
+    MP_ASSIGN_OR_RETURN(const auto all, eval::Retrieval(*queries, *gallery, 0, seed));
+    out[key] = {{"batches", ScoresJson(batches)}, {"all", ScoresJson(all)}};
+  }
+  return out;
+}
+
+// For each motion, another one of the nearest length (its neighbour in length order): the shuffled
+// ground truth yardstick, a real motion of the same length class for the wrong text.
+std::vector<size_t> SameLengthClassPartner(const std::vector<Motion>& motions) {
+  std::vector<size_t> order(motions.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return motions[a].num_frames() < motions[b].num_frames();
+  });
+  std::vector<size_t> partner(motions.size());
+  for (size_t k = 0; k < order.size(); ++k)
+    partner[order[k]] = order[k + 1 < order.size() ? k + 1 : k - 1];
+  return partner;
+}
+
+// The TMR evaluator's own retrieval on the held-out test split (issue 15): text-to-motion and
+// motion-to-text R@1/R@3 in batches, on single actions and on two-action spans ("A while B").
+Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& table, int64_t batch,
+                              uint64_t seed) {
+  json out;
+  for (const char* kind : {"singles", "pairs"}) {
+    const auto spans = SelectSpans(table, {{"split", "test"}, {"spans", kind}});
+    if (spans.size() < 2) continue;
+    std::vector<Motion> motions;
+    std::vector<std::string> texts;
+    for (const int64_t i : spans)
+      motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
+    MP_ASSIGN_OR_RETURN(auto m_rows, tmr.EncodeMotions(motions));
+    MP_ASSIGN_OR_RETURN(auto t_rows, tmr.EncodeTexts(texts));
+    const auto m = ToEmbeddings(m_rows), t = ToEmbeddings(t_rows);
+    const int64_t b = std::min<int64_t>(batch, static_cast<int64_t>(spans.size()));
+    MP_ASSIGN_OR_RETURN(const auto text_to_motion, eval::Retrieval(t, m, b, seed));
+    MP_ASSIGN_OR_RETURN(const auto motion_to_text, eval::Retrieval(m, t, b, seed));
+    out[kind] = {{"motions", spans.size()},
+                 {"text_to_motion", ScoresJson(text_to_motion)},
+                 {"motion_to_text", ScoresJson(motion_to_text)}};
+  }
+  return out;
+}
+
+// params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
+// evaluator), generated (the generate stage), batch (32), seed, diversity_pairs (300), method.
+// yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the
+// TMR's own retrieval on the test singles and two-action spans).
+class EvalGenerateStage : public StageExecutor {
+ public:
+  // One task.
+  void Plan(StagePlan& plan, const std::string& path,
+            std::vector<std::string>* errors) const override {
+    plan.shards = 1;
+    plan.reduce = false;
+    CheckInputParams(plan, path, {"evaluator", "temos", "generated"}, errors);
+  }
+  explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
+  std::string Description() const override {
+    return "scores generated motions against the ground truth: TEMOS score, APE/AVE, retrieval";
+  }
+
+  TaskReport Run(TaskContext& ctx) override {
+    const json& p = ctx.params;
+    if (!plugins_) return TaskReport::Error("eval_generate: this worker has no plugin host");
+    fs::create_directories(ctx.output_dir());
+    const auto started = std::chrono::steady_clock::now();
+    const auto load = [&](const std::string& stage) -> Result<GeneratorPtr> {
+      const std::string dir = FindCheckpoint(ctx, stage);
+      if (dir.empty()) return NotFound("input stage '" + stage + "' holds no checkpoint");
+      return LoadGenerator(*plugins_, dir);
+    };
+    auto tmr = load(p.value("evaluator", std::string("evaluator")));
+    if (!tmr.ok()) return TaskReport::BadInput("eval_generate: " + tmr.status().message());
+    const std::string temos_stage = p.value("temos", std::string());
+    Result<GeneratorPtr> temos =
+        temos_stage.empty() ? Result<GeneratorPtr>(NotFound("")) : load(temos_stage);
+    if (!temos_stage.empty() && !temos.ok())
+      return TaskReport::BadInput("eval_generate: " + temos.status().message());
+    plugin::Generator& temos_encoder = temos_stage.empty() ? **tmr : **temos;
+    auto table = InputSpans(ctx);
+    if (!table.ok()) return TaskReport::BadInput("eval_generate: " + table.status().message());
+    std::map<std::string, int64_t> span_of;
+    for (int64_t i = 0; i < table->size(); ++i) span_of[table->ids[static_cast<size_t>(i)]] = i;
+    // The generated motions (first sample of each span) and their ground truth.
+    const std::string generated_stage = p.value("generated", std::string());
+    std::vector<Motion> generated, truth;
+    std::vector<std::string> texts, ids;
+    std::string method = p.value("method", std::string()), generated_checkpoint;
+    for (const auto& input : ctx.spec.inputs()) {
+      if (!generated_stage.empty() && input.stage() != generated_stage) continue;
+      for (const auto& dir : input.dirs()) {
+        if (!fs::exists(dir + "/generated.npz")) continue;
+        auto clips = ReadClips(dir + "/generated.npz");
+        if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
+        for (auto& clip : *clips) {
+          const auto it = span_of.find(clip.id);
+          if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
+          ids.push_back(clip.id);
+          texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
+          generated.push_back(std::move(clip.motion));
+          truth.push_back(table->MotionOf(it->second));
+        }
+        ReadSummary(dir + "/generate.json", &method, &generated_checkpoint);
+      }
+    }
+    if (generated.size() < 2)
+      return TaskReport::BadInput(
+          "eval_generate: fewer than 2 generated motions with a ground truth in the inputs");
+    auto g_tmr = (*tmr)->EncodeMotions(generated), t_tmr = (*tmr)->EncodeMotions(truth),
+         text_tmr = (*tmr)->EncodeTexts(texts);
+    auto g_temos = temos_encoder.EncodeMotions(generated),
+         t_temos = temos_encoder.EncodeMotions(truth);
+    for (const auto* r : {&g_tmr, &t_tmr, &text_tmr, &g_temos, &t_temos}) {
+      if (!r->ok()) return TaskReport::Error("eval_generate: " + r->status().message());
+    }
+    const int64_t batch = p.value("batch", int64_t{32});
+    const uint64_t seed = p.value("seed", ctx.spec.seed());
+    const auto gen = ToEmbeddings(*g_tmr), gt = ToEmbeddings(*t_tmr), txt = ToEmbeddings(*text_tmr);
+    auto scores = GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
+    if (!scores.ok()) return TaskReport::Error("eval_generate: " + scores.status().message());
+    json metrics = *std::move(scores);
+    metrics.update(
+        {{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
+    if (p.contains("yardstick"))
+      metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
+    if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
+    // The yardsticks, in the same evaluation (issue 15): the ground truth itself, and shuffled
+    // ground truth (each test motion stands in for the one nearest in length to it).
+    const std::vector<size_t> other = SameLengthClassPartner(truth);
+    std::vector<Motion> shuffled;
+    std::vector<std::vector<float>> shuffled_temos, shuffled_tmr;
+    for (size_t i = 0; i < truth.size(); ++i) {
+      shuffled.push_back(truth[other[i]]);
+      shuffled_temos.push_back((*t_temos)[other[i]]);
+      shuffled_tmr.push_back((*t_tmr)[other[i]]);
+    }
+    auto truth_scores =
+        GenerationScores(truth, truth, *t_temos, *t_temos, gt, gt, txt, batch, seed);
+    auto shuffled_scores = GenerationScores(shuffled, truth, shuffled_temos, *t_temos,
+                                            ToEmbeddings(shuffled_tmr), gt, txt, batch, seed);
+    if (!truth_scores.ok() || !shuffled_scores.ok()) {
+      return TaskReport::Error(
+          "eval_generate: " +
+          (truth_scores.ok() ? shuffled_scores.status() : truth_scores.status()).message());
+    }
+    metrics["yardsticks"] = {{"truth", *truth_scores}, {"shuffled", *shuffled_scores}};
+    if (p.value("evaluator_quality", false)) {
+      auto quality = EvaluatorQuality(**tmr, *table, batch, seed);
+      if (!quality.ok()) return TaskReport::Error("eval_generate: " + quality.status().message());
+      metrics["evaluator_quality"] = *quality;
+    }
+    const double temos_score = metrics["temos_score"].get<double>();
+    const int64_t pairs = p.value("diversity_pairs", int64_t{300});
+    metrics["diversity"] = {{"generated", eval::Diversity(gen, pairs, seed)},
+                            {"truth", eval::Diversity(gt, pairs, seed)}};
+    metrics["fid"] = nullptr;  // needs more motions than dimensions
+    if (gen.n > gen.d) {
+      auto fid = eval::FrechetDistance(gt, gen);
+      if (!fid.ok()) return TaskReport::Error("eval_generate: " + fid.status().message());
+      metrics["fid"] = *fid;
+    }
+    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
+                               {"truth", MeanPlausibility(truth)}};
+    if (auto failed =
+            RecordHistory(ctx, &metrics, method, generated_checkpoint, ids,
+                          {{"temos_score", temos_score, true},
+                           {"APE.mean_global", metrics["APE"]["mean_global"].get<double>(), false},
+                           {"text_to_generated.all.R@1",
+                            metrics["text_to_generated"]["all"]["R@1"].get<double>(), true}})) {
+      return *failed;
+    }
+    if (Status st = WritePreview(ctx, {{"generated", &generated[0]}, {"truth", &truth[0]}},
+                                 texts[0], ids[0]);
+        !st.ok()) {
+      return TaskReport::Error("eval_generate: " + st.message());
+    }
+    AddTiming(&metrics, started, generated.size() * 2);
+    TaskReport out = WriteMetrics(ctx, metrics);
+    out.metrics["temos_score"] = temos_score;
+    return out;
+  }
+
+ private:
+  const PluginHost* plugins_;
+};
+
+}  // namespace
+
+MP_STAGE_KIND("eval_generate", EvalGenerateStage);
+
+}  // namespace motionpipe::stages

@@ -1,0 +1,122 @@
+#include "inputs.h"
+
+#include <glob.h>
+
+#include <algorithm>
+#include <filesystem>
+
+#include "motionpipe/base/job_layout.h"
+#include "motionpipe/sinc/texts.h"
+
+namespace motionpipe::stages {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> AllInputDirs(const TaskContext& ctx) {
+  std::vector<std::string> dirs;
+  for (const auto& input : ctx.spec.inputs()) {
+    if (!input.result_dir().empty()) dirs.push_back(input.result_dir());
+    for (const auto& d : input.dirs()) dirs.push_back(d);
+  }
+  return dirs;
+}
+
+std::vector<std::string> StringList(const json& v) {
+  std::vector<std::string> out;
+  if (v.is_string()) out.push_back(v.get<std::string>());
+  if (v.is_array()) {
+    for (const auto& item : v) out.push_back(item.get<std::string>());
+  }
+  return out;
+}
+
+std::vector<std::string> TripletFiles(const TaskContext& ctx) {
+  std::vector<std::string> files;
+  const auto add = [&](const std::string& dir) {
+    const std::vector<std::string> found = TripletFilesIn(dir);
+    files.insert(files.end(), found.begin(), found.end());
+    return !found.empty();
+  };
+  for (const auto& input : ctx.spec.inputs()) {
+    if (!input.result_dir().empty() && add(input.result_dir())) continue;
+    for (const auto& dir : input.dirs()) add(dir);
+  }
+  std::sort(files.begin(), files.end());
+  files.erase(std::unique(files.begin(), files.end()), files.end());
+  return files;
+}
+
+Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
+  const auto& side = source ? c.source : c.target;
+  const int64_t begin = side.offsets[static_cast<size_t>(row)],
+                end = side.offsets[static_cast<size_t>(row) + 1];
+  Motion m;
+  m.fps = c.fps[static_cast<size_t>(row)];
+  m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
+  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
+  return m;
+}
+
+std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
+  if (stage.find('/') != std::string::npos) {
+    glob_t matches{};
+    std::string newest;
+    fs::file_time_type newest_time{};
+    if (::glob(stage.c_str(), 0, nullptr, &matches) == 0) {
+      for (size_t k = 0; k < matches.gl_pathc; ++k) {
+        auto resolved = ResolveCheckpoint(matches.gl_pathv[k]);
+        if (!resolved.ok()) continue;
+        std::error_code ec;
+        const auto time = fs::last_write_time(layout::ModelConfigFile(*resolved), ec);
+        if (!ec && (newest.empty() || time > newest_time)) newest = *resolved, newest_time = time;
+      }
+    }
+    globfree(&matches);
+    return newest;
+  }
+  for (const auto& input : ctx.spec.inputs()) {
+    if (!stage.empty() && input.stage() != stage) continue;
+    for (const auto& dir : input.dirs()) {
+      if (auto resolved = ResolveCheckpoint(dir); resolved.ok()) return *resolved;
+    }
+  }
+  return "";
+}
+
+Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins,
+                               const json& options, std::string* checkpoint) {
+  *checkpoint = FindCheckpoint(ctx, ctx.params.value("model", std::string()));
+  if (checkpoint->empty()) return NotFound("no input holds a checkpoint (a train stage's model/)");
+  return LoadGenerator(plugins, *checkpoint, options);
+}
+
+Result<sinc::SpanTable> InputSpans(const TaskContext& ctx) {
+  for (const auto& input : ctx.spec.inputs()) {
+    for (const auto& dir : input.dirs()) {
+      if (fs::exists(dir + "/spans.npz")) return sinc::ReadSpans(dir + "/spans.npz");
+    }
+  }
+  return NotFound("no spans.npz in the inputs (a `singles` stage)");
+}
+
+std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p) {
+  const std::string split = p.value("split", std::string("test")),
+                    kind = p.value("spans", std::string("pairs"));
+  const int64_t limit = p.value("limit", int64_t{0});
+  std::vector<int64_t> out;
+  for (int64_t i = 0; i < table.size(); ++i) {
+    if (table.splits[static_cast<size_t>(i)] != split) continue;
+    if ((kind == "pairs" && table.single(i)) || (kind == "singles" && !table.single(i))) continue;
+    out.push_back(i);
+    if (limit > 0 && static_cast<int64_t>(out.size()) >= limit) break;
+  }
+  return out;
+}
+
+std::string SpanText(const sinc::SpanTable& table, int64_t i) {
+  return table.single(i) ? table.text_a[static_cast<size_t>(i)]
+                         : sinc::EvalPairText(table.text_a[static_cast<size_t>(i)],
+                                              table.text_b[static_cast<size_t>(i)]);
+}
+
+}  // namespace motionpipe::stages

@@ -1,0 +1,45 @@
+// What the stage kinds read from their inputs: input directories, triplet files, checkpoints, the
+// spans table.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "motionpipe/base/status.h"
+#include "motionpipe/formats/motionfix.h"
+#include "motionpipe/motion/motion.h"
+#include "motionpipe/sinc/spans.h"
+#include "stage.h"
+
+namespace motionpipe::stages {
+
+// Every directory the task's inputs committed (results first).
+std::vector<std::string> AllInputDirs(const TaskContext& ctx);
+
+std::vector<std::string> StringList(const json& v);
+
+// Triplet files of the inputs (TripletFilesIn), sorted. An input with a result directory (a
+// corpus) is read from there only: its task directories hold the same triplets as shards.
+std::vector<std::string> TripletFiles(const TaskContext& ctx);
+
+Motion SideMotion(const TripletColumns& c, int64_t row, bool source);
+
+// A checkpoint named by a stage parameter: an input stage's name, or a path pattern (anything with
+// a '/', e.g. "out/train_mdt-*/mdt") whose newest checkpoint is taken: a scheduled evaluation of
+// the latest training job.
+std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage);
+
+// The generator of the checkpoint named by params.model (see FindCheckpoint), with `options`.
+Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins,
+                               const json& options, std::string* checkpoint);
+
+// The spans table of an input `singles` stage.
+Result<sinc::SpanTable> InputSpans(const TaskContext& ctx);
+
+// The spans a generation covers: split, kind (pairs | singles | all), limit; in table order.
+std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p);
+
+std::string SpanText(const sinc::SpanTable& table, int64_t i);
+
+}  // namespace motionpipe::stages
