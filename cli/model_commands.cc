@@ -119,12 +119,13 @@ int RunReport(const ReportArgs& a) {
   const auto started = std::chrono::steady_clock::now();
   auto summary = report::WriteReport(options);
   if (!summary.ok()) return Fail(summary.status());
-  std::printf(
-      "report: %d editing and %d composition methods, %d train stages, %d tables, %d images -> "
-      "%s in %.1f s\n",
-      summary->edit_methods, summary->generation_methods, summary->train_stages, summary->tables,
-      summary->images, summary->path.c_str(),
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+  std::string methods;  // "1 edit and 0 generate methods"
+  for (const auto& [evaluation, count] : summary->methods)
+    methods += (methods.empty() ? "" : " and ") + std::to_string(count) + " " + evaluation;
+  std::printf("report: %s methods, %d train stages, %d tables, %d images -> %s in %.1f s\n",
+              methods.empty() ? "no" : methods.c_str(), summary->train_stages, summary->tables,
+              summary->images, summary->path.c_str(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
   for (const report::ClaimCheck& c : summary->claims) {
     std::printf("  %-13s %-50s %-40s %s\n", c.paper.c_str(), c.claim.c_str(), c.verdict.c_str(),
                 c.detail.c_str());

@@ -95,6 +95,68 @@ Status ParseColumns(const Json& j, const std::string& where, int decimals,
   return Status::Ok();
 }
 
+Status ParsePlausibility(const Json& j, const std::string& origin, EvaluationLayout* layout) {
+  if (!j.contains("plausibility")) return Status::Ok();
+  const std::string where = origin + ": plausibility";
+  const Json& p = j["plausibility"];
+  if (!p.is_object() || !p.contains("truth") || !p["truth"].is_object())
+    return InvalidArgument(where + ": a map with 'truth' {side, row} and 'generated'");
+  PlausibilityLayout out;
+  MP_RETURN_IF_ERROR(GetString(p["truth"], "side", where + ".truth", &out.truth_side));
+  MP_RETURN_IF_ERROR(GetString(p["truth"], "row", where + ".truth", &out.truth_row));
+  MP_RETURN_IF_ERROR(GetString(p, "generated", where, &out.generated_side));
+  layout->plausibility = std::move(out);
+  return Status::Ok();
+}
+
+Status ParsePreview(const Json& j, const std::string& origin, EvaluationLayout* layout) {
+  if (!j.contains("preview")) return Status::Ok();
+  const std::string where = origin + ": preview";
+  const Json& p = j["preview"];
+  if (!p.is_object()) return InvalidArgument(where + ": must be a map");
+  PreviewLayout out;
+  const Json references = p.value("references", Json::array());
+  if (!references.is_array()) return InvalidArgument(where + ": 'references' must be a list");
+  for (size_t r = 0; r < references.size(); ++r) {
+    const std::string at = where + ".references[" + std::to_string(r) + "]";
+    PreviewLayout::Reference ref;
+    MP_RETURN_IF_ERROR(GetString(references[r], "role", at, &ref.role));
+    MP_RETURN_IF_ERROR(GetString(references[r], "label", at, &ref.label));
+    MP_RETURN_IF_ERROR(GetBool(references[r], "text", at, &ref.text));
+    out.references.push_back(std::move(ref));
+  }
+  MP_RETURN_IF_ERROR(GetString(p, "method_role", where, &out.method_role));
+  MP_RETURN_IF_ERROR(GetString(p, "alt", where, &out.alt));
+  MP_RETURN_IF_ERROR(GetString(p, "caption", where, &out.caption));
+  layout->preview = std::move(out);
+  return Status::Ok();
+}
+
+Status ParseEvaluators(const Json& j, const std::string& origin, EvaluationLayout* layout) {
+  const Json rows = j.value("evaluators", Json::array());
+  if (!rows.is_array()) return InvalidArgument(origin + ": 'evaluators' must be a list");
+  for (size_t r = 0; r < rows.size(); ++r) {
+    const std::string at = origin + ": evaluators[" + std::to_string(r) + "]";
+    EvaluatorRow row;
+    MP_RETURN_IF_ERROR(GetString(rows[r], "label", at, &row.label));
+    MP_RETURN_IF_ERROR(GetString(rows[r], "form", at, &row.form));
+    MP_RETURN_IF_ERROR(GetStrings(rows[r], "pointers", at, &row.pointers));
+    if (rows[r].contains("note")) MP_RETURN_IF_ERROR(GetString(rows[r], "note", at, &row.note));
+    const size_t want = row.form == "score_pair" ? 2 : 1;
+    if (row.form != "text_motion" && row.form != "motion_motion" && row.form != "score_pair")
+      return InvalidArgument(at + ": 'form' must be text_motion, motion_motion or score_pair");
+    if (row.pointers.size() != want)
+      return InvalidArgument(at + ": 'pointers' must list " + std::to_string(want) +
+                             " JSON pointer(s) for form " + row.form);
+    for (const std::string& pointer : row.pointers) {
+      if (pointer.empty() || pointer[0] != '/')
+        return InvalidArgument(at + ": 'pointers' must be JSON pointers (/a/b)");
+    }
+    layout->evaluators.push_back(std::move(row));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Result<EvaluationLayout> ParseEvaluationLayout(const std::string& yaml_text,
@@ -104,6 +166,8 @@ Result<EvaluationLayout> ParseEvaluationLayout(const std::string& yaml_text,
   EvaluationLayout layout;
   layout.origin = origin;
   MP_RETURN_IF_ERROR(GetString(j, "evaluation", origin, &layout.evaluation));
+  if (j.contains("legacy_key"))
+    MP_RETURN_IF_ERROR(GetString(j, "legacy_key", origin, &layout.legacy_key));
   if (j.contains("protocol_of"))
     MP_RETURN_IF_ERROR(GetString(j, "protocol_of", origin, &layout.protocol_of));
   if (j.contains("protocols")) {
@@ -145,6 +209,9 @@ Result<EvaluationLayout> ParseEvaluationLayout(const std::string& yaml_text,
     MP_RETURN_IF_ERROR(GetString(yardsticks[y], "row", where, &row));
     layout.yardsticks.push_back({key, row});
   }
+  MP_RETURN_IF_ERROR(ParsePlausibility(j, origin, &layout));
+  MP_RETURN_IF_ERROR(ParsePreview(j, origin, &layout));
+  MP_RETURN_IF_ERROR(ParseEvaluators(j, origin, &layout));
   return layout;
 }
 

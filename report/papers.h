@@ -4,6 +4,7 @@
 // a third paper's table is a new file.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -66,8 +67,38 @@ struct LayoutTable {
   std::vector<LayoutColumn> columns;
 };
 
+// Texts of a layout (intro, captions, labels, notes) are HTML.
+// A row of the report's "Evaluator quality" table, read from the first evaluation run that has
+// pointers[0]. form: "text_motion" (an object with motions, text_to_motion and motion_to_text
+// retrieval scores), "motion_motion" (retrieval scores of motions among motions; the run's
+// /motions), "score_pair" (two scores, pointers[0] / pointers[1], with `note`).
+struct EvaluatorRow {
+  std::string label, form, note;
+  std::vector<std::string> pointers;
+};
+
+// The physical-plausibility rows of an evaluation kind: the ground truth's side
+// (metrics /plausibility/<truth_side>, from the first method), then each method's generated side.
+struct PlausibilityLayout {
+  std::string truth_side, truth_row, generated_side;
+};
+
+// The preview of an evaluation kind: the first evaluated example's reference motions (roles of
+// preview.npz), then each method's motion of `method_role`, in one GIF; `caption` with {text} (the
+// first reference's text that has `text: true`).
+struct PreviewLayout {
+  struct Reference {
+    std::string role, label;
+    bool text = false;
+  };
+  std::vector<Reference> references;
+  std::string method_role, alt, caption;
+};
+
 struct EvaluationLayout {
   std::string evaluation;   // the papers' `evaluation:` value, e.g. "edit"
+  std::string legacy_key;   // metrics.json written without "evaluation" are this kind's when they
+                            // hold this key
   std::string protocol_of;  // metrics key whose batches decide {protocol}; "" = always "all"
   std::vector<std::pair<std::string, std::string>> protocols;  // {protocol} -> {protocol_text}
   std::string intro;  // HTML; {protocol_text}, {batch}, {note}
@@ -77,6 +108,9 @@ struct EvaluationLayout {
   // The reference rows an evaluation scores beside its method (metrics "yardsticks": key), each
   // with the row name the tables give it.
   std::vector<std::pair<std::string, std::string>> yardsticks;
+  std::optional<PlausibilityLayout> plausibility;
+  std::optional<PreviewLayout> preview;
+  std::vector<EvaluatorRow> evaluators;
   std::string origin;
 };
 

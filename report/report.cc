@@ -364,47 +364,48 @@ const json* FirstWith(const std::vector<const Method*>& methods, const std::stri
   return nullptr;
 }
 
-// What the evaluators can tell apart (issue 15): the TMR's text-to-motion and motion-to-text
-// retrieval of the held-out single actions and two-action spans, its retrieval of each test
-// target's own source, and the TEMOS evaluator's score of a motion with itself and with a shuffled
-// partner.
-std::string EvaluatorSection(const std::vector<const Method*>& edits,
-                             const std::vector<const Method*>& gens, int* tables) {
-  std::ostringstream rows;
+// An evaluation kind's layout and its methods, ordered by the kind's first paper.
+struct KindMethods {
+  const EvaluationLayout* layout;
+  std::vector<const Method*> methods;
+};
+
+// One row of the evaluator-quality table (EvaluatorRow's forms), or "" when no run measured it.
+std::string EvaluatorTableRow(const EvaluatorRow& row, const std::vector<const Method*>& methods) {
+  const json* m = FirstWith(methods, row.pointers[0]);
+  if (!m) return "";
   const auto cell = [](const json& j, const char* key) {
     return j.contains(key) && j[key].is_number() ? Format(j[key].get<double>(), 1) : "&ndash;";
   };
-  if (const json* m = FirstWith(gens, "/evaluator_quality")) {
-    for (const auto& [kind, label] :
-         {std::pair{"singles", "TMR: test single actions"},
-          std::pair{"pairs", "TMR: test two-action spans (\"A while B\")"}}) {
-      if (!(*m)["evaluator_quality"].contains(kind)) continue;
-      const json& q = (*m)["evaluator_quality"][kind];
-      rows << "<tr><td>" << label << "</td><td>" << q.value("motions", 0) << "</td><td>"
-           << cell(q["text_to_motion"], "R@1") << "</td><td>" << cell(q["text_to_motion"], "R@3")
-           << "</td><td>" << cell(q["motion_to_text"], "R@1") << "</td><td>"
-           << cell(q["motion_to_text"], "R@3") << "</td><td>"
-           << q["text_to_motion"].value("queries", 0) << " queries in batches</td></tr>\n";
-    }
+  const json& q = m->at(json::json_pointer(row.pointers[0]));
+  std::ostringstream out;
+  out << "<tr><td>" << row.label << "</td><td>";  // HTML, as the layout's other texts
+  if (row.form == "text_motion") {
+    out << q.value("motions", 0) << "</td><td>" << cell(q["text_to_motion"], "R@1") << "</td><td>"
+        << cell(q["text_to_motion"], "R@3") << "</td><td>" << cell(q["motion_to_text"], "R@1")
+        << "</td><td>" << cell(q["motion_to_text"], "R@3") << "</td><td>"
+        << q["text_to_motion"].value("queries", 0) << " queries in batches</td></tr>\n";
+  } else if (row.form == "motion_motion") {
+    out << m->value("motions", 0) << "</td><td>" << cell(q, "R@1") << "</td><td>" << cell(q, "R@3")
+        << "</td><td>&ndash;</td><td>&ndash;</td><td>AvgR " << cell(q, "AvgR") << "</td></tr>\n";
+  } else {  // score_pair
+    const json::json_pointer second(row.pointers[1]);
+    out << m->value("motions", 0) << "</td><td colspan=\"4\">" << Format(q.get<double>(), 3)
+        << " / " << (m->contains(second) ? Format(m->at(second).get<double>(), 3) : "&ndash;")
+        << "</td><td>" << row.note << "</td></tr>\n";
   }
-  if (const json* m = FirstWith(edits, "/target_to_source/batches")) {
-    const json& q = (*m)["target_to_source"]["batches"];
-    rows << "<tr><td>TMR: each test target retrieves its own source (motion-to-motion)</td><td>"
-         << m->value("motions", 0) << "</td><td>" << cell(q, "R@1") << "</td><td>" << cell(q, "R@3")
-         << "</td><td>&ndash;</td><td>&ndash;</td><td>AvgR " << cell(q, "AvgR") << "</td></tr>\n";
+  return out.str();
+}
+
+// What the evaluators can tell apart (issue 15), as each evaluation kind's layout lists it
+// (`evaluators:`): retrieval of held-out texts and motions, and a score's range.
+std::string EvaluatorSection(const std::vector<KindMethods>& kinds, int* tables) {
+  std::string rows;
+  for (const KindMethods& kind : kinds) {
+    for (const EvaluatorRow& row : kind.layout->evaluators)
+      rows += EvaluatorTableRow(row, kind.methods);
   }
-  if (const json* m = FirstWith(gens, "/yardsticks/shuffled/temos_score")) {
-    const auto score = [&](const char* key) {
-      return Format((*m)["yardsticks"][key]["temos_score"].get<double>(), 3);
-    };
-    rows
-        << "<tr><td>TEMOS evaluator: score of a test motion with itself / with a shuffled test "
-           "motion of its length class</td><td>"
-        << m->value("motions", 0) << "</td><td colspan=\"4\">" << score("truth") << " / "
-        << score("shuffled")
-        << "</td><td>a generated motion's score means something only between these two</td></tr>\n";
-  }
-  if (rows.str().empty()) return "";
+  if (rows.empty()) return "";
   ++*tables;
   return "<h2>The evaluators</h2>\n<p>A score is only as good as the evaluator behind it: what the "
          "evaluators tell apart on the "
@@ -413,7 +414,7 @@ std::string EvaluatorSection(const std::vector<const Method*>& edits,
          "<th>evaluator and test set</th><th>motions</th><th>text→motion R@1</th><th>text→motion "
          "R@3</th><th>motion→text R@1</th>"
          "<th>motion→text R@3</th><th></th></tr></thead>\n<tbody>\n" +
-         rows.str() + "</tbody></table>\n";
+         rows + "</tbody></table>\n";
 }
 
 // ---- pictures
@@ -595,10 +596,22 @@ namespace {
 
 // Everything the report reads from a job directory.
 struct JobRuns {
-  std::map<std::string, Method> edits, generations;  // by `method` string
+  // By evaluation kind (configs/evaluations/*.yaml's `evaluation`), then by `method` string.
+  std::map<std::string, std::map<std::string, Method>> evaluations;
   std::vector<TrainCurve> curves;
   std::vector<std::pair<std::string, json>> showcases;  // stage, showcase.json
 };
+
+// The evaluation kind of a metrics.json: its "evaluation" key, or for one written before that key,
+// the kind whose layout's legacy_key it holds; "" for a stage that is no evaluation.
+std::string EvaluationOf(const json& metrics) {
+  if (metrics.contains("evaluation") && metrics["evaluation"].is_string())
+    return metrics["evaluation"].get<std::string>();
+  for (const EvaluationLayout& layout : EvaluationLayouts()) {
+    if (!layout.legacy_key.empty() && metrics.contains(layout.legacy_key)) return layout.evaluation;
+  }
+  return "";
+}
 
 // Every stage directory: evaluation metrics, training curves, showcases.
 JobRuns ReadJob(const std::string& job) {
@@ -613,10 +626,9 @@ JobRuns ReadJob(const std::string& job) {
     const std::string task = layout::TaskDir(job + "/" + stage);
     if (auto metrics = ReadJson(layout::MetricsFile(task))) {
       const std::string method = metrics->value("method", stage);
-      const bool edit = metrics->contains("generated_to_target"),
-                 gen = metrics->contains("temos_score");
-      if (edit || gen) {
-        Method& m = (edit ? runs.edits : runs.generations)[method];
+      const std::string evaluation = EvaluationOf(*metrics);
+      if (!evaluation.empty()) {
+        Method& m = runs.evaluations[evaluation][method];
         m.name = method;
         if (m.row.empty()) m.row = metrics->value("row", std::string());
         if (metrics->value("yardstick", std::string()) == "untrained")
@@ -634,8 +646,8 @@ JobRuns ReadJob(const std::string& job) {
     if (auto showcase = ReadJson(layout::ShowcaseFile(task)))
       runs.showcases.push_back({stage, *showcase});
   }
-  for (auto* methods : {&runs.edits, &runs.generations}) {
-    for (auto& [name, m] : *methods) {
+  for (auto& [evaluation, methods] : runs.evaluations) {
+    for (auto& [name, m] : methods) {
       std::sort(m.runs.begin(), m.runs.end(),
                 [](const Run& a, const Run& b) { return a.stage < b.stage; });
     }
@@ -752,9 +764,11 @@ std::string PaperTables(const Paper& paper, const EvaluationLayout& layout,
 // ---- plausibility, claims
 // ---------------------------------------------------------------------------
 
-std::string PlausibilitySection(const std::vector<const Method*>& edits,
-                                const std::vector<const Method*>& gens, int* tables) {
-  if (edits.empty() && gens.empty()) return "";
+std::string PlausibilitySection(const std::vector<KindMethods>& kinds, int* tables) {
+  const bool any = std::any_of(kinds.begin(), kinds.end(), [](const KindMethods& k) {
+    return k.layout->plausibility && !k.methods.empty();
+  });
+  if (!any) return "";
   std::ostringstream body;
   body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; "
           "these are the measurable "
@@ -775,10 +789,12 @@ std::string PlausibilitySection(const std::vector<const Method*>& edits,
     }
     body << "</tr>\n";
   };
-  if (!edits.empty()) row("editing targets (ground truth)", *edits.front(), "target");
-  for (const Method* m : edits) row(RowName(*m), *m, "generated");
-  if (!gens.empty()) row("composition ground truth", *gens.front(), "truth");
-  for (const Method* m : gens) row(RowName(*m), *m, "generated");
+  for (const KindMethods& kind : kinds) {
+    const auto& layout = kind.layout->plausibility;
+    if (!layout || kind.methods.empty()) continue;
+    row(layout->truth_row, *kind.methods.front(), layout->truth_side);
+    for (const Method* m : kind.methods) row(RowName(*m), *m, layout->generated_side);
+  }
   body << "</tbody></table>\n";
   ++*tables;
   return body.str();
@@ -789,8 +805,8 @@ std::vector<ClaimCheck> CheckClaims(const Paper& paper, const std::vector<const 
   std::string pointer = paper.metric.pointer;
   const size_t at = pointer.find("{protocol}");
   if (at != std::string::npos) {
-    const std::string key =
-        paper.evaluation == "edit" ? "generated_to_target" : "text_to_generated";
+    // The metric the protocol is read from: the pointer's segments before {protocol}.
+    const std::string key = pointer.substr(1, at > 1 ? at - 2 : 0);
     pointer.replace(at, 10, AllBatched(methods, key) ? "batches" : "all");
   }
   const Method* untrained = UntrainedRow(methods);
@@ -839,39 +855,34 @@ void AppendMethodPanels(const std::vector<const Method*>& methods, const std::st
   }
 }
 
-Result<std::string> PreviewSection(const std::vector<const Method*>& edits,
-                                   const std::vector<const Method*>& gens, int panel_size,
+// One GIF per evaluation kind with a preview layout: the first evaluated example's reference
+// motions beside each method's; drawn when at least one method's motion is there.
+Result<std::string> PreviewSection(const std::vector<KindMethods>& kinds, int panel_size,
                                    const std::string& scratch, int* images) {
   std::ostringstream body;
-  if (!edits.empty()) {
+  bool heading = false;
+  for (const KindMethods& kind : kinds) {
+    const auto& layout = kind.layout->preview;
+    if (!layout || kind.methods.empty()) continue;
     std::vector<render::MotionPanel> panels;
     std::string text;
-    const std::string first = edits.front()->runs.front().dir;
-    if (auto source = PreviewMotion(first, "source", &text))
-      panels.push_back({*source, "source", text});
-    if (auto target = PreviewMotion(first, "target", nullptr))
-      panels.push_back({*target, "target", ""});
-    AppendMethodPanels(edits, "edited", &panels);
-    if (panels.size() > 2) {
-      MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
-      body << "<h2>Previews</h2>\n<figure>" << ImgTag("image/gif", gif, "editing preview", images)
-           << "<figcaption>The first test triplet: source, target and each method's edit (seed "
-              "1), instruction \""
-           << Escape(text) << "\".</figcaption></figure>\n";
+    const std::string first = kind.methods.front()->runs.front().dir;
+    for (const PreviewLayout::Reference& ref : layout->references) {
+      std::string ref_text;
+      if (auto motion = PreviewMotion(first, ref.role, ref.text ? &ref_text : nullptr))
+        panels.push_back({*motion, ref.label, ref_text});
+      if (text.empty()) text = ref_text;
     }
-  }
-  if (!gens.empty()) {
-    std::vector<render::MotionPanel> panels;
-    std::string text;
-    if (auto truth = PreviewMotion(gens.front()->runs.front().dir, "truth", &text))
-      panels.push_back({*truth, "ground truth", text});
-    AppendMethodPanels(gens, "generated", &panels);
-    if (panels.size() > 1) {
-      MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
-      body << "<figure>" << ImgTag("image/gif", gif, "composition preview", images)
-           << "<figcaption>The first test pair, \"" << Escape(text)
-           << "\": ground truth and each method's generation (seed 1).</figcaption></figure>\n";
-    }
+    AppendMethodPanels(kind.methods, layout->method_role, &panels);
+    if (panels.size() <= layout->references.size()) continue;
+    MP_ASSIGN_OR_RETURN(const std::string gif, PreviewGif(panels, panel_size, scratch));
+    std::string caption = layout->caption;  // HTML, as the layout's other texts
+    if (const size_t at = caption.find("{text}"); at != std::string::npos)
+      caption.replace(at, 6, Escape(text));
+    if (!heading) body << "<h2>Previews</h2>\n";
+    heading = true;
+    body << "<figure>" << ImgTag("image/gif", gif, layout->alt, images) << "<figcaption>" << caption
+         << "</figcaption></figure>\n";
   }
   return body.str();
 }
@@ -996,7 +1007,7 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   // Each paper's table: the yardsticks its evaluations computed, the untrained row, the methods
   // in the paper's order. The first paper of an evaluation kind labels its methods elsewhere.
   const auto methods_of = [&](const Paper* paper, const std::string& evaluation) {
-    return ByPaper(evaluation == "edit" ? runs.edits : runs.generations, paper);
+    return ByPaper(runs.evaluations[evaluation], paper);
   };
   const auto first_paper = [&](const std::string& evaluation) -> const Paper* {
     for (const Paper& p : papers) {
@@ -1005,7 +1016,8 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
     return nullptr;
   };
   std::set<std::string> drawn;  // evaluation kinds whose other tables are drawn
-  for (const std::string evaluation : {"edit", "generate"}) {
+  for (const EvaluationLayout& kind : EvaluationLayouts()) {
+    const std::string& evaluation = kind.evaluation;
     for (const Paper& paper : papers) {
       if (paper.evaluation != evaluation) continue;
       const std::vector<const Method*> methods = methods_of(&paper, evaluation);
@@ -1020,18 +1032,19 @@ Result<ReportSummary> WriteReport(const ReportOptions& options) {
   for (const Paper& paper : papers)
     for (ClaimCheck& c : CheckClaims(paper, methods_of(&paper, paper.evaluation)))
       summary.claims.push_back(std::move(c));
-  const std::vector<const Method*> edits = methods_of(first_paper("edit"), "edit");
-  const std::vector<const Method*> gens = methods_of(first_paper("generate"), "generate");
-  summary.edit_methods = static_cast<int>(edits.size());
-  summary.generation_methods = static_cast<int>(gens.size());
+  std::vector<KindMethods> kinds;
+  for (const EvaluationLayout& kind : EvaluationLayouts()) {
+    kinds.push_back({&kind, methods_of(first_paper(kind.evaluation), kind.evaluation)});
+    summary.methods[kind.evaluation] = static_cast<int>(kinds.back().methods.size());
+  }
 
-  body << EvaluatorSection(edits, gens, &summary.tables);
-  body << PlausibilitySection(edits, gens, &summary.tables);
+  body << EvaluatorSection(kinds, &summary.tables);
+  body << PlausibilitySection(kinds, &summary.tables);
   body << ClaimsSection(summary.claims, &summary.tables);
   if (options.previews) {
     MP_ASSIGN_OR_RETURN(const std::string previews,
-                        PreviewSection(edits, gens, options.panel_size,
-                                       summary.path + ".preview.tmp.gif", &summary.images));
+                        PreviewSection(kinds, options.panel_size, summary.path + ".preview.tmp.gif",
+                                       &summary.images));
     body << previews;
   }
   for (const auto& [stage, showcase] : runs.showcases)

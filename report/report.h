@@ -9,6 +9,7 @@
 // URIs.
 #pragma once
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -38,7 +39,8 @@ struct ClaimCheck {
 struct ReportSummary {
   std::string path;
   int tables = 0, images = 0;
-  int edit_methods = 0, generation_methods = 0, train_stages = 0;
+  int train_stages = 0;
+  std::map<std::string, int> methods;  // evaluated methods by evaluation kind ("edit": 9, ...)
   std::vector<ClaimCheck> claims;
 };
 

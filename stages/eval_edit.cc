@@ -120,7 +120,8 @@ class EvalEditStage : public StageExecutor {
       if (!status.ok()) return TaskReport::Error("eval_edit: " + status.message());
     }
     json metrics = *retrieval;
-    metrics.update({{"method", method},
+    metrics.update({{"evaluation", "edit"},  // its layout: configs/evaluations/edit.yaml
+                    {"method", method},
                     {"evaluator", evaluator},
                     {"motions", generated.size()},
                     {"batch", batch},

@@ -182,8 +182,11 @@ class EvalGenerateStage : public StageExecutor {
     auto scores = GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
     if (!scores.ok()) return TaskReport::Error("eval_generate: " + scores.status().message());
     json metrics = *std::move(scores);
-    metrics.update(
-        {{"method", method}, {"motions", generated.size()}, {"batch", batch}, {"seed", seed}});
+    metrics.update({{"evaluation", "generate"},  // its layout: configs/evaluations/generate.yaml
+                    {"method", method},
+                    {"motions", generated.size()},
+                    {"batch", batch},
+                    {"seed", seed}});
     if (p.contains("yardstick"))
       metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
     if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)

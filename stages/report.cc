@@ -65,8 +65,7 @@ class ReportStage : public StageExecutor {
                       {"tables", summary->tables},
                       {"images", summary->images},
                       {"claims", claims},
-                      {"edit_methods", summary->edit_methods},
-                      {"generation_methods", summary->generation_methods}};
+                      {"methods", summary->methods}};  // by evaluation kind
     if (Status st = WriteFileAtomic(ctx.output_dir() + "/report.json", out.dump(1) + "\n");
         !st.ok())
       return TaskReport::Error(st.message());

@@ -272,7 +272,7 @@ class EditTest(EngineTest):
         # The same report from the command line, elsewhere.
         out = self.path("cli-report.html")
         printed = self.cli("report", job, "--out", out, "--history", history, "--size", "80").stdout
-        self.assertIn("report: 1 editing and 0 composition methods, 3 train stages", printed)
+        self.assertIn("report: 1 edit and 0 generate methods, 3 train stages", printed)
         self.assertEqual(check_report(self, out)[0].keys(), tables.keys())
 
         # A scheduled-style evaluation that finds the newest checkpoints by path pattern, with the

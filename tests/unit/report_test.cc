@@ -121,6 +121,24 @@ TEST(Papers, EvaluationLayoutsAreDataAndErrorsNameTheirField) {
             "columns: [{group: g, name: n, pointer: /x}]\n"
             "more: [{caption: M, when: always, columns: [{group: g, name: n, pointer: /y}]}]\n"),
       "e.yaml: more[0]: 'when' must be batches (or absent)");
+  // What the report draws beside the tables is the layout's too: plausibility, preview, evaluators.
+  EXPECT_EQ(edit.legacy_key, "generated_to_target");
+  ASSERT_TRUE(edit.plausibility && edit.preview);
+  EXPECT_EQ(edit.plausibility->truth_side, "target");
+  EXPECT_EQ(edit.preview->method_role, "edited");
+  ASSERT_EQ(edit.evaluators.size(), 1u);
+  EXPECT_EQ(edit.evaluators[0].pointers, std::vector<std::string>{"/target_to_source/batches"});
+  const std::string cols = "columns: [{group: g, name: n, pointer: /x}]\n";
+  EXPECT_EQ(error(head + cols + "evaluators: [{label: L, form: table, pointers: [/q]}]\n"),
+            "e.yaml: evaluators[0]: 'form' must be text_motion, motion_motion or score_pair");
+  EXPECT_EQ(error(head + cols + "evaluators: [{label: L, form: score_pair, pointers: [/q]}]\n"),
+            "e.yaml: evaluators[0]: 'pointers' must list 2 JSON pointer(s) for form score_pair");
+  EXPECT_EQ(error(head + cols + "plausibility: {truth: {side: t}, generated: g}\n"),
+            "e.yaml: plausibility.truth: 'row' must be a string");
+  EXPECT_EQ(error(head + cols +
+                  "preview: {references: [{role: r}], method_role: m, alt: A, "
+                  "caption: C}\n"),
+            "e.yaml: preview.references[0]: 'label' must be a string");
 }
 
 TEST(Papers, AThirdPapersTableIsOneFile) {
@@ -137,9 +155,13 @@ TEST(Papers, AThirdPapersTableIsOneFile) {
     ASSERT_TRUE(WriteFileAtomic(dir + "/job/" + stage + "/task-00000/metrics.json", m.dump()).ok());
   };
   eval("eval_a", {{"row", "Editor A"}});
-  eval("eval_b", {{"row", "Editor B"},
-                  {"method", "tmed"},
-                  {"generated_to_target", {{"all", {{"R@1", 40.0}, {"queries", 4}}}}}});
+  eval("eval_b",
+       {{"row", "Editor B"},
+        {"evaluation", "edit"},  // eval_a has no such key: read by the layout's legacy_key
+        {"method", "tmed"},
+        {"generated_to_target", {{"all", {{"R@1", 40.0}, {"queries", 4}}}}}});
+  // The "evaluation" key decides the kind, whatever other keys the metrics hold.
+  eval("eval_c", {{"evaluation", "generate"}, {"temos_score", 0.5}});
   ASSERT_TRUE(
       WriteFileAtomic(dir + "/third.yaml",
                       "paper: Third\nevaluation: edit\ntitle: A third paper's table\n"
@@ -154,6 +176,7 @@ TEST(Papers, AThirdPapersTableIsOneFile) {
   options.papers = {dir + "/third.yaml"};
   auto summary = WriteReport(options);
   ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_EQ(summary->methods, (std::map<std::string, int>{{"edit", 2}, {"generate", 1}}));
   auto html = ReadFile(dir + "/job/report.html");
   ASSERT_TRUE(html.ok());
   EXPECT_NE(html->find("<h2>A third paper's table</h2>"), std::string::npos) << *html;
