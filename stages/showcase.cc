@@ -123,16 +123,10 @@ class ShowcaseStage : public StageExecutor {
     edit_request.steps = static_cast<int>(p.value("steps", int64_t{50}));
     auto edited = (*editor)->Generate(edit_request);
     if (!edited.ok()) return TaskReport::Error("showcase: editing: " + edited.status().message());
-    using Output = std::tuple<std::string, const Motion*, std::string>;
     for (const auto& [name, motion, text] : {Output{"composed.npz", &composed, pair_text},
                                              Output{"generated.npz", &*generated, pair_text},
                                              Output{"edited.npz", &*edited, edit_text}}) {
-      Clip clip;
-      clip.id = fs::path(name).stem().string();
-      clip.source = cmu.front().source;
-      clip.motion = *motion;
-      clip.texts = {text};
-      if (Status st = WriteClips(out + "/" + name, {clip}); !st.ok())
+      if (Status st = WriteOutput(out, name, cmu.front().source, *motion, text); !st.ok())
         return TaskReport::Error(st.message());
     }
     // 4. Metrics: plausibility, and the evaluator's cosine similarity to the first clip.
@@ -142,17 +136,8 @@ class ShowcaseStage : public StageExecutor {
     rows.push_back({"composition: " + pair_text, &composed});
     rows.push_back({generator_label + " generated: " + pair_text, &*generated});
     rows.push_back({editor_label + " edit: " + edit_text, &*edited});
-    std::vector<Motion> motions;
-    for (const auto& r : rows) motions.push_back(*r.second);
-    auto embeddings = (*evaluator)->EncodeMotions(motions);
-    if (!embeddings.ok()) return TaskReport::Error("showcase: " + embeddings.status().message());
-    json table_rows = json::array();
-    for (size_t i = 0; i < rows.size(); ++i) {
-      const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), *rows[i].second);
-      table_rows.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio,
-                            r.penetration_mean, r.float_ratio, r.jerk_mean,
-                            Cosine((*embeddings)[i], (*embeddings)[0])});
-    }
+    auto table_rows = TableRows(**evaluator, rows);
+    if (!table_rows.ok()) return TaskReport::Error("showcase: " + table_rows.status().message());
     // 5. Renders.
     render::RenderOptions options;
     options.panel_width = options.panel_height =
@@ -199,13 +184,44 @@ class ShowcaseStage : public StageExecutor {
           {"columns",
            {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk",
             "cos to " + cmu.front().id}},
-          {"rows", table_rows}}}};
+          {"rows", *table_rows}}}};
     if (Status st = WriteFileAtomic(layout::ShowcaseFile(out), showcase.dump(1) + "\n"); !st.ok())
       return TaskReport::Error(st.message());
     return TaskReport::Ok();
   }
 
  private:
+  using Output = std::tuple<std::string, const Motion*, std::string>;
+
+  // out/name (composed.npz, ...): one clip of `motion` with its text, from the clip `source`.
+  static Status WriteOutput(const std::string& out, const std::string& name,
+                            const std::string& source, const Motion& motion,
+                            const std::string& text) {
+    Clip clip;
+    clip.id = fs::path(name).stem().string();
+    clip.source = source;
+    clip.motion = motion;
+    clip.texts = {text};
+    return WriteClips(out + "/" + name, {clip});
+  }
+
+  // The showcase table's rows: each motion's frames, plausibility and the evaluator's cosine
+  // similarity to the first motion.
+  static Result<json> TableRows(plugin::Generator& evaluator,
+                                const std::vector<std::pair<std::string, const Motion*>>& rows) {
+    std::vector<Motion> motions;
+    for (const auto& r : rows) motions.push_back(*r.second);
+    MP_ASSIGN_OR_RETURN(const auto embeddings, evaluator.EncodeMotions(motions));
+    json table = json::array();
+    for (size_t i = 0; i < rows.size(); ++i) {
+      const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), *rows[i].second);
+      table.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio,
+                       r.penetration_mean, r.float_ratio, r.jerk_mean,
+                       Cosine(embeddings[i], embeddings[0])});
+    }
+    return table;
+  }
+
   // The BVH files of `clips` (files or directories), sorted, imported onto SMPL-22 at 30 fps and
   // cut to max_frames (the models' training length).
   static Result<std::vector<Clip>> ImportClips(const json& clips, int64_t max_frames) {
