@@ -754,6 +754,12 @@ std::string PaperTables(const Paper& paper, const EvaluationLayout& layout,
   if (!first) return body.str();
   for (const LayoutTable& table : layout.more) {
     if (table.when == "batches" && !batches) continue;
+    // A table none of whose columns any row measured (e.g. a metric added after the job ran).
+    const bool measured = std::any_of(methods.begin(), methods.end(), [&](const Method* m) {
+      return std::any_of(table.columns.begin(), table.columns.end(),
+                         [&](const LayoutColumn& c) { return Collect(*m, c.pointer).n > 0; });
+    });
+    if (!measured) continue;
     body << MetricTable(Fill(table.caption, vars), table.with_yardsticks ? rows : methods,
                         table.columns, {}, {}, 2);
     ++*tables;

@@ -3,6 +3,7 @@
 // yardsticks, and the physical plausibility of the edits and of the targets.
 #include <chrono>
 #include <filesystem>
+#include <map>
 
 #include "evaluation.h"
 #include "inputs.h"
@@ -32,6 +33,39 @@ Result<json> EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t,
     out["generated_to_source"][protocol] = ScoresJson(to_source);
     out["towards_target"][protocol] = {{"R@1", to_target.r1 - to_source.r1}};
   }
+  return out;
+}
+
+// Per edit, in the evaluator's space (issue 15): whether the edit `g` lies closer to its target
+// than to its source by cosine similarity, overall and by the triplet's edit kind (the corpus's
+// `kinds` column: speed, posture, ...; absent for MotionFix). A copy of the source scores 0, the
+// target itself 1: unlike batch retrieval, this says which edits move the right way.
+json CloserToTarget(const std::vector<std::vector<float>>& g,
+                    const std::vector<std::vector<float>>& t,
+                    const std::vector<std::vector<float>>& s,
+                    const std::vector<std::string>& kinds) {
+  struct Sum {
+    int64_t n = 0, closer = 0;
+    double to_target = 0, to_source = 0;
+    json Json() const {
+      const double d = static_cast<double>(std::max<int64_t>(1, n));
+      return {{"triplets", n},
+              {"fraction", static_cast<double>(closer) / d},
+              {"cos_to_target", to_target / d},
+              {"cos_to_source", to_source / d}};
+    }
+  };
+  Sum all;
+  std::map<std::string, Sum> by_kind;
+  for (size_t i = 0; i < g.size(); ++i) {
+    const double ct = Cosine(g[i], t[i]), cs = Cosine(g[i], s[i]);
+    for (Sum* sum : {&all, kinds[i].empty() ? nullptr : &by_kind[kinds[i]]}) {
+      if (!sum) continue;
+      ++sum->n, sum->closer += ct > cs ? 1 : 0, sum->to_target += ct, sum->to_source += cs;
+    }
+  }
+  json out = all.Json();
+  for (const auto& [kind, sum] : by_kind) out["by_edit_kind"][kind] = sum.Json();
   return out;
 }
 
@@ -85,7 +119,7 @@ class EvalEditStage : public StageExecutor {
           "eval_edit: fewer than 2 edited motions in the inputs (an edit stage)");
     // Their triplets' sources and targets.
     std::vector<Motion> generated, targets, sources;
-    std::vector<std::string> ids, edit_texts;
+    std::vector<std::string> ids, edit_texts, edit_kinds;
     std::set<std::string> seen;
     for (const std::string& path : TripletFiles(ctx)) {
       auto c = ReadTripletColumns(path, {0, -1, true, false});
@@ -95,6 +129,7 @@ class EvalEditStage : public StageExecutor {
         if (it == edited.end() || !seen.insert(it->first).second) continue;
         ids.push_back(it->first);
         edit_texts.push_back(c->texts.empty() ? std::string() : c->texts[static_cast<size_t>(r)]);
+        edit_kinds.push_back(c->kinds.empty() ? std::string() : c->kinds[static_cast<size_t>(r)]);
         generated.push_back(it->second);
         targets.push_back(SideMotion(*c, r, false));
         sources.push_back(SideMotion(*c, r, true));
@@ -132,6 +167,11 @@ class EvalEditStage : public StageExecutor {
     // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere)
     // and the target as the edit (the upper bound).
     metrics["yardsticks"] = {{"copy", *copy}, {"target", *target}};
+    metrics["closer_to_target"] = CloserToTarget(*g_rows, *t_rows, *s_rows, edit_kinds);
+    metrics["yardsticks"]["copy"]["closer_to_target"] =
+        CloserToTarget(*s_rows, *t_rows, *s_rows, edit_kinds);
+    metrics["yardsticks"]["target"]["closer_to_target"] =
+        CloserToTarget(*t_rows, *t_rows, *s_rows, edit_kinds);
     metrics["target_to_source"] = {{"batches", ScoresJson(*target_to_source)}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
                                {"target", MeanPlausibility(targets)}};

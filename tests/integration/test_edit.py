@@ -232,6 +232,14 @@ class EditTest(EngineTest):
         self.assertEqual(target["generated_to_target"]["all"]["R@1"], 100)
         self.assertLessEqual(copy["towards_target"]["all"]["R@1"], 0)
         self.assertGreaterEqual(target["towards_target"]["all"]["R@1"], 0)
+        # Per edit, by cosine in the evaluator's space: a copy is never closer to its target than to
+        # its source, the target always is; every triplet is counted under its edit kind.
+        self.assertEqual(copy["closer_to_target"]["fraction"], 0)
+        self.assertEqual(target["closer_to_target"]["fraction"], 1)
+        closer = metrics["closer_to_target"]
+        self.assertEqual(closer["triplets"], 3)
+        self.assertEqual(sum(k["triplets"] for k in closer["by_edit_kind"].values()), 3)
+        self.assertAlmostEqual(target["closer_to_target"]["cos_to_target"], 1, places=5)
         for row in (metrics, copy, target):
             self.assertAlmostEqual(row["towards_target"]["all"]["R@1"],
                                    row["generated_to_target"]["all"]["R@1"] - row["generated_to_source"]["all"]["R@1"])
