@@ -58,6 +58,7 @@ std::vector<Method> YardstickRows(const std::vector<const Method*>& methods,
       continue;
     std::vector<Method> out;
     for (const auto& [key, label] : keys) {
+      if (!m->runs.front().metrics["yardsticks"].contains(key)) continue;  // an older job's
       Method row;
       row.name = label;
       row.yardstick = true;

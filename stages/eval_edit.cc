@@ -70,6 +70,8 @@ json CloserToTarget(const std::vector<std::vector<float>>& g,
 }
 
 // params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
+// triplets (the stage holding the triplets; default: every input); evaluator, edits and triplets
+// may also be path patterns (an earlier job's stage: rescoring without editing again),
 // batch (32), seed, method (a name for the report; default: the edit stage's model), yardstick
 // ("untrained": this row is the report's untrained editor, initial weights, same sampler),
 // jitter_yardsticks (spreads in radians: the copy with that white noise on its joint rotations,
@@ -81,7 +83,7 @@ class EvalEditStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     plan.shards = 1;
     plan.reduce = false;
-    CheckInputParams(plan, path, {"evaluator", "edits"}, errors);
+    CheckInputParams(plan, path, {"evaluator", "edits", "triplets"}, errors);
   }
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
@@ -104,15 +106,12 @@ class EvalEditStage : public StageExecutor {
     const std::string edits_stage = p.value("edits", std::string());
     std::map<std::string, Motion> edited;
     std::string method = p.value("method", std::string()), edited_checkpoint;
-    for (const auto& input : ctx.spec.inputs()) {
-      if (!edits_stage.empty() && input.stage() != edits_stage) continue;
-      for (const auto& dir : input.dirs()) {
-        if (!fs::exists(dir + "/edited.npz")) continue;
-        auto clips = ReadClips(dir + "/edited.npz");
-        if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
-        for (auto& clip : *clips) edited[clip.id] = std::move(clip.motion);
-        ReadSummary(dir + "/edits.json", &method, &edited_checkpoint);
-      }
+    for (const std::string& dir : StageDirs(ctx, edits_stage)) {
+      if (!fs::exists(dir + "/edited.npz")) continue;
+      auto clips = ReadClips(dir + "/edited.npz");
+      if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
+      for (auto& clip : *clips) edited[clip.id] = std::move(clip.motion);
+      ReadSummary(dir + "/edits.json", &method, &edited_checkpoint);
     }
     if (edited.size() < 2)
       return TaskReport::BadInput(
@@ -121,7 +120,7 @@ class EvalEditStage : public StageExecutor {
     std::vector<Motion> generated, targets, sources;
     std::vector<std::string> ids, edit_texts, edit_kinds;
     std::set<std::string> seen;
-    for (const std::string& path : TripletFiles(ctx)) {
+    for (const std::string& path : TripletFiles(ctx, p.value("triplets", std::string()))) {
       auto c = ReadTripletColumns(path, {0, -1, true, false});
       if (!c.ok()) return TaskReport::BadInput(c.status().message());
       for (int64_t r = 0; r < c->rows; ++r) {
@@ -147,11 +146,18 @@ class EvalEditStage : public StageExecutor {
     const auto g = ToEmbeddings(*g_rows), t = ToEmbeddings(*t_rows), s = ToEmbeddings(*s_rows);
     const int64_t batch = p.value("batch", int64_t{32});
     const uint64_t seed = p.value("seed", ctx.spec.seed());
+    // Another triplet's target as the edit (each takes the one half the list away): a motion of
+    // the corpus unrelated to both, the chance level of every measure.
+    std::vector<std::vector<float>> other_rows(t_rows->size());
+    for (size_t i = 0; i < other_rows.size(); ++i)
+      other_rows[i] = (*t_rows)[(i + other_rows.size() / 2) % other_rows.size()];
+    const auto other = ToEmbeddings(other_rows);
     auto retrieval = EditRetrieval(g, t, s, batch, seed),
-         copy = EditRetrieval(s, t, s, batch, seed), target = EditRetrieval(t, t, s, batch, seed);
+         copy = EditRetrieval(s, t, s, batch, seed), target = EditRetrieval(t, t, s, batch, seed),
+         unrelated = EditRetrieval(other, t, s, batch, seed);
     auto target_to_source = eval::Retrieval(t, s, batch, seed);
-    for (const Status& status :
-         {retrieval.status(), copy.status(), target.status(), target_to_source.status()}) {
+    for (const Status& status : {retrieval.status(), copy.status(), target.status(),
+                                 unrelated.status(), target_to_source.status()}) {
       if (!status.ok()) return TaskReport::Error("eval_edit: " + status.message());
     }
     json metrics = *retrieval;
@@ -164,14 +170,16 @@ class EvalEditStage : public StageExecutor {
     if (p.contains("yardstick"))
       metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
     if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
-    // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere)
-    // and the target as the edit (the upper bound).
-    metrics["yardsticks"] = {{"copy", *copy}, {"target", *target}};
+    // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere),
+    // the target as the edit (the upper bound) and another triplet's target (chance).
+    metrics["yardsticks"] = {{"copy", *copy}, {"target", *target}, {"other_target", *unrelated}};
     metrics["closer_to_target"] = CloserToTarget(*g_rows, *t_rows, *s_rows, edit_kinds);
     metrics["yardsticks"]["copy"]["closer_to_target"] =
         CloserToTarget(*s_rows, *t_rows, *s_rows, edit_kinds);
     metrics["yardsticks"]["target"]["closer_to_target"] =
         CloserToTarget(*t_rows, *t_rows, *s_rows, edit_kinds);
+    metrics["yardsticks"]["other_target"]["closer_to_target"] =
+        CloserToTarget(other_rows, *t_rows, *s_rows, edit_kinds);
     metrics["target_to_source"] = {{"batches", ScoresJson(*target_to_source)}};
     metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
                                {"target", MeanPlausibility(targets)}};

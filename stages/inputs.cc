@@ -30,16 +30,62 @@ std::vector<std::string> StringList(const json& v) {
   return out;
 }
 
-std::vector<std::string> TripletFiles(const TaskContext& ctx) {
+std::vector<std::string> StageDirs(const TaskContext& ctx, const std::string& stage) {
+  std::vector<std::string> dirs;
+  if (stage.find('/') == std::string::npos) {
+    for (const auto& input : ctx.spec.inputs()) {
+      if (!stage.empty() && input.stage() != stage) continue;
+      if (!input.result_dir().empty()) dirs.push_back(input.result_dir());
+      for (const auto& d : input.dirs()) dirs.push_back(d);
+    }
+    return dirs;
+  }
+  glob_t matches{};
+  if (::glob(stage.c_str(), 0, nullptr, &matches) == 0) {
+    for (size_t k = 0; k < matches.gl_pathc; ++k) {
+      const std::string match = matches.gl_pathv[k];
+      std::error_code ec;
+      std::vector<std::string> tasks;
+      for (const auto& entry : fs::directory_iterator(match, ec)) {
+        const std::string name = entry.path().filename().string();
+        if (entry.is_directory() && (name == layout::kResultDirName || name.rfind("task-", 0) == 0))
+          tasks.push_back(entry.path().string());
+      }
+      // result/ sorts after task-*: put it first, as for an input stage.
+      std::sort(tasks.begin(), tasks.end(), [](const std::string& a, const std::string& b) {
+        const bool ra = fs::path(a).filename() == layout::kResultDirName,
+                   rb = fs::path(b).filename() == layout::kResultDirName;
+        return ra != rb ? ra : a < b;
+      });
+      if (tasks.empty()) tasks.push_back(match);  // a task directory itself
+      dirs.insert(dirs.end(), tasks.begin(), tasks.end());
+    }
+  }
+  globfree(&matches);
+  return dirs;
+}
+
+std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string& stage) {
+  std::vector<std::string> stages = {stage};
+  if (stage.empty()) {
+    stages.clear();
+    for (const auto& input : ctx.spec.inputs()) stages.push_back(input.stage());
+  }
   std::vector<std::string> files;
   const auto add = [&](const std::string& dir) {
     const std::vector<std::string> found = TripletFilesIn(dir);
     files.insert(files.end(), found.begin(), found.end());
     return !found.empty();
   };
-  for (const auto& input : ctx.spec.inputs()) {
-    if (!input.result_dir().empty() && add(input.result_dir())) continue;
-    for (const auto& dir : input.dirs()) add(dir);
+  for (const std::string& name : stages) {
+    bool from_result = false;  // a result directory with triplets: its tasks hold them as shards
+    for (const std::string& dir : StageDirs(ctx, name)) {
+      if (fs::path(dir).filename() == layout::kResultDirName) {
+        from_result = add(dir) || from_result;
+      } else if (!from_result) {
+        add(dir);
+      }
+    }
   }
   std::sort(files.begin(), files.end());
   files.erase(std::unique(files.begin(), files.end()), files.end());

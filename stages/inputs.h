@@ -19,9 +19,15 @@ std::vector<std::string> AllInputDirs(const TaskContext& ctx);
 
 std::vector<std::string> StringList(const json& v);
 
-// Triplet files of the inputs (TripletFilesIn), sorted. An input with a result directory (a
-// corpus) is read from there only: its task directories hold the same triplets as shards.
-std::vector<std::string> TripletFiles(const TaskContext& ctx);
+// The committed directories of `stage` (every input when empty): an input stage's, result first;
+// or, for a path pattern (anything with a '/', e.g. an earlier job's "out/claims_edit-1/edit_mdt"),
+// every match's result and task directories (a match that holds none is taken as it is).
+std::vector<std::string> StageDirs(const TaskContext& ctx, const std::string& stage);
+
+// Triplet files of `stage` (StageDirs; every input when empty), sorted. A stage with a result
+// directory holding triplets (a corpus) is read from there only: its task directories hold the
+// same triplets as shards.
+std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string& stage = "");
 
 Motion SideMotion(const TripletColumns& c, int64_t row, bool source);
 

@@ -236,6 +236,7 @@ class EditTest(EngineTest):
         # its source, the target always is; every triplet is counted under its edit kind.
         self.assertEqual(copy["closer_to_target"]["fraction"], 0)
         self.assertEqual(target["closer_to_target"]["fraction"], 1)
+        self.assertIn("closer_to_target", metrics["yardsticks"]["other_target"])  # chance
         closer = metrics["closer_to_target"]
         self.assertEqual(closer["triplets"], 3)
         self.assertEqual(sum(k["triplets"] for k in closer["by_edit_kind"].values()), 3)
@@ -266,10 +267,10 @@ class EditTest(EngineTest):
         tables, images = check_report(self, os.path.join(job, "report", "task-00000", "report.html"))
         table1 = tables["Editing: retrieval of the edits (batches)"]  # batches of 2 here
         # The yardstick rows first, then the method: mdt_editor/mdt is the paper's MDT row.
-        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)", "SimMotionEdit (MDT)"])
+        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)", "another triplet's target as the edit (chance)", "SimMotionEdit (MDT)"])
         self.assertEqual(float(table1[3][2]), 100.0)  # the target as the edit: R@1 100
-        self.assertEqual(table1[4][-4:], ["70.62", "82.92", "88.12", "2.38"])  # the paper's numbers beside ours
-        self.assertAlmostEqual(float(table1[4][2]), metrics["generated_to_target"]["batches"]["R@1"], delta=0.006)
+        self.assertEqual(table1[5][-4:], ["70.62", "82.92", "88.12", "2.38"])  # the paper's numbers beside ours
+        self.assertAlmostEqual(float(table1[5][2]), metrics["generated_to_target"]["batches"]["R@1"], delta=0.006)
         self.assertIn("Claims", tables)
         self.assertTrue(any(r[1] == "MDT beats TMED" and r[2] == "not measured" for r in tables["Claims"][1:]))
         alts = [i["alt"] for i in images]

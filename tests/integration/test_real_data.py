@@ -81,6 +81,7 @@ class RealDataTest(EngineTest):
         tables, images = check_report(self, os.path.join(job, "report", "task-00000", "report.html"))
         table1 = tables["Editing: retrieval of the edits (all)"]
         self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)",
+                                                      "another triplet's target as the edit (chance)",
                                                       "untrained MDT (initial weights)", "SimMotionEdit (MDT)"])
         sinc = tables["Composition: generated motions against the ground truth"]
         self.assertEqual([r[0] for r in sinc[2:]], ["ground truth", "shuffled ground truth (same length class)", "untrained SINC (initial weights)",
@@ -107,9 +108,10 @@ class RealDataTest(EngineTest):
         for stage in ("mdt-s2", "tmed-s2", "mdt_no_filter-s2", "eval_edit_mdm_bp-s2"):
             self.assertTrue(os.path.isdir(os.path.join(job, stage, "task-00000")), stage)
         table1 = tables["Editing: retrieval of the edits (all)"]
-        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)", "untrained MDT (initial weights)",
+        self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)",
+                                                      "another triplet's target as the edit (chance)", "untrained MDT (initial weights)",
                                                       "MDM", "MDM-BP", "TMED", "SimMotionEdit (MDT)", "w/o auxiliary loss", "w/o SNR filtering"])
-        self.assertEqual([r[1] for r in table1[5:]], ["2"] * 6)
+        self.assertEqual([r[1] for r in table1[6:]], ["2"] * 6)
         verdicts = {r[1]: r[2] for r in tables["Claims"][1:] if r[0] == "SimMotionEdit"}
         self.assertEqual(len(verdicts), 5)
         # Two seeds a side: never "holds"; either a model does not beat the untrained row or too few seeds.
