@@ -77,7 +77,7 @@ int main(int argc, char** argv) {
   const std::string shard_dir = corpus + "/bench_pairs";
   for (const int threads : {1, 2}) {
     const auto t = Clock::now();
-    auto report = sinc::SynthesiseShard(*mapped, options, 0, pairs, threads, shard_dir);
+    auto report = sinc::SynthesizeShard(*mapped, options, 0, pairs, threads, shard_dir);
     if (!report.ok()) {
       std::fprintf(stderr, "%s\n", report.status().message().c_str());
       return 1;

@@ -269,7 +269,7 @@ int RunInspect(const InspectArgs& a) {
 
 void AddInspect(CLI::App* data, int* exit_code) {
   auto* cmd =
-      data->add_subcommand("inspect", "Summarise a generated corpus (through the real loaders)");
+      data->add_subcommand("inspect", "Summarize a generated corpus (through the real loaders)");
   static InspectArgs a;
   cmd->add_option("dir", a.dir, "Corpus directory")->required()->check(CLI::ExistingDirectory);
   cmd->callback([exit_code] { *exit_code = RunInspect(a); });

@@ -145,7 +145,7 @@ struct Stat {
   int n = 0;
 };
 
-Stat Summarise(const std::vector<double>& values) {
+Stat Summarize(const std::vector<double>& values) {
   Stat s;
   s.n = static_cast<int>(values.size());
   if (s.n == 0) return s;
@@ -170,7 +170,7 @@ std::vector<double> Values(const Method& m, const std::string& pointer) {
   return values;
 }
 
-Stat Collect(const Method& m, const std::string& pointer) { return Summarise(Values(m, pointer)); }
+Stat Collect(const Method& m, const std::string& pointer) { return Summarize(Values(m, pointer)); }
 
 std::string Format(double value, int decimals) {
   char text[64];
@@ -317,14 +317,14 @@ ClaimCheck Compare(const std::string& paper, const std::string& claim, const Met
     out.detail = "no " + metric_name + " for one of the methods";
     return out;
   }
-  const Stat a = Summarise(a_values), b = Summarise(b_values);
+  const Stat a = Summarize(a_values), b = Summarize(b_values);
   const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
   const double se =
       std::sqrt((a.n > 1 ? a.sd * a.sd / a.n : 0) + (b.n > 1 ? b.sd * b.sd / b.n : 0));
   out.detail = metric_name + ": " + StatText(a, decimals) + " vs " + StatText(b, decimals) +
                "; difference " + Format(diff, decimals) + ", 2 standard errors " +
                Format(2 * se, decimals);
-  if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarise(u_values), decimals);
+  if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarize(u_values), decimals);
   switch (DecideClaim(a_values, b_values, u_values, higher_is_better)) {
     case ClaimVerdict::kHolds:
       out.verdict = "holds";
@@ -576,9 +576,9 @@ bool BeatsUntrained(const Stat& model, const Stat& untrained, bool higher_is_bet
 
 ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
                          const std::vector<double>& untrained, bool higher_is_better) {
-  const Stat a = Summarise(better), b = Summarise(worse);
+  const Stat a = Summarize(better), b = Summarize(worse);
   if (!untrained.empty()) {
-    const Stat u = Summarise(untrained);
+    const Stat u = Summarize(untrained);
     if (!BeatsUntrained(a, u, higher_is_better)) return ClaimVerdict::kBetterNotTrained;
     if (!BeatsUntrained(b, u, higher_is_better)) return ClaimVerdict::kWorseNotTrained;
   }

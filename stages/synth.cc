@@ -51,7 +51,7 @@ class SynthStage : public StageExecutor {
   }
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
-    if (ctx.spec.reduce()) return Summarise(ctx);
+    if (ctx.spec.reduce()) return Summarize(ctx);
     const std::string spans_path = FindSpans(ctx, p);
     if (spans_path.empty())
       return TaskReport::BadInput(
@@ -67,7 +67,7 @@ class SynthStage : public StageExecutor {
     const int64_t begin = static_cast<int64_t>(ctx.spec.index()) * shard_size;
     const int64_t count = std::min(shard_size, total - begin);
     if (count <= 0) return TaskReport::Ok();
-    auto report = sinc::SynthesiseShard(*table, *options, ctx.spec.index(), count, ctx.threads,
+    auto report = sinc::SynthesizeShard(*table, *options, ctx.spec.index(), count, ctx.threads,
                                         ctx.output_dir());
     if (!report.ok()) return TaskReport::FromStatus(report.status());
     // The spans file the recipes index, for loaders and exports.
@@ -86,7 +86,7 @@ class SynthStage : public StageExecutor {
   }
 
  private:
-  static TaskReport Summarise(TaskContext& ctx) {
+  static TaskReport Summarize(TaskContext& ctx) {
     int64_t pairs = 0, candidates = 0, bytes = 0;
     double seconds = 0;
     std::map<std::string, int64_t> dropped;

@@ -615,7 +615,7 @@ TEST(Editor, VelocityLossSeesJitterNotOffsets) {
   EXPECT_NEAR(VelocityMse(garbage, target, padding).item<double>(), 0.0, 1e-8);
 }
 
-TEST(Editor, RegressionModePredictsTheNormalisedCurve) {
+TEST(Editor, RegressionModePredictsTheNormalizedCurve) {
   EditorOptions o = Tiny("mdt", "regression");
   EXPECT_EQ(o.sim_outputs(), 1);
   // sigmoid(0) = 0.5 against S^N 0.5 and 1.0 on real frames with a curve; -1 = no curve.

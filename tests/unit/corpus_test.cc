@@ -443,7 +443,7 @@ TEST_F(CorpusTest, LabelsCarryGroundTruthParts) {
   EXPECT_GT(checked, 0);
 }
 
-TEST_F(CorpusTest, InspectSummarisesThroughTheLoaders) {
+TEST_F(CorpusTest, InspectSummarizesThroughTheLoaders) {
   auto report = InspectCorpus(*dir_);
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   EXPECT_EQ(report->clips, 90);

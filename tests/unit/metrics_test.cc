@@ -21,7 +21,7 @@ TEST(Retrieval, RanksCountHigherCandidatesAndAverageTies) {
                                  0.5, 0.6, 0.7, 0.0};
   const auto ranks = TrueMatchRanks(s, 4);
   EXPECT_EQ(ranks, (std::vector<double>{1, 2, 2.5, 4}));
-  const RetrievalScores r = Summarise(ranks);
+  const RetrievalScores r = Summarize(ranks);
   EXPECT_DOUBLE_EQ(r.r1, 25.0);
   EXPECT_DOUBLE_EQ(r.r2, 50.0);
   EXPECT_DOUBLE_EQ(r.r3, 75.0);

@@ -275,9 +275,9 @@ TEST(Synth, ShardsAreDeterministicAndIndependentOfThreads) {
   SynthOptions options;
   options.seed = 5;
   options.checks.max_skate_ratio = 1.5;  // the test motions slide their feet
-  auto one = SynthesiseShard(*mapped, options, 3, 300, 1, dir + "/one");
-  auto two = SynthesiseShard(*mapped, options, 3, 300, 2, dir + "/two");
-  auto other = SynthesiseShard(*mapped, options, 4, 300, 2, dir + "/other");
+  auto one = SynthesizeShard(*mapped, options, 3, 300, 1, dir + "/one");
+  auto two = SynthesizeShard(*mapped, options, 3, 300, 2, dir + "/two");
+  auto other = SynthesizeShard(*mapped, options, 4, 300, 2, dir + "/other");
   ASSERT_TRUE(one.ok() && two.ok() && other.ok()) << one.status().ToString();
   EXPECT_EQ(one->pairs, 300);
   EXPECT_EQ(*ReadFile(dir + "/one/pairs.npz"), *ReadFile(dir + "/two/pairs.npz"));
@@ -288,7 +288,7 @@ TEST(Synth, ShardsAreDeterministicAndIndependentOfThreads) {
   for (const PairRecipe& r : back->recipes) EXPECT_TRUE(Compatible(r.first_parts, r.second_parts));
   // Too strict checks fail the shard with a clear message instead of looping.
   options.checks.max_skate_ratio = -1;
-  auto strict = SynthesiseShard(*mapped, options, 0, 10, 1, dir + "/strict");
+  auto strict = SynthesizeShard(*mapped, options, 0, 10, 1, dir + "/strict");
   ASSERT_FALSE(strict.ok());
   EXPECT_NE(strict.status().message().find("passed the checks"), std::string::npos);
 }

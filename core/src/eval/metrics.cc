@@ -54,7 +54,7 @@ std::vector<double> TrueMatchRanks(const std::vector<double>& similarity, int64_
   return ranks;
 }
 
-RetrievalScores Summarise(const std::vector<double>& ranks) {
+RetrievalScores Summarize(const std::vector<double>& ranks) {
   RetrievalScores s;
   s.queries = static_cast<int64_t>(ranks.size());
   if (ranks.empty()) return s;
@@ -93,7 +93,7 @@ Result<RetrievalScores> Retrieval(const Embeddings& queries, const Embeddings& g
     const auto ranks = TrueMatchRanks(similarity, batch);
     all.insert(all.end(), ranks.begin(), ranks.end());
   }
-  return Summarise(all);
+  return Summarize(all);
 }
 
 namespace {

@@ -228,7 +228,7 @@ void Put16(std::string* out, int v) {
 
 // Palette index of a colour: the 6x6x6 cube (0..215) or, for near-greys, one of 40 greys
 // (216..255).
-uint8_t Quantise(uint8_t r, uint8_t g, uint8_t b) {
+uint8_t Quantize(uint8_t r, uint8_t g, uint8_t b) {
   const int hi = std::max({r, g, b}), lo = std::min({r, g, b});
   if (hi - lo < 12) return static_cast<uint8_t>(216 + std::min(39, (r + g + b) / 3 * 40 / 256));
   const auto level = [](int v) { return (v * 5 + 127) / 255; };
@@ -283,7 +283,7 @@ std::string EncodeGif(const std::vector<Image>& frames, int delay_cs) {
     std::vector<uint8_t> indices(static_cast<size_t>(w) * static_cast<size_t>(h));
     const auto& px = frame.pixels();
     for (size_t i = 0; i < indices.size(); ++i)
-      indices[i] = Quantise(px[3 * i], px[3 * i + 1], px[3 * i + 2]);
+      indices[i] = Quantize(px[3 * i], px[3 * i + 1], px[3 * i + 2]);
     GifLzw(&out).Encode(indices);
   }
   out.push_back(';');

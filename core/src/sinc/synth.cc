@@ -241,7 +241,7 @@ std::string MaterialiseText(const SpanTable& table, const PairRecipe& recipe) {
   return recipe.text_swapped ? PairText(b, a, pattern) : PairText(a, b, pattern);
 }
 
-Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOptions& options,
+Result<SynthShardReport> SynthesizeShard(const SpanTable& table, const SynthOptions& options,
                                          int64_t index, int64_t count, int threads,
                                          const std::string& out_dir) {
   const auto started = std::chrono::steady_clock::now();

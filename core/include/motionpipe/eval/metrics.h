@@ -36,7 +36,7 @@ struct RetrievalScores {
   double avg_rank = 0;
   int64_t queries = 0;
 };
-RetrievalScores Summarise(const std::vector<double>& ranks);
+RetrievalScores Summarize(const std::vector<double>& ranks);
 
 // Query i of `queries` should retrieve row i of `gallery`. batch <= 0: one batch of everything.
 // Otherwise a seeded shuffle split into batches of `batch` (the remainder dropped), ranks within

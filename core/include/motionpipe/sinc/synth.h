@@ -103,7 +103,7 @@ struct SynthShardReport {
 // Shard `index` of a synth run: `count` pairs from Rng(MixSeed(seed, index)), checked in parallel
 // batches but accepted in draw order, so the bytes do not depend on the thread count. Writes
 // pairs.npz (recipes) and stats.json into `out_dir`.
-Result<SynthShardReport> SynthesiseShard(const SpanTable& table, const SynthOptions& options,
+Result<SynthShardReport> SynthesizeShard(const SpanTable& table, const SynthOptions& options,
                                          int64_t index, int64_t count, int threads,
                                          const std::string& out_dir);
 
