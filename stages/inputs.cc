@@ -12,15 +12,6 @@ namespace motionpipe::stages {
 
 namespace fs = std::filesystem;
 
-std::vector<std::string> AllInputDirs(const TaskContext& ctx) {
-  std::vector<std::string> dirs;
-  for (const auto& input : ctx.spec.inputs()) {
-    if (!input.result_dir().empty()) dirs.push_back(input.result_dir());
-    for (const auto& d : input.dirs()) dirs.push_back(d);
-  }
-  return dirs;
-}
-
 std::vector<std::string> StringList(const json& v) {
   std::vector<std::string> out;
   if (v.is_string()) out.push_back(v.get<std::string>());

@@ -14,9 +14,6 @@
 
 namespace motionpipe::stages {
 
-// Every directory the task's inputs committed (results first).
-std::vector<std::string> AllInputDirs(const TaskContext& ctx);
-
 std::vector<std::string> StringList(const json& v);
 
 // The committed directories of `stage` (every input when empty): an input stage's, result first;

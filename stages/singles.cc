@@ -37,7 +37,7 @@ class SinglesStage : public StageExecutor {
     std::string amass_root = p.value("amass_root", std::string());
     if (babel.empty()) {  // a corpus from an input stage: DIR/babel/{train,val,test}.json, AMASS
                           // under DIR
-      for (const std::string& dir : AllInputDirs(ctx)) {
+      for (const std::string& dir : StageDirs(ctx, "")) {
         for (const char* split : {"train", "val", "test"}) {
           const std::string file = dir + "/babel/" + split + ".json";
           if (fs::exists(file)) babel.push_back(file);
@@ -73,7 +73,7 @@ class SinglesStage : public StageExecutor {
     const std::string labeler_name = p.value("labeler", std::string("lexicon"));
     json labeler_config = p.value("labeler_config", json::object());
     if (labeler_name == "learned" && !labeler_config.contains("model")) {
-      for (const std::string& dir : AllInputDirs(ctx)) {
+      for (const std::string& dir : StageDirs(ctx, "")) {
         if (fs::exists(dir + "/learned_labeler.pt")) labeler_config["model"] = dir;
       }
     }

@@ -17,7 +17,7 @@ namespace fs = std::filesystem;
 
 std::string FindSpans(const TaskContext& ctx, const json& p) {
   if (p.contains("spans")) return p["spans"].get<std::string>();
-  for (const std::string& dir : AllInputDirs(ctx)) {
+  for (const std::string& dir : StageDirs(ctx, "")) {
     if (fs::exists(dir + "/spans.npz")) return dir + "/spans.npz";
   }
   return "";
