@@ -7,6 +7,21 @@ namespace motionpipe::stages {
 
 namespace {
 
+// params.edit_kinds: the kinds of edit the triplets make (a list of corpus::EditKindName names);
+// every kind when absent.
+Result<corpus::EditKindSet> EditKinds(const nlohmann::json& params) {
+  const auto it = params.find("edit_kinds");
+  if (it == params.end()) return corpus::kEveryEditKind;
+  if (!it->is_array() || it->empty())
+    return InvalidArgument("a non-empty list of edit kinds, e.g. [side, amplitude]");
+  std::vector<std::string> names;
+  for (const auto& name : *it) {
+    if (!name.is_string()) return InvalidArgument("edit kinds are names, got " + name.dump());
+    names.push_back(name.get<std::string>());
+  }
+  return corpus::ParseEditKinds(names);
+}
+
 // The procedural corpus: each shard task generates its clips and triplets, the reduce task merges
 // them into one corpus directory (byte-identical to `motionpipe data synth-corpus`).
 class CorpusStage : public StageExecutor {
@@ -18,6 +33,8 @@ class CorpusStage : public StageExecutor {
     const int clips = IntParam(plan.params, "clips", 1000, 1, path, errors);
     const int triplets = IntParam(plan.params, "triplets", clips, 0, path, errors);
     const int shard_size = IntParam(plan.params, "shard_size", 500, 1, path, errors);
+    if (const auto kinds = EditKinds(plan.params); !kinds.ok())
+      errors->push_back(path + ".params.edit_kinds: " + kinds.status().message());
     plan.shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
     plan.reduce = true;
   }
@@ -36,6 +53,9 @@ class CorpusStage : public StageExecutor {
     options.triplet_joints = p.value("triplet_joints", true);
     options.script.min_seconds = p.value("min_seconds", options.script.min_seconds);
     options.script.max_seconds = p.value("max_seconds", options.script.max_seconds);
+    auto kinds = EditKinds(p);
+    if (!kinds.ok()) return TaskReport::FromStatus(kinds.status());
+    options.edit_kinds = *kinds;
     options.threads = ctx.threads;
     options.out_dir = ctx.output_dir();
     if (ctx.spec.reduce()) {

@@ -272,7 +272,9 @@ TEST(Edits, EveryKindOccursWithTextAndRange) {
   for (int i = 0; i < 300; ++i) {
     Rng rng(MixSeed(31, static_cast<uint64_t>(i)));
     const ClipScript source = SampleScript(rng, {}, "s");
-    const Edit edit = SampleEdit(source, rng);
+    const std::optional<Edit> drawn = SampleEdit(source, rng);
+    ASSERT_TRUE(drawn.has_value());  // with every kind, some edit always applies
+    const Edit& edit = *drawn;
     kinds.insert(EditKindName(edit.kind));
     EXPECT_FALSE(edit.text.empty());
     EXPECT_EQ(edit.text.find('{'), std::string::npos) << edit.text;
@@ -283,6 +285,50 @@ TEST(Edits, EveryKindOccursWithTextAndRange) {
       EXPECT_NEAR(edit.target.base[k].start, edit.target.base[k - 1].end, 1e-9);
   }
   EXPECT_EQ(kinds.size(), static_cast<size_t>(EditKind::kCount));
+}
+
+TEST(Edits, KindsAskedForAreTheOnlyKindsMade) {
+  const auto side = ParseEditKinds({"side"});
+  ASSERT_TRUE(side.ok());
+  EXPECT_EQ(ParseEditKinds({}).value(), kEveryEditKind);
+  EXPECT_EQ(EditKindNames(*side), std::vector<std::string>{"side"});
+  const auto bad = ParseEditKinds({"side", "mirror"});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("'mirror'"), std::string::npos);
+  EXPECT_NE(bad.status().message().find("replace_base"), std::string::npos);  // lists the known
+  int made = 0, none = 0;
+  for (int i = 0; i < 200; ++i) {
+    Rng rng(MixSeed(37, static_cast<uint64_t>(i)));
+    const ClipScript source = SampleScript(rng, {}, "s");
+    const std::optional<Edit> edit = SampleEdit(source, rng, *side);
+    if (!edit) {
+      ++none;
+      continue;
+    }
+    ++made;
+    EXPECT_EQ(edit->kind, EditKind::kSide) << edit->text;
+  }
+  EXPECT_GT(made, 20);  // side edits apply to many scripts, not to all
+  EXPECT_GT(none, 0);
+}
+
+TEST(Corpus, EditKindsRestrictTheTriplets) {
+  const std::string root = testing::TempDir() + "/corpus_kinds";
+  std::filesystem::remove_all(root);
+  CorpusOptions options;
+  options.clips = 4, options.triplets = 24, options.shard_size = 24, options.write_amass = false;
+  options.out_dir = root + "/every";
+  ASSERT_TRUE(GenerateCorpus(options).ok());
+  CorpusOptions amplitude = options;
+  amplitude.edit_kinds = ParseEditKinds({"amplitude"}).value();
+  amplitude.out_dir = root + "/amplitude";
+  ASSERT_TRUE(GenerateCorpus(amplitude).ok());
+  const auto manifest = nlohmann::json::parse(*ReadFile(root + "/amplitude/manifest.json"));
+  EXPECT_EQ(manifest["edit_kinds"], (nlohmann::json{{"amplitude", 24}}));
+  EXPECT_EQ(manifest["edit_kinds_asked"], (nlohmann::json{"amplitude"}));
+  EXPECT_FALSE(
+      nlohmann::json::parse(*ReadFile(root + "/every/manifest.json")).contains("edit_kinds_asked"));
+  std::filesystem::remove_all(root);
 }
 
 class CorpusTest : public ::testing::Test {

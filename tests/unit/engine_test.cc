@@ -81,6 +81,16 @@ TEST(Pipeline, ParsesPlansAndOrdersStages) {
   ASSERT_TRUE(corpus.ok());
   EXPECT_EQ(corpus->stages[0].shards, 3);
   EXPECT_TRUE(corpus->stages[0].reduce);
+  // An edit kind the corpus does not make is a planning error that names the stage and the kind.
+  auto kinds = ParsePipeline(
+      "name: c\nstages:\n  corpus: {kind: corpus, params: {clips: 10, edit_kinds: [side, "
+      "mirror]}}\n",
+      {}, "c.yaml", Kinds());
+  ASSERT_FALSE(kinds.ok());
+  EXPECT_NE(kinds.status().message().find("stages.corpus.params.edit_kinds: unknown edit kind "
+                                          "'mirror'"),
+            std::string::npos)
+      << kinds.status().message();
 }
 
 // Long-running kinds get a 6 h lease unless the YAML sets one, even one equal to the 1 h default

@@ -194,7 +194,12 @@ GeneratedClip MakeClip(const CorpusOptions& options, int64_t index) {
 struct GeneratedTriplet {
   Triplet triplet;
   int64_t rejected = 0;
+  std::string error;  // set when the edit kinds asked for admit no triplet
 };
+
+// Scripts drawn for one triplet before giving up on the edit kinds asked for (the rarest kind,
+// timing, applies to about one script in five).
+constexpr int kMaxEditDraws = 1000;
 
 GeneratedTriplet MakeTriplet(const CorpusOptions& options, int64_t index) {
   GeneratedTriplet out;
@@ -205,8 +210,18 @@ GeneratedTriplet MakeTriplet(const CorpusOptions& options, int64_t index) {
   Triplet& t = out.triplet;
   for (int attempt = 0; attempt < options.gate.max_attempts; ++attempt) {
     Rng rng(MixSeed(base_seed, static_cast<uint64_t>(attempt)));
-    const ClipScript source = SampleScript(rng, options.script, id);
-    const Edit edit = SampleEdit(source, rng);
+    ClipScript source = SampleScript(rng, options.script, id);
+    std::optional<Edit> drawn = SampleEdit(source, rng, options.edit_kinds);
+    for (int draw = 1; !drawn; ++draw) {  // only with fewer kinds than every kind
+      if (draw == kMaxEditDraws) {
+        out.error = "no script of " + std::to_string(kMaxEditDraws) + " drawn for triplet " + id +
+                    " admits the edit kinds asked for";
+        return out;
+      }
+      source = SampleScript(rng, options.script, id);
+      drawn = SampleEdit(source, rng, options.edit_kinds);
+    }
+    const Edit& edit = *drawn;
     const Synthesis a = Synthesize(source, skeleton);
     const Synthesis b = Synthesize(edit.target, skeleton);
     t.source = a.motion;
@@ -320,6 +335,7 @@ Status GenerateCorpusShard(const CorpusOptions& options, int64_t index, const st
       generated[static_cast<size_t>(k)] = MakeTriplet(opts, triplet_begin + k);
     std::vector<Triplet> triplets;
     for (GeneratedTriplet& g : generated) {
+      if (!g.error.empty()) return InvalidArgument("corpus: " + g.error);
       rejected += g.rejected;
       triplet_frames += g.triplet.source.num_frames() + g.triplet.target.num_frames();
       triplet_splits[g.triplet.split].push_back(g.triplet.id);
@@ -452,6 +468,8 @@ Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options,
                              {"shard_size", options.shard_size},
                              {"vocabulary", Vocabulary().size()},
                              {"files", manifest_files}};
+  if (options.edit_kinds != kEveryEditKind)
+    manifest["edit_kinds_asked"] = EditKindNames(options.edit_kinds);
   MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/manifest.json", manifest.dump(1) + "\n"));
   return summary;
 }

@@ -522,15 +522,44 @@ const char* EditKindName(EditKind kind) {
   return "unknown";
 }
 
-Edit SampleEdit(const ClipScript& source, Rng& rng) {
+Result<EditKindSet> ParseEditKinds(const std::vector<std::string>& names) {
+  if (names.empty()) return kEveryEditKind;
+  EditKindSet set = 0;
+  for (const std::string& name : names) {
+    bool found = false;
+    std::string known;
+    for (int k = 0; k < static_cast<int>(EditKind::kCount); ++k) {
+      const char* kind_name = EditKindName(static_cast<EditKind>(k));
+      known += std::string(known.empty() ? "" : ", ") + kind_name;
+      if (name == kind_name) set |= 1u << k, found = true;
+    }
+    if (!found) return InvalidArgument("unknown edit kind '" + name + "' (known: " + known + ")");
+  }
+  return set;
+}
+
+std::vector<std::string> EditKindNames(EditKindSet kinds) {
+  std::vector<std::string> names;
+  for (int k = 0; k < static_cast<int>(EditKind::kCount); ++k) {
+    if (kinds & (1u << k)) names.emplace_back(EditKindName(static_cast<EditKind>(k)));
+  }
+  return names;
+}
+
+std::optional<Edit> SampleEdit(const ClipScript& source, Rng& rng, EditKindSet kinds) {
   // Every edit that applies to this script, then one of them at random.
   const std::vector<Candidate> candidates = Candidates(source);
   // Choose the kind of edit first (so that kinds with many candidate actions do not dominate), then
   // the action it applies to.
   static const double kKindWeight[] = {1.0, 1.2, 1.0, 1.2, 1.0, 0.8, 0.8, 0.6, 0.8, 0.4};
   std::vector<double> weights(static_cast<size_t>(EditKind::kCount), 0.0);
-  for (const Candidate& c : candidates)
+  bool any = false;
+  for (const Candidate& c : candidates) {
+    if (!(kinds & (1u << static_cast<int>(c.kind)))) continue;
     weights[static_cast<size_t>(c.kind)] = kKindWeight[static_cast<size_t>(c.kind)];
+    any = true;
+  }
+  if (!any) return std::nullopt;
   const auto chosen = static_cast<EditKind>(rng.Weighted(weights));
   std::vector<Candidate> of_kind;
   for (const Candidate& c : candidates) {
@@ -558,6 +587,7 @@ Edit SampleEdit(const ClipScript& source, Rng& rng) {
     RetextInstance(&inst, rng);
   }
   t.duration = t.base.back().end;
+  if (!(kinds & (1u << static_cast<int>(edit.kind)))) return std::nullopt;
   return edit;
 }
 

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "motionpipe/base/status.h"
+#include "motionpipe/corpus/edits.h"
 #include "motionpipe/corpus/script.h"
 
 namespace motionpipe::corpus {
@@ -44,6 +45,10 @@ struct CorpusOptions {
   bool write_amass = true;     // per-clip AMASS npz files (many small files)
   ScriptOptions script;
   PlausibilityGate gate;
+  // The edits the triplets may make (ParseEditKinds); a script none of them applies to is drawn
+  // again. Every kind, the default, gives the same triplets as before the option existed. Fewer
+  // kinds are for experiments (issue 15: can an editor learn one kind of edit?), not a corpus.
+  EditKindSet edit_kinds = kEveryEditKind;
 };
 
 struct CorpusSummary {

@@ -4,8 +4,12 @@
 // closely but never bit-exactly, as with a real actor.
 #pragma once
 
+#include <cstdint>
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "motionpipe/base/status.h"
 #include "motionpipe/corpus/script.h"
 
 namespace motionpipe::corpus {
@@ -25,6 +29,14 @@ enum class EditKind {
 };
 const char* EditKindName(EditKind kind);
 
+// A set of edit kinds, bit (1 << kind); every kind is the corpus's default.
+using EditKindSet = uint32_t;
+inline constexpr EditKindSet kEveryEditKind = (1u << static_cast<int>(EditKind::kCount)) - 1;
+// Names as EditKindName prints them; an unknown name is an error that lists the known ones. An
+// empty list is every kind.
+Result<EditKindSet> ParseEditKinds(const std::vector<std::string>& names);
+std::vector<std::string> EditKindNames(EditKindSet kinds);
+
 struct Edit {
   EditKind kind = EditKind::kSpeed;
   ClipScript target;
@@ -33,7 +45,11 @@ struct Edit {
   double edit_end = 0;
 };
 
-// Picks an edit that applies to `source` and performs it. Deterministic for the rng state.
-Edit SampleEdit(const ClipScript& source, Rng& rng);
+// Picks an edit of one of `kinds` that applies to `source` and performs it; nothing when no edit of
+// those kinds applies, or when the one picked fell back to a kind outside them (an edit that cannot
+// be performed as drawn becomes another kind). Deterministic for the rng state; with every kind it
+// always returns an edit (a posture edit applies to every script).
+std::optional<Edit> SampleEdit(const ClipScript& source, Rng& rng,
+                               EditKindSet kinds = kEveryEditKind);
 
 }  // namespace motionpipe::corpus
