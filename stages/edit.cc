@@ -3,8 +3,11 @@
 // a clip file per task.
 //
 // params: model (the input stage holding the checkpoint; default: the input that has one),
-//   split (test), limit (0 = all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed,
-//   body_parts (MDM-BP), options (merged into the generator's configuration)
+//   triplets (an input stage or a path pattern; default: every input), split (test), limit (0 =
+//   all), batch (8), sampler (ddpm | ddim), steps (DDIM steps), seed, body_parts (MDM-BP), options
+//   (merged into the generator's configuration), length (target: each edit has its target's number
+//   of frames, as the authors' evaluation generates at length_target; source: the source's; MDM-BP
+//   keeps the source's timing either way)
 #include <algorithm>
 #include <filesystem>
 
@@ -28,12 +31,15 @@ class EditStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     if (!plan.shards_set) plan.shards = 2;
     plan.reduce = false;
-    if (plan.inputs.empty())
+    if (plan.inputs.empty() && !(plan.params.contains("model") && plan.params.contains("triplets")))
       errors->push_back(path +
                         ": needs inputs: the train stage of the editor and a stage with triplets");
+    CheckInputParams(plan, path, {"model", "triplets"}, errors);
     const auto& p = plan.params;
     if (p.contains("sampler") && p["sampler"] != "ddpm" && p["sampler"] != "ddim")
       errors->push_back(path + ".params.sampler: ddpm or ddim");
+    if (p.contains("length") && p["length"] != "target" && p["length"] != "source")
+      errors->push_back(path + ".params.length: target or source");
     LongLease(plan);
   }
   explicit EditStage(const PluginHost* plugins) : plugins_(plugins) {}
@@ -53,6 +59,7 @@ class EditStage : public StageExecutor {
     const std::string split = p.value("split", std::string("test"));
     const int64_t limit = p.value("limit", int64_t{0});
     const int batch_size = std::max(1, p.value("batch", 8));
+    const bool target_length = p.value("length", std::string("target")) == "target";
     // Every triplet of the split, in file and row order; this task takes every count-th one.
     struct Item {
       size_t file;
@@ -60,7 +67,7 @@ class EditStage : public StageExecutor {
     };
     std::vector<TripletColumns> files;
     std::vector<Item> items;
-    for (const std::string& path : TripletFiles(ctx)) {
+    for (const std::string& path : TripletFiles(ctx, p.value("triplets", std::string()))) {
       auto columns = ReadTripletColumns(path, {0, -1, true, false});
       if (!columns.ok()) return TaskReport::BadInput(columns.status().message());
       for (int64_t r = 0; r < columns->rows; ++r) {
@@ -113,6 +120,10 @@ class EditStage : public StageExecutor {
         r.seed = MixSeed(ctx.spec.seed(), place[k]);
         r.sampler = p.value("sampler", std::string("ddpm"));
         r.steps = p.value("steps", 0);
+        if (target_length) {
+          const auto& o = c.target.offsets;
+          r.frames = o[static_cast<size_t>(mine[k].row) + 1] - o[static_cast<size_t>(mine[k].row)];
+        }
         requests.push_back(r);
       }
       auto edited = (*generator)->GenerateBatch(requests);

@@ -195,7 +195,8 @@ class EditTest(EngineTest):
         self.assertIn("aux", header)  # the similarity task trained on the filter's classes
         self.assertIn("aux_accuracy", header)
 
-        # The edit stage: 3 test triplets over 2 tasks, each edit as long as its source, finite.
+        # The edit stage: 3 test triplets over 2 tasks, each edit as long as its target (the authors'
+        # evaluation generates at length_target), finite.
         edited = {}
         for path in sorted(glob.glob(os.path.join(job, "edit_mdt", "task-*", "edited.npz"))):
             with np.load(path) as z:
@@ -204,13 +205,13 @@ class EditTest(EngineTest):
                     edited[str(clip)] = z["poses"][a:b]
                     self.assertTrue(np.isfinite(z["poses"][a:b]).all())
         self.assertEqual(len(edited), 3)
-        sources = {}
+        targets = {}
         for path in glob.glob(os.path.join(job, "corpus", "result", "motionfix", "triplets-*.npz")):
             with np.load(path) as z:
                 for i, tid in enumerate(z["ids"]):
-                    sources[str(tid)] = z["source_offsets"][i + 1] - z["source_offsets"][i]
+                    targets[str(tid)] = z["target_offsets"][i + 1] - z["target_offsets"][i]
         for tid, poses in edited.items():
-            self.assertEqual(poses.shape, (sources[tid], 22, 3), tid)
+            self.assertEqual(poses.shape, (targets[tid], 22, 3), tid)
 
         # eval_edit: retrieval of the 3 edits against their targets and sources, plausibility.
         with open(os.path.join(job, "eval_mdt", "task-00000", "metrics.json")) as f:
