@@ -24,6 +24,48 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// The triplets of a split that one edit task takes: every count-th of the split (in file and row
+// order, after `limit`), each with its place in the split (its sampling seed, whatever the
+// batching), longest source first so that a batch is padded little.
+struct TaskTriplets {
+  struct Item {
+    size_t file;
+    int64_t row;
+  };
+  std::vector<TripletColumns> files;
+  std::vector<Item> items;
+  std::vector<uint64_t> place;
+};
+
+Result<TaskTriplets> TasksTriplets(const TaskContext& ctx, const std::string& stage,
+                                   const std::string& split, int64_t limit) {
+  TaskTriplets out;
+  std::vector<TaskTriplets::Item> all;
+  for (const std::string& path : TripletFiles(ctx, stage)) {
+    MP_ASSIGN_OR_RETURN(auto columns, ReadTripletColumns(path, {0, -1, true, false}));
+    for (int64_t r = 0; r < columns.rows; ++r) {
+      if (columns.splits[static_cast<size_t>(r)] == split) all.push_back({out.files.size(), r});
+    }
+    out.files.push_back(std::move(columns));
+  }
+  if (all.empty())
+    return InvalidArgument("edit: no triplets of split '" + split + "' in the inputs");
+  if (limit > 0 && static_cast<int64_t>(all.size()) > limit) all.resize(static_cast<size_t>(limit));
+  std::vector<size_t> mine;
+  for (size_t k = static_cast<size_t>(ctx.spec.index()); k < all.size();
+       k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
+    mine.push_back(k);
+  }
+  const auto length = [&](size_t k) {
+    const auto& o = out.files[all[k].file].source.offsets;
+    return o[all[k].row + 1] - o[all[k].row];
+  };
+  std::stable_sort(mine.begin(), mine.end(),
+                   [&](size_t a, size_t b) { return length(a) > length(b); });
+  for (size_t k : mine) out.items.push_back(all[k]), out.place.push_back(k);
+  return out;
+}
+
 class EditStage : public StageExecutor {
  public:
   // `shards` tasks (default 2), each every count-th triplet of the test split.
@@ -60,49 +102,11 @@ class EditStage : public StageExecutor {
     const int64_t limit = p.value("limit", int64_t{0});
     const int batch_size = std::max(1, p.value("batch", 8));
     const bool target_length = p.value("length", std::string("target")) == "target";
-    // Every triplet of the split, in file and row order; this task takes every count-th one.
-    struct Item {
-      size_t file;
-      int64_t row;
-    };
-    std::vector<TripletColumns> files;
-    std::vector<Item> items;
-    for (const std::string& path : TripletFiles(ctx, p.value("triplets", std::string()))) {
-      auto columns = ReadTripletColumns(path, {0, -1, true, false});
-      if (!columns.ok()) return TaskReport::BadInput(columns.status().message());
-      for (int64_t r = 0; r < columns->rows; ++r) {
-        if (columns->splits[static_cast<size_t>(r)] == split) items.push_back({files.size(), r});
-      }
-      files.push_back(std::move(*columns));
-    }
-    if (items.empty())
-      return TaskReport::BadInput("edit: no triplets of split '" + split + "' in the inputs");
-    if (limit > 0 && static_cast<int64_t>(items.size()) > limit)
-      items.resize(static_cast<size_t>(limit));
-    std::vector<Item> mine;
-    std::vector<uint64_t>
-        place;  // each item's place in the split: its sampling seed, whatever the batching
-    for (size_t k = static_cast<size_t>(ctx.spec.index()); k < items.size();
-         k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
-      mine.push_back(items[k]);
-      place.push_back(k);
-    }
-    // Batches of similar lengths: a batch is padded to its longest source.
-    std::vector<size_t> order(mine.size());
-    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-    const auto length = [&](size_t k) {
-      const auto& o = files[mine[k].file].source.offsets;
-      return o[mine[k].row + 1] - o[mine[k].row];
-    };
-    std::stable_sort(order.begin(), order.end(),
-                     [&](size_t a, size_t b) { return length(a) > length(b); });
-    {
-      std::vector<Item> sorted_items;
-      std::vector<uint64_t> sorted_places;
-      for (size_t k : order) sorted_items.push_back(mine[k]), sorted_places.push_back(place[k]);
-      mine = std::move(sorted_items);
-      place = std::move(sorted_places);
-    }
+    auto triplets = TasksTriplets(ctx, p.value("triplets", std::string()), split, limit);
+    if (!triplets.ok()) return TaskReport::BadInput(triplets.status().message());
+    const std::vector<TripletColumns>& files = triplets->files;
+    const std::vector<TaskTriplets::Item>& mine = triplets->items;
+    const std::vector<uint64_t>& place = triplets->place;
     std::vector<Clip> clips;
     const auto started = std::chrono::steady_clock::now();
     for (size_t at = 0; at < mine.size(); at += static_cast<size_t>(batch_size)) {
