@@ -197,8 +197,8 @@ struct GeneratedTriplet {
   std::string error;  // set when the edit kinds asked for admit no triplet
 };
 
-// Scripts drawn for one triplet before giving up on the edit kinds asked for (the rarest kind,
-// timing, applies to about one script in five).
+// Scripts drawn for one triplet before giving up on the edit kinds asked for: a bound, so that a
+// kind no script admits is an error, not an endless loop.
 constexpr int kMaxEditDraws = 1000;
 
 GeneratedTriplet MakeTriplet(const CorpusOptions& options, int64_t index) {

@@ -541,7 +541,8 @@ Result<EditKindSet> ParseEditKinds(const std::vector<std::string>& names) {
 std::vector<std::string> EditKindNames(EditKindSet kinds) {
   std::vector<std::string> names;
   for (int k = 0; k < static_cast<int>(EditKind::kCount); ++k) {
-    if (kinds & (1u << k)) names.emplace_back(EditKindName(static_cast<EditKind>(k)));
+    if (Contains(kinds, static_cast<EditKind>(k)))
+      names.emplace_back(EditKindName(static_cast<EditKind>(k)));
   }
   return names;
 }
@@ -555,7 +556,7 @@ std::optional<Edit> SampleEdit(const ClipScript& source, Rng& rng, EditKindSet k
   std::vector<double> weights(static_cast<size_t>(EditKind::kCount), 0.0);
   bool any = false;
   for (const Candidate& c : candidates) {
-    if (!(kinds & (1u << static_cast<int>(c.kind)))) continue;
+    if (!Contains(kinds, c.kind)) continue;
     weights[static_cast<size_t>(c.kind)] = kKindWeight[static_cast<size_t>(c.kind)];
     any = true;
   }
@@ -587,7 +588,7 @@ std::optional<Edit> SampleEdit(const ClipScript& source, Rng& rng, EditKindSet k
     RetextInstance(&inst, rng);
   }
   t.duration = t.base.back().end;
-  if (!(kinds & (1u << static_cast<int>(edit.kind)))) return std::nullopt;
+  if (!Contains(kinds, edit.kind)) return std::nullopt;
   return edit;
 }
 

@@ -32,6 +32,9 @@ const char* EditKindName(EditKind kind);
 // A set of edit kinds, bit (1 << kind); every kind is the corpus's default.
 using EditKindSet = uint32_t;
 inline constexpr EditKindSet kEveryEditKind = (1u << static_cast<int>(EditKind::kCount)) - 1;
+inline bool Contains(EditKindSet kinds, EditKind kind) {
+  return (kinds & (1u << static_cast<int>(kind))) != 0;
+}
 // Names as EditKindName prints them; an unknown name is an error that lists the known ones. An
 // empty list is every kind.
 Result<EditKindSet> ParseEditKinds(const std::vector<std::string>& names);
