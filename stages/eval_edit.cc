@@ -2,6 +2,7 @@
 // retrieval generated-to-target and generated-to-source (SimMotionEdit Table 1), beside the
 // yardsticks, and the physical plausibility of the edits and of the targets.
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <map>
 
@@ -21,7 +22,9 @@ namespace fs = std::filesystem;
 
 // Retrieval of edits `g` among the targets and among the sources (batches and all), and how far the
 // edits move towards their targets: generated-to-target minus generated-to-source R@1 (the copy of
-// the source scores about -(target-to-source R@1), the target itself about +that).
+// the source scores about -(target-to-source R@1), the target itself about +that), with its
+// standard error over the edits (paired per edit: one evaluation's sampling error; seeds add
+// theirs).
 Result<json> EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t,
                            const eval::Embeddings& s, int64_t batch, uint64_t seed) {
   json out;
@@ -31,7 +34,8 @@ Result<json> EditRetrieval(const eval::Embeddings& g, const eval::Embeddings& t,
     MP_ASSIGN_OR_RETURN(const auto to_source, eval::Retrieval(g, s, b, seed));
     out["generated_to_target"][protocol] = ScoresJson(to_target);
     out["generated_to_source"][protocol] = ScoresJson(to_source);
-    out["towards_target"][protocol] = {{"R@1", to_target.r1 - to_source.r1}};
+    const eval::PairedDifference towards = eval::PairedR1Difference(to_target, to_source);
+    out["towards_target"][protocol] = {{"R@1", towards.value}, {"se", towards.standard_error}};
   }
   return out;
 }
@@ -49,8 +53,10 @@ json CloserToTarget(const std::vector<std::vector<float>>& g,
     double to_target = 0, to_source = 0;
     json Json() const {
       const double d = static_cast<double>(std::max<int64_t>(1, n));
+      const double fraction = static_cast<double>(closer) / d;
       return {{"triplets", n},
-              {"fraction", static_cast<double>(closer) / d},
+              {"fraction", fraction},
+              {"fraction_se", std::sqrt(fraction * (1 - fraction) / d)},  // binomial
               {"cos_to_target", to_target / d},
               {"cos_to_source", to_source / d}};
     }

@@ -245,6 +245,14 @@ class EditTest(EngineTest):
         for row in (metrics, copy, target):
             self.assertAlmostEqual(row["towards_target"]["all"]["R@1"],
                                    row["generated_to_target"]["all"]["R@1"] - row["generated_to_source"]["all"]["R@1"])
+            # Its standard error over the 3 edits (paired per edit); 0 only when every edit agrees.
+            self.assertGreaterEqual(row["towards_target"]["all"]["se"], 0)
+        # The target as the edit finds its target and, unless its source ranks first, not its source:
+        # the paired differences are 0 or 100.
+        ranks_to_source = target["generated_to_source"]["all"]["R@1"] / 100 * 3
+        if 0 < ranks_to_source < 3:
+            self.assertGreater(target["towards_target"]["all"]["se"], 0)
+        self.assertIn("fraction_se", closer)
         # The history got this run's metrics with the hashes, and the AvgR regression is reported.
         self.assertEqual([r["metric"] for r in metrics["regressions"]], ["generated_to_target.all.AvgR"])
         self.assertEqual(metrics["regressions"][0]["best_checkpoint"], "an-old-checkpoint")

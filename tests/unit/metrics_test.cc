@@ -3,8 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <random>
 
 #include "metric_history.h"
@@ -53,6 +55,30 @@ TEST(Retrieval, IdenticalEmbeddingsAreFoundFirstAndBatchesDropTheRemainder) {
   const RetrievalScores chance = *Retrieval(Random(640, 8, 3), y, 32, 5);
   EXPECT_NEAR(chance.avg_rank, 16.5, 1.5);
   EXPECT_DOUBLE_EQ(Retrieval(Random(640, 8, 3), y, 32, 5).value().avg_rank, chance.avg_rank);
+}
+
+TEST(Retrieval, PairedR1DifferencePairsTheSameQueriesAndGivesItsStandardError) {
+  // By hand: query 3 is left out of a; the pairs (1, 2), (1, 1), (2, 1) differ by +100, 0, -100.
+  RetrievalScores a, b;
+  const double left_out = std::numeric_limits<double>::quiet_NaN();
+  a.rank_of_query = {1, 1, 2, left_out};
+  b.rank_of_query = {2, 1, 1, 1};
+  PairedDifference d = PairedR1Difference(a, b);
+  EXPECT_EQ(d.queries, 3);
+  EXPECT_DOUBLE_EQ(d.value, 0);
+  EXPECT_NEAR(d.standard_error, 100 / std::sqrt(3.0), 1e-9);  // sd 100 over sqrt(3)
+  // Two retrievals with the same batch and seed: the same 64 of 70 queries, ranked by query index.
+  const Embeddings x = Random(70, 8, 1), y = Random(70, 8, 2);
+  const RetrievalScores same = *Retrieval(x, x, 32, 7), other = *Retrieval(x, y, 32, 7);
+  ASSERT_EQ(same.rank_of_query.size(), 70U);
+  EXPECT_EQ(std::count_if(same.rank_of_query.begin(), same.rank_of_query.end(),
+                          [](double r) { return std::isnan(r); }),
+            6);
+  d = PairedR1Difference(same, other);
+  EXPECT_EQ(d.queries, 64);
+  EXPECT_NEAR(d.value, same.r1 - other.r1, 1e-9);
+  const double p = other.r1 / 100;  // the differences are 100 (1 - [b's rank is 1])
+  EXPECT_NEAR(d.standard_error, 100 * std::sqrt(p * (1 - p) * 64 / 63 / 64), 1e-9);
 }
 
 TEST(PositionErrors, ApeAndAveOfHandMadeMotions) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 
@@ -82,6 +83,8 @@ Result<RetrievalScores> Retrieval(const Embeddings& queries, const Embeddings& g
   else
     std::shuffle(order.begin(), order.end(), std::mt19937_64(seed));
   std::vector<double> all;
+  std::vector<double> rank_of_query(static_cast<size_t>(queries.n),
+                                    std::numeric_limits<double>::quiet_NaN());
   for (int64_t start = 0; start + batch <= queries.n; start += batch) {
     Embeddings q{batch, queries.d, {}}, g{batch, gallery.d, {}};
     for (int64_t k = 0; k < batch; ++k) {
@@ -92,8 +95,33 @@ Result<RetrievalScores> Retrieval(const Embeddings& queries, const Embeddings& g
     MP_ASSIGN_OR_RETURN(const auto similarity, CosineSimilarity(q, g));
     const auto ranks = TrueMatchRanks(similarity, batch);
     all.insert(all.end(), ranks.begin(), ranks.end());
+    for (int64_t k = 0; k < batch; ++k)
+      rank_of_query[static_cast<size_t>(order[static_cast<size_t>(start + k)])] =
+          ranks[static_cast<size_t>(k)];
   }
-  return Summarize(all);
+  RetrievalScores scores = Summarize(all);
+  scores.rank_of_query = std::move(rank_of_query);
+  return scores;
+}
+
+PairedDifference PairedR1Difference(const RetrievalScores& a, const RetrievalScores& b) {
+  PairedDifference out;
+  const size_t n = std::min(a.rank_of_query.size(), b.rank_of_query.size());
+  double sum = 0, squares = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const double ra = a.rank_of_query[i], rb = b.rank_of_query[i];
+    if (std::isnan(ra) || std::isnan(rb)) continue;
+    const double d = 100.0 * ((ra <= 1 ? 1.0 : 0.0) - (rb <= 1 ? 1.0 : 0.0));
+    sum += d, squares += d * d;
+    ++out.queries;
+  }
+  if (out.queries == 0) return out;
+  const double q = static_cast<double>(out.queries);
+  out.value = sum / q;
+  // The sample standard deviation of the differences over sqrt(queries).
+  if (out.queries > 1)
+    out.standard_error = std::sqrt(std::max(0.0, (squares - sum * sum / q) / (q - 1)) / q);
+  return out;
 }
 
 namespace {

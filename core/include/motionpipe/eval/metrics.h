@@ -35,8 +35,22 @@ struct RetrievalScores {
   double r1 = 0, r2 = 0, r3 = 0;  // percent of queries whose rank is <= k
   double avg_rank = 0;
   int64_t queries = 0;
+  // Retrieval only: each query's rank by its index, NaN for a query left out (the remainder
+  // dropped by batching); two retrievals of the same queries with the same batch and seed score
+  // the same queries in the same batches, so their ranks pair up query by query.
+  std::vector<double> rank_of_query;
 };
 RetrievalScores Summarize(const std::vector<double>& ranks);
+
+// The difference of two R@1 (percent) over the same queries, a.r1 - b.r1, and its standard error
+// as a mean of per-query differences [rank_a = 1] - [rank_b = 1] (paired: the queries scored in
+// both). E.g. how far edits move towards their targets: generated-to-target against
+// generated-to-source.
+struct PairedDifference {
+  double value = 0, standard_error = 0;
+  int64_t queries = 0;
+};
+PairedDifference PairedR1Difference(const RetrievalScores& a, const RetrievalScores& b);
 
 // Query i of `queries` should retrieve row i of `gallery`. batch <= 0: one batch of everything.
 // Otherwise a seeded shuffle split into batches of `batch` (the remainder dropped), ranks within
