@@ -1,5 +1,6 @@
 #include "diffusion.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace motionpipe::mdt {
@@ -146,6 +147,14 @@ torch::Tensor TimestepEmbedding(const torch::Tensor& t, int64_t dim) {
   auto emb = torch::cat({torch::cos(args), torch::sin(args)}, 1);
   if (dim % 2) emb = torch::cat({emb, torch::zeros({t.size(0), 1})}, 1);
   return emb;
+}
+
+int64_t SampleTrainingStep(int64_t steps, double power, torch::Generator generator) {
+  if (power == 0) return torch::randint(steps, {1}, generator).item<int64_t>();
+  const double u = torch::rand({1}, generator, torch::kFloat64).item<double>();
+  const auto t =
+      static_cast<int64_t>(std::floor(static_cast<double>(steps) * std::pow(u, 1 / (power + 1))));
+  return std::clamp<int64_t>(t, 0, steps - 1);
 }
 
 }  // namespace motionpipe::mdt

@@ -49,6 +49,14 @@ class CosineSchedule {
   std::vector<double> betas_, alpha_bar_, posterior_variance_, coef_x0_, coef_xt_;
 };
 
+// A training example's diffusion step. power 0: uniform over [0, steps) (the reference; the same
+// draw as torch::randint). power k > 0: density proportional to (t + 1/2)^k, drawn as
+// floor(steps u^(1 / (k + 1))) from one uniform u, so that more of the training lands on the noisy
+// steps, where the source prior's edit is decided by the text (issue 15: text and source move the
+// estimate only at t >= 250 of 300); not in the paper, a loss weighting over steps as EDM's and
+// SD3's step densities are.
+int64_t SampleTrainingStep(int64_t steps, double power, torch::Generator generator);
+
 // The model's x0 prediction at step t for the current x_t (guidance already applied).
 using Denoise = std::function<torch::Tensor(const torch::Tensor& xt, int64_t t)>;
 

@@ -40,10 +40,10 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
   RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.", {"velocity"});
-  RequireKnownKeys(
-      j.value("diffusion", nlohmann::json::object()), "diffusion.",
-      {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion", "guidance_text",
-       "preconditioning", "sigma_data", "snr_shift", "learned_skip", "components", "whiten"});
+  RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
+                   {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
+                    "guidance_text", "preconditioning", "sigma_data", "snr_shift",
+                    "step_density_power", "learned_skip", "components", "whiten"});
   EditorOptions o;
   o.variant = j.value("variant", o.variant);
   if (o.variant != "mdt" && o.variant != "tmed" && o.variant != "mdm") {
@@ -86,6 +86,9 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   const nlohmann::json d = j.value("diffusion", nlohmann::json::object());
   o.diffusion_steps = d.value("steps", o.diffusion_steps);
   o.snr_shift = d.value("snr_shift", o.snr_shift);
+  o.step_density_power = d.value("step_density_power", o.step_density_power);
+  if (!(o.step_density_power >= 0 && o.step_density_power <= 10))
+    throw std::invalid_argument("diffusion.step_density_power must be in [0, 10]");
   o.velocity_weight =
       j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
   if (!(o.velocity_weight >= 0)) throw std::invalid_argument("loss.velocity must be >= 0");
@@ -156,7 +159,8 @@ nlohmann::json EditorOptions::ToJson() const {
             {"components", components},
             {"whiten", whiten},
             {"sigma_data", sigma_data},
-            {"snr_shift", snr_shift}}}};
+            {"snr_shift", snr_shift},
+            {"step_density_power", step_density_power}}}};
 }
 
 DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {

@@ -42,6 +42,9 @@ struct EditorOptions {
   double velocity_weight = 0;
   double snr_shift =
       1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
+  // The training steps' density, proportional to t^k (SampleTrainingStep); 0: uniform (the
+  // reference). Sampling is unchanged.
+  double step_density_power = 0;
   // How the network's output becomes the x0 estimate. "x0": the output is x0 (REFERENCE 3.2).
   // "edm": Karras et al.'s preconditioning, x0 = c_skip x~ + c_out F, so that near t = 0 the noisy
   // target passes through instead of being rebuilt from the width-d trunk (at d = 128 < 207 the

@@ -95,7 +95,7 @@ class EditorModel : public plugin::Model {
                            : at::make_generator<at::CPUGeneratorImpl>(static_cast<uint64_t>(
                                  torch::randint(1LL << 62, {1}).item<int64_t>()));
       steps[static_cast<size_t>(i)] =
-          torch::randint(schedule_.steps(), {1}, generator).item<int64_t>();
+          SampleTrainingStep(schedule_.steps(), options_.step_density_power, generator);
       const double u = torch::rand({1}, generator).item<double>();
       const bool both = u < options_.drop_both;
       drop_text[static_cast<size_t>(i)] =

@@ -242,6 +242,30 @@ TEST(Diffusion, TheSnrShiftMovesLogSnrByTwoLogK) {
   EXPECT_THROW(CosineSchedule(300, 0.5), std::invalid_argument);
 }
 
+TEST(Diffusion, TrainingStepsFollowTheirDensity) {
+  // Power 0 is the reference's uniform draw, the same numbers as torch::randint under one seed.
+  auto a = at::make_generator<at::CPUGeneratorImpl>(7),
+       b = at::make_generator<at::CPUGeneratorImpl>(7);
+  for (int i = 0; i < 50; ++i)
+    EXPECT_EQ(SampleTrainingStep(300, 0, a), torch::randint(300, {1}, b).item<int64_t>());
+  // Power 1: density proportional to t, so P(t >= 250) = 1 - (250/300)^2 = 0.306 (uniform: 0.167)
+  // and the mean is 2/3 of 300, less the half step of the floor.
+  auto g = at::make_generator<at::CPUGeneratorImpl>(11);
+  const int n = 40000;
+  int noisy = 0;
+  double sum = 0;
+  for (int i = 0; i < n; ++i) {
+    const int64_t t = SampleTrainingStep(300, 1, g);
+    ASSERT_TRUE(t >= 0 && t < 300);
+    noisy += t >= 250;
+    sum += static_cast<double>(t);
+  }
+  EXPECT_NEAR(static_cast<double>(noisy) / n, 1 - (250.0 / 300) * (250.0 / 300), 0.01);
+  EXPECT_NEAR(sum / n, 200 - 0.5, 1.5);
+  EXPECT_THROW(EditorOptions::FromJson({{"diffusion", {{"step_density_power", -1}}}}),
+               std::invalid_argument);
+}
+
 TEST(Diffusion, PreconditioningIsKarrasForThisSchedule) {
   const CosineSchedule schedule(300);
   const double sd = 0.5;
