@@ -97,6 +97,7 @@ Result<Probe> LoadProbe(const Args& a) {
   EditDataOptions data;
   data.split = a.split;
   data.max_frames = 120;
+  data.fps = probe.options.fps;  // the checkpoint's network rate
   EditDataset dataset(data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
   dataset.SetStats(probe.mean, probe.stddev);
   probe.n = std::min<int64_t>(a.n, dataset.size());

@@ -1,6 +1,7 @@
 #include "edit_data.h"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <map>
 
@@ -29,6 +30,59 @@ EditDataOptions EditDataOptions::FromContext(const plugin::DataContext& context)
 FeatureMatrix EditFeatures(const Motion& motion, const float* joints) {
   return joints ? EncodeMotionFix207WithJoints(motion, joints)
                 : EncodeMotionFix207(Skeleton::Smpl22(), motion);
+}
+
+namespace {
+
+bool SameRate(double a, double b) { return std::abs(a - b) <= 1e-5 * std::max(a, b); }
+
+}  // namespace
+
+AtNetworkRate ToNetworkRate(const Motion& motion, const float* joints, double fps) {
+  AtNetworkRate out;
+  if (fps <= 0 || !(motion.fps > 0) || SameRate(motion.fps, fps) || motion.num_frames() == 0) {
+    out.motion = motion;
+    if (joints) out.joints.assign(joints, joints + motion.num_frames() * kNumJoints * 3);
+    return out;
+  }
+  out.step = motion.fps / fps;
+  const double whole = std::round(out.step);
+  if (whole >= 1 && std::abs(out.step - whole) <= 1e-6 * whole) {
+    out.step = whole;
+    out.motion = Resample(motion, fps, ResampleMethod::kByIndex);
+    if (joints) {
+      const int64_t k = static_cast<int64_t>(whole);
+      for (int64_t f = 0; f < out.motion.num_frames(); ++f)
+        out.joints.insert(out.joints.end(), joints + f * k * kNumJoints * 3,
+                          joints + (f * k + 1) * kNumJoints * 3);
+    }
+  } else {
+    out.motion = Resample(motion, fps, ResampleMethod::kInterpolate);
+  }
+  return out;
+}
+
+int64_t NetworkFrames(int64_t frames, double rate, double fps) {
+  if (fps <= 0 || !(rate > 0) || SameRate(rate, fps)) return frames;
+  return static_cast<int64_t>(std::ceil(static_cast<double>(frames - 1) * fps / rate - 1e-9)) + 1;
+}
+
+Motion FromNetworkRate(const Motion& motion, double rate, int64_t frames) {
+  Motion out =
+      SameRate(motion.fps, rate) ? motion : Resample(motion, rate, ResampleMethod::kInterpolate);
+  out.fps = rate;
+  // Resample covers the same duration, so it gives at least `frames` frames from NetworkFrames';
+  // a shorter motion (another length) repeats its last frame.
+  const int64_t have = out.num_frames();
+  out.poses.resize(static_cast<size_t>(frames) * kNumJoints * 3);
+  out.trans.resize(static_cast<size_t>(frames) * 3);
+  for (int64_t f = std::max<int64_t>(have, 1); f < frames; ++f) {
+    std::copy_n(&out.poses[static_cast<size_t>(have - 1) * kNumJoints * 3], kNumJoints * 3,
+                &out.poses[static_cast<size_t>(f) * kNumJoints * 3]);
+    std::copy_n(&out.trans[static_cast<size_t>(have - 1) * 3], 3,
+                &out.trans[static_cast<size_t>(f) * 3]);
+  }
+  return out;
 }
 
 EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::string>& input_dirs)
@@ -99,7 +153,7 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
                                 "' of the inputs");
 }
 
-FeatureMatrix EditDataset::Features(const Item& item, bool source) const {
+FeatureMatrix EditDataset::Features(const Item& item, bool source, double* step) const {
   const TripletColumns& c = files_[item.file];
   const TripletColumns::Side& side = source ? c.source : c.target;
   const int64_t begin = side.offsets[static_cast<size_t>(item.row)],
@@ -111,7 +165,10 @@ FeatureMatrix EditDataset::Features(const Item& item, bool source) const {
   const float* joints = side.positions && side.position_joints == kNumJoints
                             ? side.positions + begin * kNumJoints * 3
                             : nullptr;
-  return EditFeatures(m, joints);
+  if (options_.fps <= 0) return EditFeatures(m, joints);
+  const AtNetworkRate at = ToNetworkRate(m, joints, options_.fps);
+  if (step) *step = at.step;
+  return EditFeatures(at.motion, at.joints.empty() ? nullptr : at.joints.data());
 }
 
 namespace {
@@ -145,9 +202,11 @@ std::pair<torch::Tensor, torch::Tensor> Pad(const std::vector<FeatureMatrix>& fe
 plugin::Batch EditDataset::Get(const std::vector<int64_t>& indices, uint64_t) {
   plugin::Batch batch;
   std::vector<FeatureMatrix> sources, targets;
+  std::vector<double> steps(indices.size(), 1.0);  // source frames per network frame
   for (int64_t index : indices) {
     const Item& item = items_[static_cast<size_t>(index)];
-    FeatureMatrix s = Features(item, true), t = Features(item, false);
+    FeatureMatrix s = Features(item, true, &steps[static_cast<size_t>(sources.size())]),
+                  t = Features(item, false);
     // Crop both to max_frames (the first frames: the curve is indexed by source frame).
     if (s.rows > options_.max_frames)
       s.rows = options_.max_frames, s.data.resize(static_cast<size_t>(s.rows * s.cols));
@@ -166,10 +225,12 @@ plugin::Batch EditDataset::Get(const std::vector<int64_t>& indices, uint64_t) {
     const Item& item = items_[static_cast<size_t>(indices[static_cast<size_t>(i)])];
     if (item.curve < 0) continue;
     const auto& curve = curves_[static_cast<size_t>(item.curve)];
-    const int64_t frames =
-        std::min<int64_t>(static_cast<int64_t>(curve.size()), sources[static_cast<size_t>(i)].rows);
-    for (int64_t f = 0; f < frames; ++f) {
-      const float s = curve[static_cast<size_t>(f)];
+    const double step = steps[static_cast<size_t>(i)];
+    for (int64_t f = 0; f < sources[static_cast<size_t>(i)].rows; ++f) {
+      // The curve is indexed by the source's own frames (ToNetworkRate's floor(f step)).
+      const auto at = static_cast<size_t>(std::floor(static_cast<double>(f) * step + 1e-9));
+      if (at >= curve.size()) break;
+      const float s = curve[at];
       similarity[i][f] = s;
       // eq. (10): K equal bins of S^N in [0, 1], the top bin closed.
       classes[i][f] = std::min<int64_t>(

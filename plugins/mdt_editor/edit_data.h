@@ -23,7 +23,8 @@ namespace motionpipe::mdt {
 struct EditDataOptions {
   std::string filter = "input";
   std::string split = "train";
-  int64_t max_frames = 200;
+  int64_t max_frames = 200;  // in the network's frames
+  double fps = 0;            // the network's frame rate (the model's); 0: the data's
   int classes = 3;
   bool regression = false;
   static EditDataOptions FromContext(const plugin::DataContext& context);
@@ -31,6 +32,24 @@ struct EditDataOptions {
 
 // Motions -> 207-d features (stored joint positions when present).
 FeatureMatrix EditFeatures(const Motion& motion, const float* joints);
+
+// The network's frame rate (EditorOptions::fps, issue 15: a step at 10 fps costs about a third of
+// one at 30). A motion at `fps` (<= 0 or the motion's own: unchanged): a whole-number ratio keeps
+// every k-th frame, as Resample by index, and the stored joints [T, 22, 3] of those frames when
+// given; any other ratio interpolates (slerp) and leaves the joints to forward kinematics.
+// `step` is the motion's frames per network frame: network frame f shows frame floor(f step).
+struct AtNetworkRate {
+  Motion motion;
+  std::vector<float> joints;  // empty: forward kinematics
+  double step = 1;
+};
+AtNetworkRate ToNetworkRate(const Motion& motion, const float* joints, double fps);
+// The network frames that cover `frames` frames at `rate` once brought back to it: ceil((frames -
+// 1) fps / rate) + 1 (`frames` itself when fps <= 0 or equal to rate).
+int64_t NetworkFrames(int64_t frames, double rate, double fps);
+// A motion generated at the network's rate brought back to `rate` (interpolated) and cut to
+// exactly `frames` frames.
+Motion FromNetworkRate(const Motion& motion, double rate, int64_t frames);
 
 class EditDataset : public plugin::Dataset {
  public:
@@ -58,7 +77,8 @@ class EditDataset : public plugin::Dataset {
     int64_t row = 0;
     int64_t curve = -1;  // index into the similarity curves, -1 = none
   };
-  FeatureMatrix Features(const Item& item, bool source) const;
+  // At the network's rate; *step (optional) gets the data frames per network frame.
+  FeatureMatrix Features(const Item& item, bool source, double* step = nullptr) const;
   EditDataOptions options_;
   std::vector<TripletColumns> files_;
   std::vector<Item> items_;

@@ -32,7 +32,7 @@ void RequireKnownKeys(const nlohmann::json& j, const std::string& where,
 EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(j, "",
                    {"variant", "model", "aux", "features", "adaln_text", "diffusion", "loss",
-                    "text_encoder_from", "freeze_text_encoder"});
+                    "text_encoder_from", "freeze_text_encoder", "fps"});
   RequireKnownKeys(
       j.value("model", nlohmann::json::object()), "model.",
       {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout", "text_encoder"});
@@ -83,6 +83,9 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.enhanced_text = text == "enhanced";
   o.enhanced_motion = motion == "enhanced";
   o.adaln_text = j.value("adaln_text", o.adaln_text);
+  o.fps = j.value("fps", o.fps);
+  if (!(o.fps >= 0 && o.fps <= 1000))
+    throw std::invalid_argument("fps must be in [0, 1000] (0: the data's own rate)");
   const nlohmann::json d = j.value("diffusion", nlohmann::json::object());
   o.diffusion_steps = d.value("steps", o.diffusion_steps);
   o.snr_shift = d.value("snr_shift", o.snr_shift);
@@ -144,6 +147,7 @@ nlohmann::json EditorOptions::ToJson() const {
            {{"text", enhanced_text ? "enhanced" : "raw"},
             {"motion", enhanced_motion ? "enhanced" : "raw"}}},
           {"adaln_text", adaln_text},
+          {"fps", fps},
           {"text_encoder_from", text_encoder_from},
           {"freeze_text_encoder", freeze_text_encoder},
           {"loss", {{"velocity", velocity_weight}}},

@@ -83,6 +83,11 @@ struct EditorOptions {
   // signal-to-noise ratio at a step), or keep the feature space's scale (false: the 207-column
   // diffusion restricted to the kept axes, the same signal-to-noise ratio per direction).
   bool whiten = true;
+  // The frame rate the network works at: training motions and edit sources are brought to it
+  // (ToNetworkRate) and edits back to the rate asked for. 0: the data's own (the reference, 30
+  // fps in MotionFix). Not in the paper: a step at 10 fps costs about a third of one at 30, and
+  // the demo's MDT is limited by its budget (issue 15).
+  double fps = 0;
   double drop_text = 0.05, drop_source = 0.05, drop_both = 0.15;  // condition dropout in training
   double guidance_motion = 2, guidance_text = 2;                  // g_m, g_t
   nn::TextEncoderOptions text;

@@ -45,6 +45,7 @@ class EditorModel : public plugin::Model {
   std::unique_ptr<plugin::Dataset> MakeDataset(const plugin::DataContext& context) override {
     EditDataOptions data = EditDataOptions::FromContext(context);
     data.classes = options_.classes;
+    data.fps = options_.fps;
     data.regression = options_.aux == "regression";
     auto dataset = std::make_unique<EditDataset>(data, context.input_dirs);
     if (context.split == "train") {
@@ -245,7 +246,8 @@ class EditorGenerator : public plugin::Generator {
     const auto scale = 2.0 * (model_->stddev() + 1e-5);
     // Sources (normalised) and target lengths.
     std::vector<torch::Tensor> sources;
-    std::vector<int64_t> lengths;
+    std::vector<int64_t> lengths;    // at the network's rate
+    std::vector<int64_t> requested;  // at the request's rate
     std::vector<std::string> texts;
     for (const auto& r : requests) {
       if (r.texts.size() != 1) return InvalidArgument("an edit takes one instruction text");
@@ -257,7 +259,8 @@ class EditorGenerator : public plugin::Generator {
       if (r.source) {
         if (r.source->num_frames() < 2)
           return InvalidArgument("the source motion needs at least 2 frames");
-        const FeatureMatrix f = EditFeatures(*r.source, nullptr);
+        const FeatureMatrix f =
+            EditFeatures(ToNetworkRate(*r.source, nullptr, o.fps).motion, nullptr);
         sources.push_back(
             (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}).clone() -
              model_->mean()) /
@@ -269,7 +272,11 @@ class EditorGenerator : public plugin::Generator {
       if (body_parts_) frames = r.source->num_frames();  // inpainting keeps the source's timing
       if (frames < 2 || frames > 10000)
         return InvalidArgument(std::to_string(frames) + " frames is not a sensible length");
-      lengths.push_back(frames);
+      requested.push_back(frames);
+      // MDM-BP's inpainting keeps the source's frames, at the network's rate too.
+      lengths.push_back(body_parts_
+                            ? sources.back().size(0)
+                            : NetworkFrames(frames, r.source ? r.source->fps : r.fps, o.fps));
     }
     const int64_t tt = *std::max_element(lengths.begin(), lengths.end());
     auto target_padding = torch::zeros({n, tt}, torch::kBool);
@@ -358,7 +365,9 @@ class EditorGenerator : public plugin::Generator {
                   sizeof(float) * static_cast<size_t>(frames * kEditFeatureDim));
       const auto& r = requests[static_cast<size_t>(i)];
       const MotionAnchor anchor = r.source ? AnchorOf(*r.source) : MotionAnchor{};
-      Motion m = DecodeMotionFix207(features, anchor, r.source ? r.source->fps : r.fps);
+      const double rate = r.source ? r.source->fps : r.fps;
+      Motion m = DecodeMotionFix207(features, anchor, o.fps > 0 ? o.fps : rate);
+      if (o.fps > 0) m = FromNetworkRate(m, rate, requested[static_cast<size_t>(i)]);
       for (float v : m.poses) {
         if (!std::isfinite(v)) return Internal("edit: the model produced NaN");
       }

@@ -595,6 +595,76 @@ TEST(Editor, ConstantFeatureColumnsKeepUnitScale) {
   EXPECT_EQ(moving, 4);
 }
 
+// Issue 15: the network's frame rate (EditorOptions::fps). Training motions and edit sources come
+// to it by keeping every k-th frame (with their stored joints), edits go back to the rate and the
+// length asked for.
+TEST(Editor, TheNetworkRateKeepsEveryKthFrameAndEditsComeBackAtTheAskedLength) {
+  Motion m = Motion::Rest(31, 30, 0.9);
+  std::vector<float> joints(31 * kNumJoints * 3);
+  for (int64_t f = 0; f < 31; ++f) {
+    m.trans[static_cast<size_t>(f * 3)] = 0.03f * static_cast<float>(f);  // walks along x
+    for (int64_t k = 0; k < kNumJoints * 3; ++k)
+      joints[static_cast<size_t>(f * kNumJoints * 3 + k)] = static_cast<float>(f);
+  }
+  const AtNetworkRate at = ToNetworkRate(m, joints.data(), 10);
+  EXPECT_EQ(at.step, 3);
+  ASSERT_EQ(at.motion.num_frames(), 11);  // frames 0, 3, ..., 30
+  EXPECT_EQ(at.motion.fps, 10);
+  ASSERT_EQ(at.joints.size(), 11U * kNumJoints * 3);
+  for (int64_t f = 0; f < 11; ++f) {
+    EXPECT_FLOAT_EQ(at.motion.trans[static_cast<size_t>(f * 3)], 0.03f * static_cast<float>(3 * f));
+    EXPECT_EQ(at.joints[static_cast<size_t>(f * kNumJoints * 3 + 5)], static_cast<float>(3 * f));
+  }
+  // The data's own rate, or none asked: unchanged. 20 fps (1.5 frames each): interpolated, joints
+  // left to forward kinematics.
+  for (double fps : {0.0, 30.0}) {
+    const AtNetworkRate same = ToNetworkRate(m, joints.data(), fps);
+    EXPECT_EQ(same.motion.num_frames(), 31);
+    EXPECT_EQ(same.step, 1);
+    EXPECT_EQ(same.joints, joints);
+  }
+  const AtNetworkRate twenty = ToNetworkRate(m, joints.data(), 20);
+  EXPECT_DOUBLE_EQ(twenty.step, 1.5);
+  EXPECT_EQ(twenty.motion.num_frames(), 21);
+  EXPECT_TRUE(twenty.joints.empty());
+  EXPECT_NEAR(twenty.motion.trans[3], 0.045, 1e-6);  // halfway between frames 1 and 2
+  // Network frames that cover a length, and the way back: exactly the frames asked for.
+  EXPECT_EQ(NetworkFrames(31, 30, 10), 11);
+  EXPECT_EQ(NetworkFrames(32, 30, 10), 12);
+  EXPECT_EQ(NetworkFrames(32, 30, 0), 32);
+  EXPECT_EQ(NetworkFrames(32, 30, 30), 32);
+  const Motion back = FromNetworkRate(at.motion, 30, 31);
+  ASSERT_EQ(back.num_frames(), 31);
+  EXPECT_EQ(back.fps, 30);
+  for (int64_t f = 0; f < 31; ++f)
+    EXPECT_NEAR(back.trans[static_cast<size_t>(f * 3)], 0.03 * static_cast<double>(f), 1e-5) << f;
+  const Motion longer = FromNetworkRate(at.motion, 30, 33);  // repeats the last frame
+  ASSERT_EQ(longer.num_frames(), 33);
+  EXPECT_FLOAT_EQ(longer.trans[32 * 3], longer.trans[30 * 3]);
+
+  // The training data at the network's rate: 30-frame clips at 30 fps become 10 frames at 10 fps.
+  const std::string dir = ::testing::TempDir() + "/network_rate";
+  std::filesystem::create_directories(dir + "/motionfix");
+  std::vector<Triplet> triplets(2);
+  for (int i = 0; i < 2; ++i) {
+    triplets[i].id = "t" + std::to_string(i);
+    triplets[i].text = "walk";
+    triplets[i].split = "train";
+    triplets[i].source = triplets[i].target = Motion::Rest(30, 30, 0.9);
+  }
+  ASSERT_TRUE(WriteTriplets(dir + "/motionfix/triplets-00000.npz", triplets).ok());
+  EditDataOptions options;
+  options.filter = "none";
+  options.fps = 10;
+  EditDataset data(options, {dir});
+  const auto [mean, stddev] = data.ComputeStats();
+  data.SetStats(mean, stddev);
+  const auto batch = data.Get({0, 1}, 0);
+  EXPECT_EQ(batch.tensors.at("source").size(0), 10);
+  EXPECT_EQ(batch.tensors.at("target").size(0), 10);
+  EXPECT_THROW(EditorOptions::FromJson({{"fps", -10}}), std::invalid_argument);
+}
+
 TEST(Editor, PartColumnsPartitionTheFeature) {
   const auto columns = PartColumns();
   // Every column belongs to exactly one part (pelvis position columns 141:144 to global).
