@@ -74,9 +74,10 @@ Motion FromNetworkRate(const Motion& motion, double rate, int64_t frames) {
   // Resample covers the same duration, so it gives at least `frames` frames from NetworkFrames';
   // a shorter motion (another length) repeats its last frame.
   const int64_t have = out.num_frames();
+  if (have == 0) throw std::invalid_argument("FromNetworkRate: the generated motion has no frames");
   out.poses.resize(static_cast<size_t>(frames) * kNumJoints * 3);
   out.trans.resize(static_cast<size_t>(frames) * 3);
-  for (int64_t f = std::max<int64_t>(have, 1); f < frames; ++f) {
+  for (int64_t f = have; f < frames; ++f) {
     std::copy_n(&out.poses[static_cast<size_t>(have - 1) * kNumJoints * 3], kNumJoints * 3,
                 &out.poses[static_cast<size_t>(f) * kNumJoints * 3]);
     std::copy_n(&out.trans[static_cast<size_t>(have - 1) * 3], 3,
