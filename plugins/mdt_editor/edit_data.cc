@@ -32,15 +32,9 @@ FeatureMatrix EditFeatures(const Motion& motion, const float* joints) {
                 : EncodeMotionFix207(Skeleton::Smpl22(), motion);
 }
 
-namespace {
-
-bool SameRate(double a, double b) { return std::abs(a - b) <= 1e-5 * std::max(a, b); }
-
-}  // namespace
-
 AtNetworkRate ToNetworkRate(const Motion& motion, const float* joints, double fps) {
   AtNetworkRate out;
-  if (fps <= 0 || !(motion.fps > 0) || SameRate(motion.fps, fps) || motion.num_frames() == 0) {
+  if (fps <= 0 || !(motion.fps > 0) || SameFrameRate(motion.fps, fps) || motion.num_frames() == 0) {
     out.motion = motion;
     if (joints) out.joints.assign(joints, joints + motion.num_frames() * kNumJoints * 3);
     return out;
@@ -63,13 +57,14 @@ AtNetworkRate ToNetworkRate(const Motion& motion, const float* joints, double fp
 }
 
 int64_t NetworkFrames(int64_t frames, double rate, double fps) {
-  if (fps <= 0 || !(rate > 0) || SameRate(rate, fps)) return frames;
+  if (fps <= 0 || !(rate > 0) || SameFrameRate(rate, fps)) return frames;
   return static_cast<int64_t>(std::ceil(static_cast<double>(frames - 1) * fps / rate - 1e-9)) + 1;
 }
 
 Motion FromNetworkRate(const Motion& motion, double rate, int64_t frames) {
-  Motion out =
-      SameRate(motion.fps, rate) ? motion : Resample(motion, rate, ResampleMethod::kInterpolate);
+  Motion out = SameFrameRate(motion.fps, rate)
+                   ? motion
+                   : Resample(motion, rate, ResampleMethod::kInterpolate);
   out.fps = rate;
   // Resample covers the same duration, so it gives at least `frames` frames from NetworkFrames';
   // a shorter motion (another length) repeats its last frame.

@@ -259,8 +259,10 @@ class EditorGenerator : public plugin::Generator {
       if (r.source) {
         if (r.source->num_frames() < 2)
           return InvalidArgument("the source motion needs at least 2 frames");
+        // At the data's own rate (fps 0) the source is encoded as it is, without a copy.
         const FeatureMatrix f =
-            EditFeatures(ToNetworkRate(*r.source, nullptr, o.fps).motion, nullptr);
+            o.fps > 0 ? EditFeatures(ToNetworkRate(*r.source, nullptr, o.fps).motion, nullptr)
+                      : EditFeatures(*r.source, nullptr);
         sources.push_back(
             (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}).clone() -
              model_->mean()) /

@@ -132,6 +132,12 @@ TEST(Motion, RatesThatAgreeToRoundingKeepEveryFrame) {
   EXPECT_EQ(Resample(m, 30).num_frames(), 249);
   m.fps = 120.0000012;
   EXPECT_EQ(Resample(m, 30).num_frames(), 63);  // frames 0, 4, ..., 248
+  // The rule itself, which the editor's network rate shares: symmetric, 10 ppm of the larger rate.
+  EXPECT_TRUE(SameFrameRate(30, 1.0 / 0.03333333));
+  EXPECT_TRUE(SameFrameRate(1.0 / 0.03333333, 30));
+  EXPECT_TRUE(SameFrameRate(30, 30.0002));
+  EXPECT_FALSE(SameFrameRate(30, 30.001));
+  EXPECT_FALSE(SameFrameRate(10, 30));
 }
 
 // Issue 17: `import-bvh --fps 1e9` aborted with std::bad_alloc; `--fps 1e5` took 2.4 GB.

@@ -146,11 +146,11 @@ Status CheckResample(const Motion& motion, double target_fps, const std::string&
   return Status::Ok();
 }
 
+bool SameFrameRate(double a, double b) { return std::abs(a - b) <= 1e-5 * std::max(a, b); }
+
 Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) {
   const int64_t frames = motion.num_frames();
-  // Rates that agree to 10 ppm are the same rate: a BVH stores 30 fps as "Frame Time: 0.03333333",
-  // i.e. 30.0000003 fps, which must not drop a frame.
-  if (frames == 0 || target_fps <= 0 || std::abs(target_fps - motion.fps) <= 1e-5 * target_fps) {
+  if (frames == 0 || target_fps <= 0 || SameFrameRate(target_fps, motion.fps)) {
     Motion same = motion;
     if (target_fps > 0) same.fps = target_fps;
     return same;

@@ -47,6 +47,9 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end);
 // floor(i * src/dst)). Interpolate slerps rotations and lerps translation, for rates that do not
 // divide.
 enum class ResampleMethod { kByIndex, kInterpolate };
+// Rates that agree to 10 ppm are the same rate: a BVH stores 30 fps as "Frame Time: 0.03333333",
+// i.e. 30.0000003 fps, which must not drop a frame. Resample keeps such a motion's frames.
+bool SameFrameRate(double a, double b);
 Motion Resample(const Motion& motion, double target_fps,
                 ResampleMethod method = ResampleMethod::kByIndex);
 
