@@ -7,8 +7,10 @@ import html.parser
 import http.server
 import io
 import json
+import math
 import os
 import sqlite3
+import statistics
 import subprocess
 import threading
 import unittest
@@ -248,10 +250,11 @@ class EditTest(EngineTest):
             # Its standard error over the 3 edits (paired per edit); 0 only when every edit agrees.
             self.assertGreaterEqual(row["towards_target"]["all"]["se"], 0)
         # The target as the edit finds its target and, unless its source ranks first, not its source:
-        # the paired differences are 0 or 100.
-        ranks_to_source = target["generated_to_source"]["all"]["R@1"] / 100 * 3
-        if 0 < ranks_to_source < 3:
-            self.assertGreater(target["towards_target"]["all"]["se"], 0)
+        # the paired differences are 0 (source first) or 100, and their standard error is the sample
+        # deviation of those over sqrt(3), whatever the number of sources ranked first.
+        sources_first = round(target["generated_to_source"]["all"]["R@1"] / 100 * 3)
+        differences = [0.0] * sources_first + [100.0] * (3 - sources_first)
+        self.assertAlmostEqual(target["towards_target"]["all"]["se"], statistics.stdev(differences) / math.sqrt(3), places=6)
         self.assertIn("fraction_se", closer)
         # The history got this run's metrics with the hashes, and the AvgR regression is reported.
         self.assertEqual([r["metric"] for r in metrics["regressions"]], ["generated_to_target.all.AvgR"])
