@@ -1,0 +1,57 @@
+#!/usr/bin/python3
+"""The pelvis trajectory of an edit stage's motions, beside another's (issue 15: where plausibility is lost).
+
+The 207-d editing feature stores the pelvis as a velocity (REFERENCE.md section 2), so its height is
+integrated when a generated motion is decoded: an edit whose height drifts floats above or sinks
+into the floor, and its feet slide. Per motion: |z(end) - z(0)|, the standard deviation of z, the
+mean vertical speed and the mean horizontal acceleration of the pelvis; the means over the motions.
+
+    /usr/bin/python3 tools/root_stats.py out/demo-1/edit_mdt_untrained out/demo-1/edit_mdt
+"""
+import argparse
+import glob
+import os
+import sys
+
+import numpy as np
+
+
+def motions(stage_dir):
+    """(trans [T, 3], fps) of every motion in the stage's task-*/edited.npz files."""
+    files = sorted(glob.glob(os.path.join(stage_dir, "task-*", "edited.npz")))
+    if not files:
+        sys.exit(f"{stage_dir}: no task-*/edited.npz (is it an edit stage's output directory?)")
+    for path in files:
+        with np.load(path) as z:
+            if "trans" not in z.files or "offsets" not in z.files:
+                sys.exit(f"{path}: not an edit output (needs 'trans' and 'offsets')")
+            offsets, trans, fps = z["offsets"], z["trans"], z["fps"]
+        for i in range(len(offsets) - 1):
+            yield trans[offsets[i]:offsets[i + 1]], float(fps[i])
+
+
+def row(stage_dir):
+    drift, spread, vertical, accel = [], [], [], []
+    for trans, fps in motions(stage_dir):
+        if len(trans) < 3:
+            continue
+        z = trans[:, 2]
+        drift.append(abs(z[-1] - z[0]))
+        spread.append(z.std())
+        vertical.append(np.abs(np.diff(z)).mean() * fps)
+        accel.append(np.linalg.norm(np.diff(trans[:, :2], n=2, axis=0), axis=1).mean() * fps * fps)
+    return len(drift), np.mean(drift), np.mean(spread), np.mean(vertical), np.mean(accel)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("stages", nargs="+", help="edit stage output directories (out/JOB/STAGE)")
+    args = parser.parse_args()
+    print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} {'accel xy (m/s2)':>15}")
+    for stage in args.stages:
+        n, drift, spread, vertical, accel = row(stage)
+        print(f"{stage:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f}")
+
+
+if __name__ == "__main__":
+    main()
