@@ -62,9 +62,8 @@ int64_t NetworkFrames(int64_t frames, double rate, double fps) {
 }
 
 Motion FromNetworkRate(const Motion& motion, double rate, int64_t frames) {
-  Motion out = SameFrameRate(motion.fps, rate)
-                   ? motion
-                   : Resample(motion, rate, ResampleMethod::kInterpolate);
+  // Resample keeps a motion already at `rate` (SameFrameRate) as it is.
+  Motion out = Resample(motion, rate, ResampleMethod::kInterpolate);
   out.fps = rate;
   // Resample covers the same duration, so it gives at least `frames` frames from NetworkFrames';
   // a shorter motion (another length) repeats its last frame.
