@@ -23,8 +23,9 @@ def motions(stage_dir):
         sys.exit(f"{stage_dir}: no task-*/edited.npz (is it an edit stage's output directory?)")
     for path in files:
         with np.load(path) as z:
-            if "trans" not in z.files or "offsets" not in z.files:
-                sys.exit(f"{path}: not an edit output (needs 'trans' and 'offsets')")
+            missing = [k for k in ("trans", "offsets", "fps") if k not in z.files]
+            if missing:
+                sys.exit(f"{path}: not an edit output (no {', '.join(missing)})")
             offsets, trans, fps = z["offsets"], z["trans"], z["fps"]
         for i in range(len(offsets) - 1):
             yield trans[offsets[i]:offsets[i + 1]], float(fps[i])
@@ -40,6 +41,8 @@ def row(stage_dir):
         spread.append(z.std())
         vertical.append(np.abs(np.diff(z)).mean() * fps)
         accel.append(np.linalg.norm(np.diff(trans[:, :2], n=2, axis=0), axis=1).mean() * fps * fps)
+    if not drift:
+        sys.exit(f"{stage_dir}: no motion of 3 frames or more")
     return len(drift), np.mean(drift), np.mean(spread), np.mean(vertical), np.mean(accel)
 
 
