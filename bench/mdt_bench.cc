@@ -4,7 +4,8 @@
 // motion with three-way guidance for DDPM-300 and DDIM-50 at batch 1 and 32. The training rate is
 // also given in GFLOP/s (the step's matrix products counted, TrainingStepFlops) beside the sgemm
 // rate of LibTorch on the same threads, measured in the same run (issue 15: goal 60% of it at
-// paper size).
+// paper size), and the same step under bf16 autocast (plugins/common/precision.h) as the ratio
+// bf16/f32 of samples/s.
 //   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //   [--no-reference]
 //             [--no-latency]
@@ -20,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "../plugins/common/precision.h"
 #include "../plugins/common/threads.h"
 #include "../plugins/mdt_editor/editor.h"
 #include "bench_util.h"
@@ -218,28 +220,34 @@ void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
                                 torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
   net->train();
   const int64_t batch = a.batch;
-  const auto step = [&] {
+  const auto step = [&](nn::Precision precision) {
     const auto t = torch::randint(0, 300, {batch}, torch::kInt64);
     const auto u = torch::rand({batch});
     Condition c{b.texts, b.source, b.source_padding, u.lt(0.2),
                 u.lt(0.15).logical_or(u.ge(0.2).logical_and(u.lt(0.25)))};
-    const auto xt = schedule.QSample(b.target, t, torch::randn_like(b.target));
-    const Prediction p = net->forward(xt, t, b.target_padding, c);
-    const auto loss =
-        GroupedMaskedMse(p.x0, b.target, b.target_padding) +
-        0.05 * SimilarityLoss(p.similarity, b.classes, torch::zeros({batch, a.frames}),
-                              b.source_padding, c.drop_source, net->options())
-                   .at("aux");
+    torch::Tensor loss;
+    {
+      const nn::MixedPrecision autocast(precision);
+      const auto xt = schedule.QSample(b.target, t, torch::randn_like(b.target));
+      const Prediction p = net->forward(xt, t, b.target_padding, c);
+      loss = GroupedMaskedMse(p.x0, b.target, b.target_padding) +
+             0.05 * SimilarityLoss(p.similarity, b.classes, torch::zeros({batch, a.frames}),
+                                   b.source_padding, c.drop_source, net->options())
+                        .at("aux");
+    }
     optimizer.zero_grad();
     loss.backward();
     torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
     optimizer.step();
     return loss.item<double>();
   };
-  for (int k = 0; k < 2; ++k) step();
-  const auto started = Clock::now();
-  for (int64_t k = 0; k < a.steps; ++k) step();
-  const double cpp = static_cast<double>(a.steps * batch) / Since(started);
+  const auto rate = [&](nn::Precision precision) {
+    for (int k = 0; k < 2; ++k) step(precision);
+    const auto started = Clock::now();
+    for (int64_t k = 0; k < a.steps; ++k) step(precision);
+    return static_cast<double>(a.steps * batch) / Since(started);
+  };
+  const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
   const double python = a.reference ? PythonReference(a, size, net, b) : 0;
   const auto tokens = net->text_encoder()->TokenIds(b.texts);
   const double flops =
@@ -247,9 +255,10 @@ void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
                         static_cast<double>(tokens.size(1)), net->options().text);
   const double achieved = flops * cpp / static_cast<double>(batch) / 1e9,
                peak = SgemmGflops(size.dim);
-  std::printf("%-6s %10lld %12.2f %12.2f %8.2f %11.1f %11.1f %8.0f%%\n", size.name.c_str(),
-              static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0,
-              achieved, peak, 100 * achieved / peak);
+  std::printf("%-6s %10lld %12.2f %12.2f %8.2f %11.1f %11.1f %8.0f%% %12.2f %9.2f\n",
+              size.name.c_str(), static_cast<long long>(parameters), cpp, python,
+              python > 0 ? cpp / python : 0.0, achieved, peak, 100 * achieved / peak, bf16,
+              bf16 / cpp);
   std::fflush(stdout);
 }
 
@@ -321,8 +330,9 @@ int main(int argc, char** argv) {
       "source and target up to %lld frames, %lld thread(s)\n",
       static_cast<long long>(args->batch), static_cast<long long>(args->frames),
       static_cast<long long>(args->threads));
-  std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s\n", "size", "params", "C++ samp/s",
-              "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak");
+  std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s %12s %9s\n", "size", "params", "C++ samp/s",
+              "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
+              "bf16/f32");
   const TrainBatch batch = MakeTrainBatch(*args);
   for (const Size& size : all) {
     if (args->sizes.find(size.name) != std::string::npos) BenchTraining(*args, size, batch);

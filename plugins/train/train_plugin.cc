@@ -11,7 +11,9 @@
 //   keep_checkpoints, log_every, seed, validate_every (steps between validations on the held-out
 //   split; 0 = none), val_batches (4), keep (last | best: the output model is the one with the
 //   lowest validation loss), gloo_host (the address other ranks reach this one on; default
-//   127.0.0.1), store (tcp | file; default tcp), collective_timeout (seconds, default 120)
+//   127.0.0.1), store (tcp | file; default tcp), collective_timeout (seconds, default 120),
+//   precision (float32 | bf16: the forward pass under bf16 autocast, plugins/common/precision.h;
+//   weights, gradients and optimiser state stay float32)
 //
 // Rank r of W takes every W-th example of each global batch, and the gradients are averaged over
 // the ranks (all-reduce of one flattened buffer), so W ranks take the same step as one rank on the
@@ -37,6 +39,7 @@
 
 #include "../api/model.hpp"
 #include "../api/plugin.hpp"
+#include "../common/precision.h"
 #include "../common/threads.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
@@ -59,6 +62,7 @@ struct Options {
   std::string keep = "last";
   double lr = 3e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.999, min_lr = 0, clip_grad = 1.0;
   std::string schedule = "cosine";
+  nn::Precision precision = nn::Precision::kFloat32;
   uint64_t seed = 1;
   std::string gloo_host = "127.0.0.1";
   std::string store = "tcp";
@@ -93,6 +97,12 @@ struct Options {
     o.min_lr = p.value("min_lr", o.min_lr);
     o.clip_grad = p.value("clip_grad", o.clip_grad);
     o.schedule = p.value("schedule", o.schedule);
+    try {
+      o.precision =
+          nn::ParsePrecision(p.value("precision", std::string("float32")), "params.precision");
+    } catch (const std::invalid_argument& e) {
+      throw plugin::BadInput(e.what());
+    }
     o.seed = p.value("seed", task.spec.value("seed", uint64_t{1}));
     o.gloo_host = p.value("gloo_host", o.gloo_host);
     o.store = p.value("store", o.store);
@@ -116,6 +126,7 @@ struct Options {
             {"weight_decay", weight_decay},
             {"betas", {beta1, beta2}},
             {"schedule", schedule},
+            {"precision", nn::PrecisionName(precision)},
             {"min_lr", min_lr},
             {"clip_grad", clip_grad},
             {"checkpoint_every", checkpoint_every},
@@ -487,7 +498,12 @@ class Trainer {
   void Step(int64_t step) {
     plugin::Batch batch = BatchOf(step);
     torch::manual_seed(MixSeed(options_.seed, static_cast<uint64_t>(step * world_ + rank_)));
-    auto losses = model().Losses(batch, step);
+    std::map<std::string, torch::Tensor> losses;
+    {
+      // The forward pass under the step's precision; backward follows the dtypes it chose.
+      const nn::MixedPrecision autocast(options_.precision);
+      losses = model().Losses(batch, step);
+    }
     const auto loss = losses.at("loss");
     if (!std::isfinite(loss.item<double>()))
       throw std::runtime_error("loss is not finite at step " + std::to_string(step));

@@ -132,7 +132,8 @@ class TrainStageTest(EngineTest):
     def test_bad_model_configs_fail_the_task_with_the_reason(self):
         for overrides, reason in ((["stages.sinc.params.model=no_such_model"], "no model plugin 'no_such_model'"),
                                   (["stages.sinc.params.config.model.heads=3"], "must be divisible by heads"),
-                                  (["stages.sinc.params.batch_size=7", "vars.world=2"], "must be divisible by world_size 2")):
+                                  (["stages.sinc.params.batch_size=7", "vars.world=2"], "must be divisible by world_size 2"),
+                                  (["stages.sinc.params.precision=half"], "params.precision must be float32 or bf16, not 'half'")):
             pipeline = self.write_pipeline("bad.yaml", PIPELINE.replace("OUT", self.path("bad")))
             result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2", "--threads", "1", *overrides],
                                     capture_output=True, text=True, timeout=300)

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "../../plugins/common/precision.h"
 #include "../../plugins/mdt_editor/diffusion.h"
 #include "../../plugins/mdt_editor/edit_data.h"
 #include "motionpipe/formats/motionfix.h"
@@ -163,6 +164,87 @@ TEST(Editor, EveryVariantOverfitsAFewTriplets) {
     }
     EXPECT_LT(last, 0.2 * first) << variant << ": first " << first << " last " << last;
   }
+}
+
+// Issue 15: training in bf16 (plugins/common/precision.h). Under the guard the matrix products run
+// in bfloat16 while the weights and their gradients stay float32, the guard restores autocast's
+// state, and the MDT's loss and gradients on a batch agree with float32's (a broken cast, or
+// autocast left on outside the guard, fails here).
+TEST(Editor, Bf16AutocastKeepsFloat32WeightsAndTheLossAndGradientsOfFloat32) {
+  EXPECT_EQ(nn::ParsePrecision("bf16", "params.precision"), nn::Precision::kBf16);
+  EXPECT_EQ(nn::ParsePrecision("float32", "params.precision"), nn::Precision::kFloat32);
+  try {
+    nn::ParsePrecision("half", "params.precision");
+    ADD_FAILURE() << "half accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("params.precision must be float32 or bf16, not 'half'"),
+              std::string::npos)
+        << e.what();
+  }
+  torch::nn::Linear linear(8, 4);
+  const auto x = torch::randn({3, 8});
+  {
+    const nn::MixedPrecision outer(nn::Precision::kBf16);
+    {
+      const nn::MixedPrecision inner(nn::Precision::kBf16);
+      EXPECT_EQ(linear(x).scalar_type(), torch::kBFloat16);
+    }
+    EXPECT_TRUE(at::autocast::is_cpu_enabled());  // the inner guard restores the outer state
+    EXPECT_EQ(linear(x).scalar_type(), torch::kBFloat16);
+  }
+  EXPECT_FALSE(at::autocast::is_cpu_enabled());
+  EXPECT_EQ(linear(x).scalar_type(), torch::kFloat32);
+  {
+    const nn::MixedPrecision off(nn::Precision::kFloat32);
+    EXPECT_EQ(linear(x).scalar_type(), torch::kFloat32);
+  }
+
+  // A trained-a-little MDT (at initialisation adaLN-Zero makes the output trivial), then one
+  // batch's loss and gradients in both precisions.
+  torch::manual_seed(3);
+  EditorNet net(Tiny("mdt", "none"));
+  const TinyTriplets data;
+  net->text_encoder()->Fit(data.texts);
+  const CosineSchedule schedule(50);
+  torch::optim::AdamW optimizer(net->parameters(), torch::optim::AdamWOptions(2e-3));
+  net->train();
+  const auto t = torch::full({3}, 10, torch::kInt64);
+  const auto noise = torch::randn_like(data.target);
+  const Condition c{data.texts, data.source, data.source_padding, {}, {}};
+  const auto loss_of = [&](nn::Precision precision) {
+    const nn::MixedPrecision autocast(precision);
+    const auto xt = schedule.QSample(data.target, t, noise);
+    return GroupedMaskedMse(net->forward(xt, t, data.target_padding, c).x0, data.target,
+                            data.target_padding);
+  };
+  for (int step = 0; step < 30; ++step) {
+    optimizer.zero_grad();
+    loss_of(nn::Precision::kFloat32).backward();
+    optimizer.step();
+  }
+  net->eval();  // no dropout: both passes see the same network
+  const auto gradient = [&](nn::Precision precision) {
+    optimizer.zero_grad();
+    const auto loss = loss_of(precision);
+    EXPECT_EQ(loss.scalar_type(), torch::kFloat32);
+    loss.backward();
+    std::vector<torch::Tensor> flat;
+    for (const auto& p : net->parameters()) {
+      EXPECT_EQ(p.scalar_type(), torch::kFloat32);
+      if (p.grad().defined()) {
+        EXPECT_EQ(p.grad().scalar_type(), torch::kFloat32);
+        flat.push_back(p.grad().reshape({-1}).clone());
+      }
+    }
+    return std::make_pair(loss.item<double>(), torch::cat(flat));
+  };
+  const auto [loss32, grad32] = gradient(nn::Precision::kFloat32);
+  const auto [loss16, grad16] = gradient(nn::Precision::kBf16);
+  EXPECT_NEAR(loss16, loss32, 0.02 * loss32);
+  EXPECT_NE(loss16, loss32);  // the products did run in bf16
+  const double cosine =
+      (grad16 * grad32).sum().item<double>() / (grad16.norm() * grad32.norm()).item<double>();
+  EXPECT_GT(cosine, 0.99);
 }
 
 // Issue 15: target positions were offset by the batch's longest source (and TMED's by its longest
