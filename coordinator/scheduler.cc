@@ -83,6 +83,18 @@ Result<int64_t> Scheduler::CreateJob(const PipelineSpec& spec) {
   MP_ASSIGN_OR_RETURN(const int64_t id, journal_->CreateJob(stored));
   job.id = id;
   job.output_dir = root + "/" + spec.name + "-" + std::to_string(id);
+  // A journal numbers only its own jobs: a directory of this name that already holds files was made
+  // by another journal (or one since deleted). Writing into it would overwrite that job's outputs
+  // and let its trainers resume checkpoints of another pipeline.
+  if (fs::exists(job.output_dir, ec) && !fs::is_empty(job.output_dir, ec)) {
+    const std::string why = job.output_dir +
+                            " already holds the outputs of a job this journal did not make (one "
+                            "run with another --journal, or a deleted journal): move it away, "
+                            "resume that job with its own journal, or give this pipeline another "
+                            "name";
+    journal_->UpdateJob(id, "failed", clock_->Now(), why);
+    return FailedPrecondition(why);
+  }
   // Durable, as every commit's directories are: a power loss must not take the job's directory.
   if (const Status made = MakeDirsDurable(job.output_dir); !made.ok())
     return IoError(job.output_dir + ": cannot create the job directory: " + made.message());

@@ -51,7 +51,10 @@ class Chaos(EngineTest):
         for p in self.processes:
             p.stop(signal.SIGKILL, timeout=2)
         self.processes = []
+        # The chaos run starts on a fresh journal, whose first job is numbered 1 again: its directory
+        # must be free (a coordinator refuses another journal's).
         os.rename(self.path("journal.sqlite"), self.path("calm.sqlite"))
+        os.rename(calm_dir, calm_dir + ".calm")
         chaos_dir, kills = self.run_job(kill=True)
         chaos = output_files(chaos_dir, "w")
         print(f"chaos: {TASKS} tasks, {kills} workers killed")

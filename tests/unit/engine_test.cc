@@ -742,6 +742,32 @@ TEST_F(SchedulerTest, ATaskQueuedOnABusyWorkerIsReclaimedForAnIdleOne) {
   EXPECT_EQ(StageOf(*job, "write").committed(), 1);
 }
 
+// Job ids are a journal's own: a second journal over the same output root numbers its first job 1
+// as well. Its job must not write into (or resume trainers from) the first journal's directory.
+TEST_F(SchedulerTest, ANewJobRefusesAnotherJournalsDirectory) {
+  auto first = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  const std::string dir = root_ + "/test-" + std::to_string(*first);
+  ASSERT_TRUE(fs::is_directory(dir));
+  std::ofstream(dir + "/kept.txt") << "an earlier job's output";
+  journal_path_ = root_ + "/other-journal.sqlite";
+  Reopen();
+  auto second = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
+  ASSERT_FALSE(second.ok());
+  EXPECT_NE(second.status().message().find("/test-1 already holds the outputs of a job this "
+                                           "journal did not make"),
+            std::string::npos)
+      << second.status().ToString();
+  std::ifstream kept(dir + "/kept.txt");
+  std::string text;
+  std::getline(kept, text);
+  EXPECT_EQ(text, "an earlier job's output");
+  // An empty directory of that name (nothing to lose) is taken.
+  fs::remove_all(root_ + "/test-2");
+  fs::create_directories(root_ + "/test-2");
+  EXPECT_TRUE(scheduler_->Submit(PipelineIn(root_), {}, "p.yaml").ok());
+}
+
 TEST_F(SchedulerTest, ResumeAfterRestartNeverRerunsCommittedTasks) {
   auto job = scheduler_->Submit(PipelineIn(root_), {}, "p.yaml");
   scheduler_->OnReady("w1", ReadyFor("w1", 2));
