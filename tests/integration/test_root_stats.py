@@ -1,0 +1,74 @@
+"""tools/root_stats.py (issue 15's pelvis diagnostic) on edit outputs whose figures are known by hand,
+and its error messages for directories and files that are not edit outputs."""
+import os
+import subprocess
+import tempfile
+import unittest
+
+import numpy as np
+
+TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "root_stats.py")
+
+
+def write_edits(stage_dir, motions, fps=10.0, drop=()):
+    """One task-00000/edited.npz holding `motions` (each [T, 3] pelvis translations, z up)."""
+    os.makedirs(os.path.join(stage_dir, "task-00000"))
+    offsets = np.cumsum([0] + [len(m) for m in motions])
+    arrays = {"trans": np.concatenate(motions).astype(np.float32), "offsets": offsets.astype(np.int64),
+              "fps": np.full(len(motions), fps, np.float32)}
+    for key in drop:
+        del arrays[key]
+    np.savez(os.path.join(stage_dir, "task-00000", "edited.npz"), **arrays)
+
+
+def run(*stages):
+    return subprocess.run(["/usr/bin/python3", TOOL, *stages], capture_output=True, text=True, timeout=60)
+
+
+class RootStatsTest(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.addCleanup(self.tmp.cleanup)
+
+    def path(self, name):
+        return os.path.join(self.tmp.name, name)
+
+    def test_figures_of_known_trajectories(self):
+        rising = np.zeros((5, 3))
+        rising[:, 2] = [1.0, 1.1, 1.2, 1.3, 1.4]  # drift 0.4, sd 0.1414, |vz| 0.1 m a frame
+        accelerating = np.zeros((4, 3))
+        accelerating[:, 0] = 0.01 * np.arange(4) ** 2  # second difference 0.02 m a frame^2
+        accelerating[:, 2] = 0.9
+        too_short = np.zeros((2, 3))  # left out: fewer than 3 frames
+        write_edits(self.path("stage"), [rising, too_short, accelerating], fps=10.0)
+        result = run(self.path("stage"))
+        self.assertEqual(result.returncode, 0, result.stderr)
+        fields = result.stdout.splitlines()[1].split()
+        self.assertEqual(fields[0], self.path("stage"))
+        n, drift, spread, vertical, accel = int(fields[1]), *map(float, fields[2:])
+        self.assertEqual(n, 2)
+        self.assertAlmostEqual(drift, 0.2, places=3)                  # (0.4 + 0) / 2
+        self.assertAlmostEqual(spread, np.std([1.0, 1.1, 1.2, 1.3, 1.4]) / 2, places=3)
+        self.assertAlmostEqual(vertical, 0.5, places=3)               # (0.1 x 10 fps + 0) / 2
+        self.assertAlmostEqual(accel, 1.0, places=2)                  # (0 + 0.02 x 10^2) / 2
+
+    def test_what_is_not_an_edit_output_is_named(self):
+        os.makedirs(self.path("empty"))
+        result = run(self.path("empty"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn(self.path("empty") + ": no task-*/edited.npz", result.stderr)
+
+        write_edits(self.path("nofps"), [np.zeros((4, 3))], drop=("fps",))
+        result = run(self.path("nofps"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn(os.path.join(self.path("nofps"), "task-00000", "edited.npz") + ": not an edit output (no fps)",
+                      result.stderr)
+
+        write_edits(self.path("short"), [np.zeros((2, 3))])
+        result = run(self.path("short"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn(self.path("short") + ": no motion of 3 frames or more", result.stderr)
+
+
+if __name__ == "__main__":
+    unittest.main()
