@@ -10,12 +10,16 @@ import numpy as np
 TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "root_stats.py")
 
 
-def write_edits(stage_dir, motions, fps=10.0, drop=()):
-    """One task-00000/edited.npz holding `motions` (each [T, 3] pelvis translations, z up)."""
+def write_edits(stage_dir, motions, fps=10.0, drop=(), pelvis=None):
+    """One task-00000/edited.npz holding `motions` (each [T, 3] pelvis translations, z up), the
+    pelvis at the axis-angle `pelvis` (identity by default) and the other joints at rest."""
     os.makedirs(os.path.join(stage_dir, "task-00000"))
     offsets = np.cumsum([0] + [len(m) for m in motions])
+    poses = np.zeros((offsets[-1], 22, 3), np.float32)
+    if pelvis is not None:
+        poses[:, 0] = pelvis
     arrays = {"trans": np.concatenate(motions).astype(np.float32), "offsets": offsets.astype(np.int64),
-              "fps": np.full(len(motions), fps, np.float32)}
+              "poses": poses, "fps": np.full(len(motions), fps, np.float32)}
     for key in drop:
         del arrays[key]
     np.savez(os.path.join(stage_dir, "task-00000", "edited.npz"), **arrays)
@@ -45,12 +49,27 @@ class RootStatsTest(unittest.TestCase):
         self.assertEqual(result.returncode, 0, result.stderr)
         fields = result.stdout.splitlines()[1].split()
         self.assertEqual(fields[0], self.path("stage"))
-        n, drift, spread, vertical, accel = int(fields[1]), *map(float, fields[2:])
+        n, drift, spread, vertical, accel, tilt = int(fields[1]), *map(float, fields[2:])
         self.assertEqual(n, 2)
         self.assertAlmostEqual(drift, 0.2, places=3)                  # (0.4 + 0) / 2
         self.assertAlmostEqual(spread, np.std([1.0, 1.1, 1.2, 1.3, 1.4]) / 2, places=3)
         self.assertAlmostEqual(vertical, 0.5, places=3)               # (0.1 x 10 fps + 0) / 2
         self.assertAlmostEqual(accel, 1.0, places=2)                  # (0 + 0.02 x 10^2) / 2
+        self.assertAlmostEqual(tilt, 0.0, places=6)                   # an upright pelvis
+
+    def test_a_tilted_pelvis_carries_height_that_its_up_axis_gives_back(self):
+        # The pelvis's y axis is up (SMPL's), tilted 10 degrees about x; it walks 0.1 m a frame along
+        # world y on level ground. In its own frame the step has a component along its z axis,
+        # worth 0.1 sin 10 cos 10 m of height a frame, which its y component cancels.
+        walk = np.zeros((5, 3))
+        walk[:, 1] = 0.1 * np.arange(5)
+        write_edits(self.path("tilted"), [walk], pelvis=[np.radians(100.0), 0.0, 0.0])
+        result = run(self.path("tilted"))
+        self.assertEqual(result.returncode, 0, result.stderr)
+        fields = result.stdout.splitlines()[1].split()
+        drift, tilt = float(fields[2]), float(fields[6])
+        self.assertAlmostEqual(drift, 0.0, places=5)
+        self.assertAlmostEqual(tilt, 4 * 0.1 * np.sin(np.radians(10)) * np.cos(np.radians(10)), places=3)
 
     def test_what_is_not_an_edit_output_is_named(self):
         os.makedirs(self.path("empty"))
