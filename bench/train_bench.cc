@@ -1,7 +1,9 @@
 // Training throughput (samples/s) of the TEMOS model (plugins/temos_sinc) at the demo's size and at
 // the paper's, against the same architecture in PyTorch Python (bench/reference/temos_ref.py, run
 // by Debian's /usr/bin/python3) on the same batch with the same threads, in one run; then the train
-// stage's own rate through workers with world_size 1 and 2 (scaling from 1 to 2 ranks).
+// stage's own rate through workers with world_size 1 and 2 (scaling from 1 to 2 ranks). The step is
+// also timed under bf16 autocast (plugins/common/precision.h, the train stage's precision: bf16):
+// the ratio bf16/f32 of samples/s.
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //   [--no-reference]
 //               [--no-scaling]
@@ -13,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <random>
@@ -20,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "../plugins/common/precision.h"
 #include "../plugins/common/threads.h"
 #include "../plugins/temos_sinc/temos.h"
 #include "bench_util.h"
@@ -160,21 +164,29 @@ void BenchSize(const Args& a, const Size& size) {
   torch::optim::AdamW optimizer(net->parameters(),
                                 torch::optim::AdamWOptions(1e-4).weight_decay(0.01));
   net->train();
-  const auto step = [&] {
-    auto losses = net->Losses(groups, b.features, b.padding);
+  const auto step = [&](nn::Precision precision) {
+    std::map<std::string, torch::Tensor> losses;
+    {
+      const nn::MixedPrecision autocast(precision);
+      losses = net->Losses(groups, b.features, b.padding);
+    }
     optimizer.zero_grad();
     losses.at("loss").backward();
     torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
     optimizer.step();
     return losses.at("loss").item<double>();
   };
-  for (int k = 0; k < 2; ++k) step();
-  const auto started = Clock::now();
-  for (int64_t k = 0; k < a.steps; ++k) step();
-  const double cpp = static_cast<double>(a.steps * a.batch) / Since(started);
+  const auto rate = [&](nn::Precision precision) {
+    for (int k = 0; k < 2; ++k) step(precision);
+    const auto started = Clock::now();
+    for (int64_t k = 0; k < a.steps; ++k) step(precision);
+    return static_cast<double>(a.steps * a.batch) / Since(started);
+  };
+  const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
   const double python = a.reference ? PythonReference(a, size, net, texts, b) : 0;
-  std::printf("%-6s %10lld %12.1f %12.1f %8.2f\n", size.name.c_str(),
-              static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0);
+  std::printf("%-6s %10lld %12.1f %12.1f %8.2f %12.1f %9.2f\n", size.name.c_str(),
+              static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0,
+              bf16, bf16 / cpp);
   std::fflush(stdout);
 }
 
@@ -234,7 +246,8 @@ int main(int argc, char** argv) {
       "thread(s)\n",
       static_cast<long long>(args->batch), static_cast<long long>(args->frames),
       static_cast<long long>(args->threads));
-  std::printf("%-6s %10s %12s %12s %8s\n", "size", "params", "C++ samp/s", "Py samp/s", "ratio");
+  std::printf("%-6s %10s %12s %12s %8s %12s %9s\n", "size", "params", "C++ samp/s", "Py samp/s",
+              "ratio", "bf16 samp/s", "bf16/f32");
   for (const Size& size : all) {
     if (args->sizes.find(size.name) != std::string::npos) BenchSize(*args, size);
   }
