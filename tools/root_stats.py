@@ -19,15 +19,9 @@ import sys
 
 import numpy as np
 
-
-def rotation_matrices(axis_angle):
-    """[..., 3] axis-angle -> [..., 3, 3] (Rodrigues)."""
-    angle = np.linalg.norm(axis_angle, axis=-1)[..., None, None]
-    axis = axis_angle / np.maximum(angle[..., 0], 1e-12)
-    k = np.zeros(axis.shape[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = axis[..., 2], -axis[..., 1], axis[..., 0]
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+# Rodrigues, the NumPy reference's (one copy in the repository).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bench", "reference"))
+from similarity_ref import rotation_matrices  # noqa: E402
 
 
 def tilt_height(trans, pelvis):

@@ -3,7 +3,8 @@
 // bmm, addmm, conv) in bfloat16 and keeps the numerically sensitive ops in float32; the weights,
 // their gradients and the optimiser's moments stay float32 (they are never cast in place).
 // Measured here (issue 15): a bf16 matrix product runs 2.2-2.4x as fast as OpenBLAS's float32 one
-// on one core; how much of a training step that saves is printed by bench/mdt_bench --precision.
+// on one core; how much of a training step that saves, bench/mdt_bench and bench/train_bench print
+// (the bf16/f32 column).
 #pragma once
 
 #include <ATen/autocast_mode.h>
