@@ -39,7 +39,8 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
-  RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.", {"velocity"});
+  RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.",
+                   {"velocity", "foot_contact"});
   RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
                    {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
                     "guidance_text", "preconditioning", "sigma_data", "snr_shift",
@@ -95,6 +96,9 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.velocity_weight =
       j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
   if (!(o.velocity_weight >= 0)) throw std::invalid_argument("loss.velocity must be >= 0");
+  o.foot_contact_weight =
+      j.value("loss", nlohmann::json::object()).value("foot_contact", o.foot_contact_weight);
+  if (!(o.foot_contact_weight >= 0)) throw std::invalid_argument("loss.foot_contact must be >= 0");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
@@ -150,7 +154,7 @@ nlohmann::json EditorOptions::ToJson() const {
           {"fps", fps},
           {"text_encoder_from", text_encoder_from},
           {"freeze_text_encoder", freeze_text_encoder},
-          {"loss", {{"velocity", velocity_weight}}},
+          {"loss", {{"velocity", velocity_weight}, {"foot_contact", foot_contact_weight}}},
           {"diffusion",
            {{"steps", diffusion_steps},
             {"drop_text", drop_text},

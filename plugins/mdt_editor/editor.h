@@ -40,6 +40,9 @@ struct EditorOptions {
   // MDM's velocity loss L_vel (Tevet et al. 2023) on the normalised features' frame-to-
   // frame differences, added with this weight to the x0 loss; 0 (the reference) leaves it out.
   double velocity_weight = 0;
+  // MDM's foot-contact loss L_foot (foot_contact.h) in (m/s)^2, added with this weight; 0 (the
+  // reference) leaves it out. The frames' rate is `fps` (30, MotionFix's and the corpus's, when 0).
+  double foot_contact_weight = 0;
   double snr_shift =
       1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
   // The training steps' density, proportional to t^k (SampleTrainingStep); 0: uniform (the

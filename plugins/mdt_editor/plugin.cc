@@ -17,11 +17,13 @@
 #include "../common/threads.h"
 #include "edit_data.h"
 #include "editor.h"
+#include "foot_contact.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/anchor.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/labels/labeler.h"
+#include "motionpipe/motion/plausibility.h"
 
 namespace motionpipe::mdt {
 
@@ -126,6 +128,13 @@ class EditorModel : public plugin::Model {
     if (options_.velocity_weight > 0) {
       out["velocity"] = VelocityMse(p.x0, target, batch.tensors.at("target_padding"));
       loss = loss + options_.velocity_weight * out["velocity"];
+    }
+    if (options_.foot_contact_weight > 0) {
+      const auto scale = 2.0 * (std_ + 1e-5);  // the features' normalisation (REFERENCE.md 2)
+      out["foot_contact"] = FootContactLoss(
+          p.x0 * scale + mean_, target * scale + mean_, batch.tensors.at("target_padding"),
+          options_.fps > 0 ? options_.fps : 30.0, PlausibilityOptions{}.skate_speed);
+      loss = loss + options_.foot_contact_weight * out["foot_contact"];
     }
     if (p.similarity.defined()) {
       const auto aux =

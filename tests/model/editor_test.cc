@@ -11,6 +11,8 @@
 #include "../../plugins/common/precision.h"
 #include "../../plugins/mdt_editor/diffusion.h"
 #include "../../plugins/mdt_editor/edit_data.h"
+#include "../../plugins/mdt_editor/foot_contact.h"
+#include "motionpipe/features/motionfix207.h"
 #include "motionpipe/formats/motionfix.h"
 
 namespace motionpipe::mdt {
@@ -789,6 +791,93 @@ TEST(Editor, VelocityLossSeesJitterNotOffsets) {
   auto garbage = target.clone();
   garbage.select(1, 1).narrow(0, 6, 4).add_(100.0);
   EXPECT_NEAR(VelocityMse(garbage, target, padding).item<double>(), 0.0, 1e-8);
+}
+
+// A walk that turns, leans and swings its legs, with the pelvis bobbing: every term of the feet's
+// kinematics (pelvis velocity, tilt, heading change, hips, knees, ankles) moves.
+Motion TurningWalk(int64_t frames) {
+  Motion m = Motion::Rest(frames, 30, 0.9);
+  for (int64_t f = 0; f < frames; ++f) {
+    const double t = static_cast<double>(f) / 30;
+    m.SetTranslation(f, Vec3{0.8 * t, 0.3 * t * t, 0.9 + 0.03 * std::sin(9 * t)});
+    m.SetLocalRotation(f, 0, RotZ(0.7 * t) * RotX(kPi / 2) * RotZ(0.1 * std::sin(3 * t)));
+    for (const int side : {0, 1}) {
+      const double phase = 6 * t + kPi * side;
+      m.SetLocalRotation(f, 1 + side, RotX(0.5 * std::sin(phase)) * RotZ(0.05 * side));
+      m.SetLocalRotation(f, 4 + side, RotX(0.6 * (1 + std::cos(phase))));
+      m.SetLocalRotation(f, 7 + side, RotX(0.2 * std::sin(phase)) * RotY(0.1));
+    }
+  }
+  return m;
+}
+
+torch::Tensor FeatureTensor(const Motion& m) {
+  FeatureMatrix f = EncodeMotionFix207(Skeleton::Smpl22(), m);
+  return torch::from_blob(f.data.data(), {f.rows, 1, f.cols}, torch::kFloat32).clone();
+}
+
+// Issue 15 (plausibility): the foot-contact loss's kinematics read the columns decoding reads and
+// reproduce the feet of the motion's forward kinematics. A displacement expressed in a heading
+// frame keeps its length and its height, so both are compared with the world's.
+TEST(Editor, FootDisplacementsAreTheForwardKinematicsFeet) {
+  const Motion m = TurningWalk(24);
+  const auto d = FootDisplacements(FeatureTensor(m));
+  ASSERT_EQ(d.sizes(), (std::vector<int64_t>{23, 1, 4, 3}));
+  const std::vector<float> joints = ComputeJoints(Skeleton::Smpl22(), m);
+  double largest = 0;
+  for (int64_t i = 1; i < 24; ++i) {
+    int k = 0;
+    for (const int joint : {7, 10, 8, 11}) {
+      double world[3], length = 0;
+      for (int c = 0; c < 3; ++c) {
+        world[c] = joints[static_cast<size_t>((i * kNumJoints + joint) * 3 + c)] -
+                   joints[static_cast<size_t>(((i - 1) * kNumJoints + joint) * 3 + c)];
+        length += world[c] * world[c];
+      }
+      const auto ours = d[i - 1][0][k++];
+      EXPECT_NEAR(ours.norm().item<double>(), std::sqrt(length), 2e-5) << "frame " << i;
+      EXPECT_NEAR(ours[2].item<double>(), world[2], 2e-5) << "frame " << i;
+      largest = std::max(largest, std::sqrt(length));
+    }
+  }
+  EXPECT_GT(largest, 0.02);  // the feet do move (at 30 fps, 0.6 m/s)
+}
+
+// L_foot penalises the prediction's feet only where the target's stand still, in (m/s)^2, and not
+// on padded frames; its gradient reaches the pelvis velocity and the legs, not the arms or the
+// derived positions.
+TEST(Editor, FootContactLossPenalisesFeetThatMoveWhereTheTargetsStand) {
+  const int64_t frames = 16;
+  const Motion standing = Motion::Rest(frames, 30, 0.9);
+  Motion sliding = standing;
+  for (int64_t f = 0; f < frames; ++f) sliding.SetTranslation(f, Vec3{0.5 * f / 30.0, 0, 0.9});
+  const auto stand = FeatureTensor(standing), slide = FeatureTensor(sliding);
+  const auto none = torch::zeros({1, frames}, torch::kBool);
+  EXPECT_NEAR(FootContactLoss(stand, stand, none, 30, 0.15).item<double>(), 0.0, 1e-8);
+  // Every foot slides at 0.5 m/s where the target stands: 0.25 (m/s)^2.
+  EXPECT_NEAR(FootContactLoss(slide, stand, none, 30, 0.15).item<double>(), 0.25, 1e-3);
+  // Where the target's feet move (faster than the contact speed) nothing is asked of them.
+  EXPECT_NEAR(FootContactLoss(stand, slide, none, 30, 0.15).item<double>(), 0.0, 1e-8);
+  // Read as 10-fps frames, the same per-frame step is a third of the speed.
+  EXPECT_NEAR(FootContactLoss(slide, stand, none, 10, 0.15).item<double>(), 0.25 / 9, 1e-4);
+  // A prediction that slides only on padded frames is not penalised.
+  auto padding = torch::zeros({1, frames}, torch::kBool);
+  padding[0].narrow(0, 8, frames - 8).fill_(true);
+  auto late = stand.clone();
+  late.narrow(0, 8, frames - 8).copy_(slide.narrow(0, 8, frames - 8));
+  EXPECT_NEAR(FootContactLoss(late, stand, padding, 30, 0.15).item<double>(), 0.0, 1e-8);
+  EXPECT_GT(FootContactLoss(late, stand, none, 30, 0.15).item<double>(), 0.01);
+  // The gradient: the walk's frames against a standing target.
+  auto walk = FeatureTensor(TurningWalk(frames)).requires_grad_(true);
+  FootContactLoss(walk, stand, none, 30, 0.15).backward();
+  const torch::Tensor g = walk.grad().abs().sum(std::vector<int64_t>{0, 1});
+  EXPECT_GT(g.narrow(0, 0, 3).sum().item<double>(), 0);            // pelvis velocity
+  EXPECT_GT(g.narrow(0, 3, 6).sum().item<double>(), 0);            // heading-free orientation
+  EXPECT_GT(g.narrow(0, 9, 6).sum().item<double>(), 0);            // heading change
+  EXPECT_GT(g.narrow(0, 15, 6).sum().item<double>(), 0);           // left hip (joint 1)
+  EXPECT_GT(g.narrow(0, 15 + 6 * 6, 6).sum().item<double>(), 0);   // left ankle (joint 7)
+  EXPECT_EQ(g.narrow(0, 15 + 6 * 15, 6).sum().item<double>(), 0);  // left shoulder (joint 16)
+  EXPECT_EQ(g.narrow(0, 141, 66).sum().item<double>(), 0);         // derived positions
 }
 
 TEST(Editor, RegressionModePredictsTheNormalizedCurve) {

@@ -1,0 +1,87 @@
+#include "foot_contact.h"
+
+#include <array>
+
+#include "motionpipe/skeleton/skeleton.h"
+
+namespace motionpipe::mdt {
+
+namespace {
+
+// Matrix products over the last two dimensions, written elementwise (see FootDisplacements).
+torch::Tensor MatMat(const torch::Tensor& a, const torch::Tensor& b) {
+  return (a.unsqueeze(-1) * b.unsqueeze(-3)).sum(-2);
+}
+torch::Tensor MatVec(const torch::Tensor& a, const torch::Tensor& v) {
+  return (a * v.unsqueeze(-2)).sum(-1);
+}
+
+// The 6D representation's matrix (its first two rows, Gram-Schmidt; core's Rot6dToMatrix).
+torch::Tensor Rot6dToMatrix(const torch::Tensor& six) {
+  const auto a = six.narrow(-1, 0, 3), b = six.narrow(-1, 3, 3);
+  const auto r0 = a / a.norm(2, -1, true).clamp_min(1e-8);
+  const auto orthogonal = b - (r0 * b).sum(-1, true) * r0;
+  const auto r1 = orthogonal / orthogonal.norm(2, -1, true).clamp_min(1e-8);
+  const auto r2 = torch::cross(r0, r1, -1);
+  return torch::stack({r0, r1, r2}, -2);
+}
+
+// The local rotation of joint j (1..21) from columns 15:141.
+torch::Tensor LocalRotation(const torch::Tensor& features, int joint) {
+  return Rot6dToMatrix(features.narrow(-1, 15 + 6 * (joint - 1), 6));
+}
+
+// Positions of the four foot joints relative to the pelvis in the heading-free frame: [T, N, 4, 3].
+torch::Tensor FootPositions(const torch::Tensor& features) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  const auto offset = [&](int joint) {
+    const Vec3& o = skeleton.rest_offsets()[static_cast<size_t>(joint)];
+    return torch::tensor({o.x, o.y, o.z}, torch::kFloat64).to(torch::kFloat32);
+  };
+  const auto pelvis = Rot6dToMatrix(features.narrow(-1, 3, 6));
+  std::vector<torch::Tensor> feet;
+  // hip, knee, ankle, foot of each leg (the parents chain).
+  for (const std::array<int, 4>& leg : {std::array<int, 4>{1, 4, 7, 10}, {2, 5, 8, 11}}) {
+    auto global = pelvis;
+    auto position = MatVec(global, offset(leg[0]));
+    for (size_t k = 1; k < leg.size(); ++k) {
+      global = MatMat(global, LocalRotation(features, leg[k - 1]));
+      position = position + MatVec(global, offset(leg[k]));
+      if (k >= 2) feet.push_back(position);
+    }
+  }
+  return torch::stack({feet[0], feet[1], feet[2], feet[3]}, -2);
+}
+
+}  // namespace
+
+torch::Tensor FootDisplacements(const torch::Tensor& features) {
+  const auto f = features.to(torch::kFloat32);
+  const int64_t frames = f.size(0);
+  const auto q = FootPositions(f);                         // [T, N, 4, 3]
+  const auto pelvis = Rot6dToMatrix(f.narrow(-1, 3, 6));   // G
+  const auto heading = Rot6dToMatrix(f.narrow(-1, 9, 6));  // H
+  const auto velocity = f.narrow(-1, 0, 3);                // v
+  const auto later = [&](const torch::Tensor& x) { return x.narrow(0, 1, frames - 1); };
+  const auto earlier = [&](const torch::Tensor& x) { return x.narrow(0, 0, frames - 1); };
+  const auto step = MatVec(earlier(pelvis), later(velocity)).unsqueeze(-2);  // G_{i-1} v_i
+  return step + MatVec(later(heading).unsqueeze(-3), later(q)) - earlier(q);
+}
+
+torch::Tensor FootContactLoss(const torch::Tensor& prediction, const torch::Tensor& target,
+                              const torch::Tensor& padding, double fps, double contact_speed) {
+  if (prediction.size(0) < 2) return torch::zeros({}, torch::kFloat32);
+  const int64_t frames = prediction.size(0);
+  const auto speed = [&](const torch::Tensor& x) { return FootDisplacements(x) * fps; };
+  const auto target_speed = speed(target).detach().norm(2, -1);  // [T - 1, N, 4]
+  const auto real = padding.narrow(1, 1, frames - 1)
+                        .logical_or(padding.narrow(1, 0, frames - 1))
+                        .logical_not()
+                        .t()
+                        .unsqueeze(-1);  // [T - 1, N, 1]
+  const auto contact = target_speed.lt(contact_speed).logical_and(real).to(torch::kFloat32);
+  const auto squared = speed(prediction).pow(2).sum(-1);
+  return (squared * contact).sum() / contact.sum().clamp_min(1.0);
+}
+
+}  // namespace motionpipe::mdt

@@ -1,0 +1,35 @@
+// MDM's foot-contact loss (Tevet et al. 2023, sec. 3, L_foot) for the 207-d editing feature: the
+// feet's velocities, found by forward kinematics of the predicted frame, are pushed to zero on the
+// frames where the target's feet stand still. Not in SimMotionEdit's reference; an option of the
+// editors (`loss: {foot_contact: w}`) for issue 15's plausibility (the edits' feet slide on about
+// half of their contact frames, the targets' on under 1%).
+//
+// The kinematics read exactly the columns that decoding reads (REFERENCE.md section 2): the pelvis
+// velocity 0:3, the heading-free orientation 3:9, the heading change 9:15 and the legs' local
+// rotations in 15:141; the derived joint positions 141:207 are not used, so the loss acts on the
+// motion an edit decodes to.
+#pragma once
+
+#include <torch/torch.h>
+
+namespace motionpipe::mdt {
+
+// The four foot joints (left ankle, left foot, right ankle, right foot: SMPL-22 joints 7, 10, 8,
+// 11), displaced between frames i - 1 and i, in metres, in the heading frame of frame i - 1:
+//   d_i = G_{i-1} v_i + H_i q_i - q_{i-1},
+// with v the pelvis velocity (in the previous frame's pelvis frame), G the heading-free global
+// orientation, H the heading change and q a foot's position relative to the pelvis, heading removed
+// (the leg chain's forward kinematics on Skeleton::Smpl22's rest offsets).
+// `features`: unnormalised 207-d frames [T, N, 207]; returns [T - 1, N, 4, 3] in float32 (the
+// products are written out elementwise so that bf16 autocast leaves them in float32: a millimetre
+// step is the difference of two positions near a metre).
+torch::Tensor FootDisplacements(const torch::Tensor& features);
+
+// L_foot: the mean squared speed (m/s)^2 of the prediction's foot joints over the (foot, frame
+// pair)s where the target's foot moves slower than `contact_speed` m/s (the target's feet are in
+// contact) and both frames are real. `prediction`, `target`: unnormalised [T, N, 207]; `padding`
+// [N, T] (true = padded); `fps`: the frames' rate.
+torch::Tensor FootContactLoss(const torch::Tensor& prediction, const torch::Tensor& target,
+                              const torch::Tensor& padding, double fps, double contact_speed);
+
+}  // namespace motionpipe::mdt
