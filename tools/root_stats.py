@@ -8,12 +8,17 @@ mean vertical speed and the mean horizontal acceleration of the pelvis, and how 
 change the pelvis's tilt carries: the velocity is stored in the previous frame's full pelvis frame,
 so a height change is R[z, up] v_up + R[z, other axes] v_other, and the second term is |dz| through
 the tilt (the up axis being the pelvis axis nearest the world's z over the motion); the means over
-the motions.
+the motions. Beside them, the feet's skate as the evaluation computes it (per motion, the fraction of
+foot-frames within 5 cm of the floor in both frames whose horizontal speed exceeds 0.15 m/s; the
+mean over the motions), and the same with every frame moved vertically so that its lowest foot
+joint stands on the floor: if the height's drift made the feet skate (a sunken swing foot counted
+as a sliding contact), the second would fall to the targets' level.
 
     /usr/bin/python3 tools/root_stats.py out/demo-1/edit_mdt_untrained out/demo-1/edit_mdt
 """
 import argparse
 import glob
+import json
 import os
 import sys
 
@@ -22,6 +27,42 @@ import numpy as np
 # Rodrigues, the NumPy reference's (one copy in the repository).
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bench", "reference"))
 from similarity_ref import rotation_matrices  # noqa: E402
+
+SKELETON = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "skeleton", "smpl22.json")
+LEGS = ((1, 4, 7, 10), (2, 5, 8, 11))  # hip, knee, ankle, foot (SMPL-22); the feet are 7, 10, 8, 11
+CONTACT_HEIGHT, SKATE_SPEED = 0.05, 0.15  # core's PlausibilityOptions
+
+
+def leg_offsets():
+    """Rest offsets (y-up, metres) of the leg joints, from the skeleton file."""
+    with open(SKELETON) as f:
+        doc = json.load(f)
+    offsets = {}
+    for joint in sum(LEGS, ()):
+        direction = np.asarray(doc["rest_offset_directions_yup"][joint], float)
+        offsets[joint] = doc["bone_lengths_m"][joint] * direction / np.linalg.norm(direction)
+    return offsets
+
+
+def feet(trans, rotations, offsets):
+    """World positions [T, 4, 3] of the ankles and feet (forward kinematics along the legs)."""
+    out = []
+    for leg in LEGS:
+        world, position = rotations[:, 0], trans + rotations[:, 0] @ offsets[leg[0]]
+        for k in range(1, len(leg)):
+            world = world @ rotations[:, leg[k - 1]]
+            position = position + world @ offsets[leg[k]]
+            if k >= 2:
+                out.append(position)
+    return np.stack(out, axis=1)
+
+
+def skate(positions, fps, grounded):
+    """Fraction of contact foot-frames that slide (0 without contact)."""
+    z = positions[..., 2] - (positions[..., 2].min(axis=1, keepdims=True) if grounded else 0)
+    contact = (z[1:] < CONTACT_HEIGHT) & (z[:-1] < CONTACT_HEIGHT)
+    speed = np.linalg.norm(np.diff(positions[..., :2], axis=0), axis=-1) * fps
+    return (speed[contact] > SKATE_SPEED).sum() / contact.sum() if contact.any() else 0.0
 
 
 def tilt_height(trans, pelvis):
@@ -33,7 +74,7 @@ def tilt_height(trans, pelvis):
 
 
 def motions(stage_dir):
-    """(trans [T, 3], pelvis rotations [T, 3, 3], fps) of every motion in the stage's task-*/edited.npz."""
+    """(trans [T, 3], local rotations [T, 22, 3, 3], fps) of every motion in the stage's task-*/edited.npz."""
     files = sorted(glob.glob(os.path.join(stage_dir, "task-*", "edited.npz")))
     if not files:
         sys.exit(f"{stage_dir}: no task-*/edited.npz (is it an edit stage's output directory?)")
@@ -45,12 +86,14 @@ def motions(stage_dir):
             offsets, trans, poses, fps = z["offsets"], z["trans"], z["poses"], z["fps"]
         for i in range(len(offsets) - 1):
             frames = slice(offsets[i], offsets[i + 1])
-            yield trans[frames], rotation_matrices(poses[frames, 0]), float(fps[i])
+            rotations = rotation_matrices(poses[frames].reshape(-1, 3)).reshape(-1, 22, 3, 3)
+            yield trans[frames], rotations, float(fps[i])
 
 
 def row(stage_dir):
-    drift, spread, vertical, accel, tilt = [], [], [], [], []
-    for trans, pelvis, fps in motions(stage_dir):
+    drift, spread, vertical, accel, tilt, skating, grounded = [], [], [], [], [], [], []
+    offsets = leg_offsets()
+    for trans, rotations, fps in motions(stage_dir):
         if len(trans) < 3:
             continue
         z = trans[:, 2]
@@ -58,10 +101,14 @@ def row(stage_dir):
         spread.append(z.std())
         vertical.append(np.abs(np.diff(z)).mean() * fps)
         accel.append(np.linalg.norm(np.diff(trans[:, :2], n=2, axis=0), axis=1).mean() * fps * fps)
-        tilt.append(tilt_height(trans, pelvis))
+        tilt.append(tilt_height(trans, rotations[:, 0]))
+        positions = feet(trans, rotations, offsets)
+        skating.append(skate(positions, fps, grounded=False))
+        grounded.append(skate(positions, fps, grounded=True))
     if not drift:
         sys.exit(f"{stage_dir}: no motion of 3 frames or more")
-    return len(drift), np.mean(drift), np.mean(spread), np.mean(vertical), np.mean(accel), np.mean(tilt)
+    return (len(drift), np.mean(drift), np.mean(spread), np.mean(vertical), np.mean(accel), np.mean(tilt),
+            np.mean(skating), np.mean(grounded))
 
 
 def main():
@@ -69,10 +116,11 @@ def main():
     parser.add_argument("stages", nargs="+", help="edit stage output directories (out/JOB/STAGE)")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
-          f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13}")
+          f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14}")
     for stage in args.stages:
-        n, drift, spread, vertical, accel, tilt = row(stage)
-        print(f"{stage:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f} {tilt:>13.3f}")
+        n, drift, spread, vertical, accel, tilt, skating, grounded = row(stage)
+        print(f"{stage:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f} {tilt:>13.3f} "
+              f"{skating:>6.3f} {grounded:>14.3f}")
 
 
 if __name__ == "__main__":

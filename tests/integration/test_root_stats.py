@@ -49,7 +49,7 @@ class RootStatsTest(unittest.TestCase):
         self.assertEqual(result.returncode, 0, result.stderr)
         fields = result.stdout.splitlines()[1].split()
         self.assertEqual(fields[0], self.path("stage"))
-        n, drift, spread, vertical, accel, tilt = int(fields[1]), *map(float, fields[2:])
+        n, drift, spread, vertical, accel, tilt = int(fields[1]), *map(float, fields[2:7])
         self.assertEqual(n, 2)
         self.assertAlmostEqual(drift, 0.2, places=3)                  # (0.4 + 0) / 2
         self.assertAlmostEqual(spread, np.std([1.0, 1.1, 1.2, 1.3, 1.4]) / 2, places=3)
@@ -70,6 +70,26 @@ class RootStatsTest(unittest.TestCase):
         drift, tilt = float(fields[2]), float(fields[6])
         self.assertAlmostEqual(drift, 0.0, places=5)
         self.assertAlmostEqual(tilt, 4 * 0.1 * np.sin(np.radians(10)) * np.cos(np.radians(10)), places=3)
+
+    def test_skate_counts_sliding_contact_feet_and_grounding_finds_them_at_any_height(self):
+        # Upright (the pelvis turned 90 degrees about x: the rest pose's y axis up), the legs
+        # straight: the lowest foot joint is 0.3936 + 0.4324 m below the pelvis (the left ankle and
+        # foot; the right's are 1 cm higher). Sliding along x at 0.5 m/s on the floor, every contact
+        # foot-frame skates; 2 m up nothing touches the floor, unless each frame is grounded.
+        legs = 0.3936 + 0.4324
+        def slide(height, speed):
+            walk = np.zeros((6, 3))
+            walk[:, 0] = speed / 10.0 * np.arange(6)
+            walk[:, 2] = height
+            return walk
+        for name, height, speed, expected in [("floor", legs + 0.01, 0.5, (1.0, 1.0)),
+                                              ("air", 2.0, 0.5, (0.0, 1.0)),
+                                              ("still", legs + 0.01, 0.0, (0.0, 0.0))]:
+            write_edits(self.path(name), [slide(height, speed)], pelvis=[np.pi / 2, 0.0, 0.0])
+            result = run(self.path(name))
+            self.assertEqual(result.returncode, 0, result.stderr)
+            fields = result.stdout.splitlines()[1].split()
+            self.assertEqual((float(fields[7]), float(fields[8])), expected, name)
 
     def test_what_is_not_an_edit_output_is_named(self):
         os.makedirs(self.path("empty"))
