@@ -75,7 +75,108 @@ json CloserToTarget(const std::vector<std::vector<float>>& g,
   return out;
 }
 
-// params: evaluator (input stage holding the evaluator checkpoint), edits (the edit stage),
+// The edits, their triplets' sources and targets, and what the scores need besides.
+struct EditSet {
+  std::vector<Motion> generated, targets, sources;
+  std::vector<std::string> edit_kinds;
+  int64_t batch = 32;
+  uint64_t seed = 0;
+  std::vector<double> jitter_sigmas;
+};
+
+// Everything eval_edit reports that depends on the evaluator: retrieval of the edits and of the
+// yardsticks in the same batches (issue 15: the source as the edit (copy: moves nowhere), the
+// target as the edit (the upper bound) and another triplet's target (chance)), which edits lie
+// closer to their targets, target-to-source retrieval, and on request the jittered copies.
+Result<json> ScoreWith(plugin::Generator& encoder, const EditSet& e) {
+  MP_ASSIGN_OR_RETURN(const auto g_rows, encoder.EncodeMotions(e.generated));
+  MP_ASSIGN_OR_RETURN(const auto t_rows, encoder.EncodeMotions(e.targets));
+  MP_ASSIGN_OR_RETURN(const auto s_rows, encoder.EncodeMotions(e.sources));
+  const auto g = ToEmbeddings(g_rows), t = ToEmbeddings(t_rows), s = ToEmbeddings(s_rows);
+  // Another triplet's target as the edit (each takes the one half the list away): a motion of
+  // the corpus unrelated to both, the chance level of every measure.
+  std::vector<std::vector<float>> other_rows(t_rows.size());
+  for (size_t i = 0; i < other_rows.size(); ++i)
+    other_rows[i] = t_rows[(i + other_rows.size() / 2) % other_rows.size()];
+  const auto other = ToEmbeddings(other_rows);
+  MP_ASSIGN_OR_RETURN(json metrics, EditRetrieval(g, t, s, e.batch, e.seed));
+  MP_ASSIGN_OR_RETURN(const json copy, EditRetrieval(s, t, s, e.batch, e.seed));
+  MP_ASSIGN_OR_RETURN(const json target, EditRetrieval(t, t, s, e.batch, e.seed));
+  MP_ASSIGN_OR_RETURN(const json unrelated, EditRetrieval(other, t, s, e.batch, e.seed));
+  MP_ASSIGN_OR_RETURN(const auto target_to_source, eval::Retrieval(t, s, e.batch, e.seed));
+  metrics["yardsticks"] = {{"copy", copy}, {"target", target}, {"other_target", unrelated}};
+  metrics["closer_to_target"] = CloserToTarget(g_rows, t_rows, s_rows, e.edit_kinds);
+  metrics["yardsticks"]["copy"]["closer_to_target"] =
+      CloserToTarget(s_rows, t_rows, s_rows, e.edit_kinds);
+  metrics["yardsticks"]["target"]["closer_to_target"] =
+      CloserToTarget(t_rows, t_rows, s_rows, e.edit_kinds);
+  metrics["yardsticks"]["other_target"]["closer_to_target"] =
+      CloserToTarget(other_rows, t_rows, s_rows, e.edit_kinds);
+  metrics["target_to_source"] = {{"batches", ScoresJson(target_to_source)}};
+  // Diagnostic (issue 15), on request: the copy with white noise of spread sigma (radians) on
+  // every joint rotation, scored in the same batches, shows how much of an edit's score the
+  // evaluator loses to roughness alone.
+  json jittered = json::object();
+  for (double sigma : e.jitter_sigmas) {
+    std::vector<Motion> noisy = e.sources;
+    Rng rng(e.seed ^ 0x6a177e12ULL);
+    for (Motion& m : noisy) {
+      for (float& v : m.poses) v += static_cast<float>(sigma * rng.Normal());
+    }
+    MP_ASSIGN_OR_RETURN(const auto rows, encoder.EncodeMotions(noisy));
+    MP_ASSIGN_OR_RETURN(json entry, EditRetrieval(ToEmbeddings(rows), t, s, e.batch, e.seed));
+    entry["sigma"] = sigma;
+    entry["plausibility"] = MeanPlausibility(noisy);
+    jittered[std::to_string(sigma)] = entry;
+  }
+  if (!jittered.empty()) metrics["jittered_copies"] = jittered;
+  return metrics;
+}
+
+// The mean of several evaluators' scores, leaf by leaf: numbers averaged, objects and equally long
+// arrays recursed into, anything else (a string) taken from the first.
+json MeanOf(const std::vector<json>& each) {
+  const json& first = each.front();
+  if (first.is_number()) {
+    double sum = 0;
+    bool equal = true;  // counts (queries, triplets) stay as they are
+    for (const json& j : each) {
+      if (!j.is_number()) return first;
+      sum += j.get<double>();
+      equal = equal && j == first;
+    }
+    if (equal) return first;
+    return sum / static_cast<double>(each.size());
+  }
+  const auto gather = [&](const auto& at) {
+    std::vector<json> parts;
+    for (const json& j : each) parts.push_back(at(j));
+    return MeanOf(parts);
+  };
+  if (first.is_object()) {
+    json out = json::object();
+    for (const auto& [key, value] : first.items()) {
+      bool everywhere = true;
+      for (const json& j : each) everywhere = everywhere && j.is_object() && j.contains(key);
+      out[key] = everywhere ? gather([&](const json& j) { return j.at(key); }) : value;
+    }
+    return out;
+  }
+  if (first.is_array()) {
+    for (const json& j : each) {
+      if (!j.is_array() || j.size() != first.size()) return first;
+    }
+    json out = json::array();
+    for (size_t i = 0; i < first.size(); ++i)
+      out.push_back(gather([&](const json& j) { return j.at(i); }));
+    return out;
+  }
+  return first;
+}
+
+// params: evaluator (input stage holding the evaluator checkpoint, or a list of them: every score
+// is then the mean over the evaluators, and by_evaluator lists each one's headline figures), edits
+// (the edit stage),
 // triplets (the stage holding the triplets; default: every input); evaluator, edits and triplets
 // may also be path patterns (an earlier job's stage: rescoring without editing again),
 // batch (32), seed, method (a name for the report; default: the edit stage's model), yardstick
@@ -89,7 +190,8 @@ class EvalEditStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     plan.shards = 1;
     plan.reduce = false;
-    CheckInputParams(plan, path, {"evaluator", "edits", "triplets"}, errors);
+    CheckInputParams(plan, path, {"edits", "triplets"}, errors);
+    CheckInputListParams(plan, path, {"evaluator"}, errors);
   }
   explicit EvalEditStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
@@ -101,13 +203,28 @@ class EvalEditStage : public StageExecutor {
     if (!plugins_) return TaskReport::Error("eval_edit: this worker has no plugin host");
     fs::create_directories(ctx.output_dir());
     const auto started = std::chrono::steady_clock::now();
-    const std::string evaluator_stage = p.value("evaluator", std::string("evaluator"));
-    const std::string evaluator = FindCheckpoint(ctx, evaluator_stage);
-    if (evaluator.empty())
-      return TaskReport::BadInput("eval_edit: input stage '" + evaluator_stage +
-                                  "' holds no evaluator checkpoint");
-    auto encoder = LoadGenerator(*plugins_, evaluator);
-    if (!encoder.ok()) return TaskReport::BadInput(encoder.status().message());
+    // One evaluator (a name) or several (a list): their scores are averaged.
+    std::vector<std::string> evaluator_names;
+    const json& named = p.contains("evaluator") ? p["evaluator"] : json("evaluator");
+    for (const json& name : named.is_array() ? named : json::array({named})) {
+      if (!name.is_string())
+        return TaskReport::BadInput(
+            "eval_edit: params.evaluator must be a name or a list of names");
+      evaluator_names.push_back(name.get<std::string>());
+    }
+    if (evaluator_names.empty())
+      return TaskReport::BadInput("eval_edit: params.evaluator names no evaluator");
+    std::vector<std::string> checkpoints;
+    std::vector<GeneratorPtr> encoders;
+    for (const std::string& name : evaluator_names) {
+      checkpoints.push_back(FindCheckpoint(ctx, name));
+      if (checkpoints.back().empty())
+        return TaskReport::BadInput("eval_edit: input stage '" + name +
+                                    "' holds no evaluator checkpoint");
+      auto encoder = LoadGenerator(*plugins_, checkpoints.back());
+      if (!encoder.ok()) return TaskReport::BadInput(encoder.status().message());
+      encoders.push_back(std::move(*encoder));
+    }
     // The edited motions by triplet id, from every edit task.
     const std::string edits_stage = p.value("edits", std::string());
     std::map<std::string, Motion> edited;
@@ -144,73 +261,47 @@ class EvalEditStage : public StageExecutor {
       return TaskReport::BadInput("eval_edit: " + std::to_string(edited.size() - generated.size()) +
                                   " edited motion(s) have no triplet in the inputs");
     }
-    auto g_rows = (*encoder)->EncodeMotions(generated), t_rows = (*encoder)->EncodeMotions(targets),
-         s_rows = (*encoder)->EncodeMotions(sources);
-    for (const auto* e : {&g_rows, &t_rows, &s_rows}) {
-      if (!e->ok()) return TaskReport::Error("eval_edit: " + e->status().message());
+    EditSet set;
+    set.generated = std::move(generated), set.targets = std::move(targets);
+    set.sources = std::move(sources), set.edit_kinds = std::move(edit_kinds);
+    set.batch = p.value("batch", int64_t{32});
+    set.seed = p.value("seed", ctx.spec.seed());
+    set.jitter_sigmas = p.value("jitter_yardsticks", std::vector<double>{});
+    for (double sigma : set.jitter_sigmas) {
+      if (!(sigma > 0 && sigma < 1))
+        return TaskReport::BadInput("eval_edit: jitter_yardsticks are spreads in (0, 1) radians");
     }
-    const auto g = ToEmbeddings(*g_rows), t = ToEmbeddings(*t_rows), s = ToEmbeddings(*s_rows);
-    const int64_t batch = p.value("batch", int64_t{32});
-    const uint64_t seed = p.value("seed", ctx.spec.seed());
-    // Another triplet's target as the edit (each takes the one half the list away): a motion of
-    // the corpus unrelated to both, the chance level of every measure.
-    std::vector<std::vector<float>> other_rows(t_rows->size());
-    for (size_t i = 0; i < other_rows.size(); ++i)
-      other_rows[i] = (*t_rows)[(i + other_rows.size() / 2) % other_rows.size()];
-    const auto other = ToEmbeddings(other_rows);
-    auto retrieval = EditRetrieval(g, t, s, batch, seed),
-         copy = EditRetrieval(s, t, s, batch, seed), target = EditRetrieval(t, t, s, batch, seed),
-         unrelated = EditRetrieval(other, t, s, batch, seed);
-    auto target_to_source = eval::Retrieval(t, s, batch, seed);
-    for (const Status& status : {retrieval.status(), copy.status(), target.status(),
-                                 unrelated.status(), target_to_source.status()}) {
-      if (!status.ok()) return TaskReport::Error("eval_edit: " + status.message());
+    // Each evaluator's scores; with several, their mean (a judge less tied to one evaluator's
+    // training) and each one's headline figures.
+    std::vector<json> scores;
+    json by_evaluator = json::array();
+    for (size_t k = 0; k < encoders.size(); ++k) {
+      auto scored = ScoreWith(*encoders[k], set);
+      if (!scored.ok()) return TaskReport::Error("eval_edit: " + scored.status().message());
+      const json& one = *scored;
+      by_evaluator.push_back(
+          {{"evaluator", checkpoints[k]},
+           {"generated_to_target", one["generated_to_target"]["batches"]["R@1"]},
+           {"generated_to_source", one["generated_to_source"]["batches"]["R@1"]},
+           {"towards_target", one["towards_target"]["batches"]["R@1"]},
+           {"copy_generated_to_target",
+            one["yardsticks"]["copy"]["generated_to_target"]["batches"]["R@1"]}});
+      scores.push_back(std::move(*scored));
     }
-    json metrics = *retrieval;
-    metrics.update({{"evaluation", "edit"},  // its layout: configs/evaluations/edit.yaml
-                    {"method", method},
-                    {"evaluator", evaluator},
-                    {"motions", generated.size()},
-                    {"batch", batch},
-                    {"seed", seed}});
+    json metrics = scores.size() == 1 ? scores.front() : MeanOf(scores);
+    metrics.update(
+        {{"evaluation", "edit"},  // its layout: configs/evaluations/edit.yaml
+         {"method", method},
+         {"evaluator", checkpoints.size() == 1 ? json(checkpoints[0]) : json(checkpoints)},
+         {"motions", set.generated.size()},
+         {"batch", set.batch},
+         {"seed", set.seed}});
+    if (checkpoints.size() > 1) metrics["by_evaluator"] = by_evaluator;
     if (p.contains("yardstick"))
       metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
     if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
-    // The yardsticks, in the same batches (issue 15): the source as the edit (copy: moves nowhere),
-    // the target as the edit (the upper bound) and another triplet's target (chance).
-    metrics["yardsticks"] = {{"copy", *copy}, {"target", *target}, {"other_target", *unrelated}};
-    metrics["closer_to_target"] = CloserToTarget(*g_rows, *t_rows, *s_rows, edit_kinds);
-    metrics["yardsticks"]["copy"]["closer_to_target"] =
-        CloserToTarget(*s_rows, *t_rows, *s_rows, edit_kinds);
-    metrics["yardsticks"]["target"]["closer_to_target"] =
-        CloserToTarget(*t_rows, *t_rows, *s_rows, edit_kinds);
-    metrics["yardsticks"]["other_target"]["closer_to_target"] =
-        CloserToTarget(other_rows, *t_rows, *s_rows, edit_kinds);
-    metrics["target_to_source"] = {{"batches", ScoresJson(*target_to_source)}};
-    metrics["plausibility"] = {{"generated", MeanPlausibility(generated)},
-                               {"target", MeanPlausibility(targets)}};
-    // Diagnostic (issue 15), on request: the copy with white noise of spread sigma (radians) on
-    // every joint rotation, scored in the same batches, shows how much of an edit's score the
-    // evaluator loses to roughness alone.
-    json jittered = json::object();
-    for (double sigma : p.value("jitter_yardsticks", std::vector<double>{})) {
-      if (!(sigma > 0 && sigma < 1))
-        return TaskReport::BadInput("eval_edit: jitter_yardsticks are spreads in (0, 1) radians");
-      std::vector<Motion> noisy = sources;
-      Rng rng(seed ^ 0x6a177e12ULL);
-      for (Motion& m : noisy) {
-        for (float& v : m.poses) v += static_cast<float>(sigma * rng.Normal());
-      }
-      auto rows = (*encoder)->EncodeMotions(noisy);
-      if (!rows.ok()) return TaskReport::Error("eval_edit: " + rows.status().message());
-      auto scores = EditRetrieval(ToEmbeddings(*rows), t, s, batch, seed);
-      if (!scores.ok()) return TaskReport::Error("eval_edit: " + scores.status().message());
-      json entry = *scores;
-      entry["sigma"] = sigma;
-      entry["plausibility"] = MeanPlausibility(noisy);
-      jittered[std::to_string(sigma)] = entry;
-    }
-    if (!jittered.empty()) metrics["jittered_copies"] = jittered;
+    metrics["plausibility"] = {{"generated", MeanPlausibility(set.generated)},
+                               {"target", MeanPlausibility(set.targets)}};
     const json& g2t = metrics["generated_to_target"]["all"];
     if (auto failed =
             RecordHistory(ctx, &metrics, method, edited_checkpoint, ids,
@@ -218,13 +309,15 @@ class EvalEditStage : public StageExecutor {
                            {"generated_to_target.all.AvgR", g2t["AvgR"].get<double>(), false}})) {
       return *failed;
     }
-    if (Status st = WritePreview(
-            ctx, {{"source", &sources[0]}, {"edited", &generated[0]}, {"target", &targets[0]}},
-            edit_texts[0], ids[0]);
+    if (Status st = WritePreview(ctx,
+                                 {{"source", &set.sources[0]},
+                                  {"edited", &set.generated[0]},
+                                  {"target", &set.targets[0]}},
+                                 edit_texts[0], ids[0]);
         !st.ok()) {
       return TaskReport::Error("eval_edit: " + st.message());
     }
-    AddTiming(&metrics, started, generated.size() * 3);
+    AddTiming(&metrics, started, set.generated.size() * encoders.size() * 3);
     TaskReport out = WriteMetrics(ctx, metrics);
     out.metrics["R1_generated_to_target"] =
         metrics["generated_to_target"]["batches"]["R@1"].get<double>();

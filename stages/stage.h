@@ -14,6 +14,7 @@
 namespace motionpipe::stages {
 
 using nlohmann::json;
+using worker::CheckInputListParams;
 using worker::CheckInputParams;
 using worker::GeneratorPtr;
 using worker::IntParam;

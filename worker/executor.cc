@@ -31,18 +31,36 @@ int IntParam(const nlohmann::json& params, const char* key, int fallback, int mi
   return static_cast<int>(v.get<int64_t>());
 }
 
+namespace {
+bool NamesAnInput(const StagePlan& plan, const nlohmann::json& value) {
+  return value.is_string() && (value.get<std::string>().find('/') != std::string::npos ||
+                               std::find(plan.inputs.begin(), plan.inputs.end(),
+                                         value.get<std::string>()) != plan.inputs.end());
+}
+}  // namespace
+
 void CheckInputParams(const StagePlan& plan, const std::string& path,
                       std::initializer_list<const char*> keys, std::vector<std::string>* errors) {
   for (const char* key : keys) {
-    if (!plan.params.contains(key)) continue;
-    const nlohmann::json& value = plan.params[key];
-    const bool names =
-        value.is_string() && (value.get<std::string>().find('/') != std::string::npos ||
-                              std::find(plan.inputs.begin(), plan.inputs.end(),
-                                        value.get<std::string>()) != plan.inputs.end());
-    if (!names)
+    if (plan.params.contains(key) && !NamesAnInput(plan, plan.params[key]))
       errors->push_back(path + ".params." + key +
                         ": must name one of the stage's inputs (or a checkpoint path pattern)");
+  }
+}
+
+void CheckInputListParams(const StagePlan& plan, const std::string& path,
+                          std::initializer_list<const char*> keys,
+                          std::vector<std::string>* errors) {
+  for (const char* key : keys) {
+    if (!plan.params.contains(key)) continue;
+    const nlohmann::json& value = plan.params[key];
+    bool names = !value.is_array() || !value.empty();
+    for (const auto& one : value.is_array() ? value : nlohmann::json::array({value}))
+      names = names && NamesAnInput(plan, one);
+    if (!names)
+      errors->push_back(path + ".params." + key +
+                        ": must name one of the stage's inputs (or a checkpoint path pattern), or "
+                        "be a non-empty list of them");
   }
 }
 

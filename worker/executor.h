@@ -74,6 +74,10 @@ int IntParam(const nlohmann::json& params, const char* key, int fallback, int mi
              const std::string& path, std::vector<std::string>* errors);
 void CheckInputParams(const StagePlan& plan, const std::string& path,
                       std::initializer_list<const char*> keys, std::vector<std::string>* errors);
+// The same for keys that may also hold a non-empty list of such names.
+void CheckInputListParams(const StagePlan& plan, const std::string& path,
+                          std::initializer_list<const char*> keys,
+                          std::vector<std::string>* errors);
 // Long-running kinds (training, sampling) get a 6 h lease unless the YAML sets one.
 inline void LongLease(StagePlan& plan) {
   if (!plan.timeout_set) plan.timeout_seconds = 6 * 3600;

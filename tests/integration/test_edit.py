@@ -107,6 +107,37 @@ stages:
 """
 
 
+# A finished job's edits rescored by two evaluators (the first job's and another seed's), and by the
+# second alone: an earlier run judged again without editing again.
+JUDGES = """
+name: judges
+output_root: OUT/../judges
+seed: 1
+stages:
+  corpus: {kind: corpus, params: {clips: 60, triplets: 60, shard_size: 30}}
+  singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}
+  evaluator_b:
+    kind: train
+    inputs: [singles]
+    params:
+      model: temos_sinc
+      config: {variant: tmr, model: {latent: 32, layers: 1, heads: 2, ff: 64, text_encoder: {layers: 1, vocab: 200}}}
+      data: {real_pairs: false, synthetic_p: 0, max_frames: 60}
+      steps: 2
+      batch_size: 4
+      warmup: 0
+      seed: 2
+  eval_b:
+    kind: eval_edit
+    inputs: [evaluator_b, corpus]
+    params: {evaluator: evaluator_b, edits: "JOBS/edit_mdt", batch: 2}
+  eval_both:
+    kind: eval_edit
+    inputs: [evaluator_b, corpus]
+    params: {evaluator: ["JOBS/evaluator", evaluator_b], edits: "JOBS/edit_mdt", batch: 2}
+"""
+
+
 class ReportParser(html.parser.HTMLParser):
     """Collects a report's tables (caption and rows of cell texts) and its images' data URIs."""
 
@@ -316,6 +347,38 @@ class EditTest(EngineTest):
         self.assertIn('motionpipe_eval_regressions{method="mdt_editor/mdt"} 1', body)
         with open(glob.glob(self.path("nightly", "nightly-*", "edit", "task-00000", "edits.json"))[0]) as f:
             self.assertEqual(json.load(f)["checkpoint"], os.path.join(job, "mdt", "task-00000", "model"))
+
+        # The first job's edits judged again by two evaluators (its own and another seed's): every
+        # score is the mean of the two evaluators' own, the plausibility is the edits', and each
+        # one's headline figures are listed.
+        judges = JUDGES.replace("JOBS", self.path("out", "edit_test-*"))
+        result = subprocess.run([MOTIONPIPE, "run", self.write_pipeline("judges.yaml", judges), "--workers", "2", "--threads", "1"],
+                                capture_output=True, text=True, timeout=600)
+        self.assertEqual(result.returncode, 0, result.stdout[-2000:] + result.stderr[-2000:])
+        judged = {}
+        for name in ("eval_b", "eval_both"):
+            with open(glob.glob(self.path("judges", "judges-*", name, "task-00000", "metrics.json"))[0]) as f:
+                judged[name] = json.load(f)
+        one, two, both = metrics, judged["eval_b"], judged["eval_both"]
+        self.assertEqual(both["evaluator"], [one["evaluator"], two["evaluator"]])
+        self.assertNotEqual(one["closer_to_target"]["cos_to_target"], two["closer_to_target"]["cos_to_target"])
+        for keys in (("generated_to_target", "all", "AvgR"), ("generated_to_source", "all", "AvgR"),
+                     ("towards_target", "all", "R@1"), ("closer_to_target", "cos_to_target"),
+                     ("yardsticks", "other_target", "closer_to_target", "cos_to_target")):
+            a, b, mean = one, two, both
+            for key in keys:
+                a, b, mean = a[key], b[key], mean[key]
+            self.assertAlmostEqual(mean, (a + b) / 2, places=6, msg=keys)  # float32 embeddings
+        self.assertEqual(both["closer_to_target"]["triplets"], 3)  # a count stays a count
+        self.assertEqual(both["plausibility"], one["plausibility"])
+        self.assertEqual([e["evaluator"] for e in both["by_evaluator"]], both["evaluator"])
+        self.assertEqual([e["generated_to_target"] for e in both["by_evaluator"]],
+                         [m["generated_to_target"]["batches"]["R@1"] for m in (one, two)])
+        # A list that names what is neither an input nor a path is refused when the job is planned.
+        bad = self.write_pipeline("bad.yaml", judges.replace("evaluator: [", "evaluator: [nowhere, "))
+        result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("stages.eval_both.params.evaluator: must name one of the stage's inputs", result.stdout + result.stderr)
 
         # motionpipe edit on a real CMU clip: the source's length, finite, repeatable under a seed.
         model = os.path.join(job, "mdt")
