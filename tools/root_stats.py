@@ -12,7 +12,9 @@ the motions. Beside them, the feet's skate as the evaluation computes it (per mo
 foot-frames within 5 cm of the floor in both frames whose horizontal speed exceeds 0.15 m/s; the
 mean over the motions), and the same with every frame moved vertically so that its lowest foot
 joint stands on the floor: if the height's drift made the feet skate (a sunken swing foot counted
-as a sliding contact), the second would fall to the targets' level.
+as a sliding contact), the second would fall to the targets' level. Then, on those grounded
+contact foot-frames, the root mean square horizontal speed of the feet, of the pelvis and of the
+feet relative to the pelvis: a planted foot has the first near 0 while the other two cancel.
 
     /usr/bin/python3 tools/root_stats.py out/demo-1/edit_mdt_untrained out/demo-1/edit_mdt
 """
@@ -57,6 +59,19 @@ def feet(trans, rotations, offsets):
     return np.stack(out, axis=1)
 
 
+def contact_speeds(trans, positions, fps):
+    """Sums of squared horizontal speeds (feet, pelvis, feet relative to the pelvis) over the grounded
+    contact foot-frames, and their count."""
+    z = positions[..., 2] - positions[..., 2].min(axis=1, keepdims=True)
+    contact = (z[1:] < CONTACT_HEIGHT) & (z[:-1] < CONTACT_HEIGHT)
+    def speed(xy):
+        return np.linalg.norm(np.diff(xy, axis=0), axis=-1) * fps
+    pelvis = np.repeat(speed(trans[:, :2])[:, None], positions.shape[1], axis=1)
+    relative = speed(positions[..., :2] - trans[:, None, :2])
+    return np.array([(speed(positions[..., :2])[contact] ** 2).sum(), (pelvis[contact] ** 2).sum(),
+                     (relative[contact] ** 2).sum()]), contact.sum()
+
+
 def skate(positions, fps, grounded):
     """Fraction of contact foot-frames that slide (0 without contact)."""
     z = positions[..., 2] - (positions[..., 2].min(axis=1, keepdims=True) if grounded else 0)
@@ -93,6 +108,7 @@ def motions(stage_dir):
 def row(stage_dir):
     drift, spread, vertical, accel, tilt, skating, grounded = [], [], [], [], [], [], []
     offsets = leg_offsets()
+    squares, contacts = np.zeros(3), 0
     for trans, rotations, fps in motions(stage_dir):
         if len(trans) < 3:
             continue
@@ -105,10 +121,12 @@ def row(stage_dir):
         positions = feet(trans, rotations, offsets)
         skating.append(skate(positions, fps, grounded=False))
         grounded.append(skate(positions, fps, grounded=True))
+        sums, count = contact_speeds(trans, positions, fps)
+        squares, contacts = squares + sums, contacts + count
     if not drift:
         sys.exit(f"{stage_dir}: no motion of 3 frames or more")
     return (len(drift), np.mean(drift), np.mean(spread), np.mean(vertical), np.mean(accel), np.mean(tilt),
-            np.mean(skating), np.mean(grounded))
+            np.mean(skating), np.mean(grounded), *np.sqrt(squares / max(contacts, 1)))
 
 
 def main():
@@ -116,11 +134,12 @@ def main():
     parser.add_argument("stages", nargs="+", help="edit stage output directories (out/JOB/STAGE)")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
-          f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14}")
+          f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
+          f"{'contact speed: feet':>19} {'pelvis':>6} {'feet - pelvis (m/s)':>19}")
     for stage in args.stages:
-        n, drift, spread, vertical, accel, tilt, skating, grounded = row(stage)
+        n, drift, spread, vertical, accel, tilt, skating, grounded, feet_speed, pelvis_speed, relative = row(stage)
         print(f"{stage:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f} {tilt:>13.3f} "
-              f"{skating:>6.3f} {grounded:>14.3f}")
+              f"{skating:>6.3f} {grounded:>14.3f} {feet_speed:>19.3f} {pelvis_speed:>6.3f} {relative:>19.3f}")
 
 
 if __name__ == "__main__":

@@ -90,6 +90,8 @@ class RootStatsTest(unittest.TestCase):
             self.assertEqual(result.returncode, 0, result.stderr)
             fields = result.stdout.splitlines()[1].split()
             self.assertEqual((float(fields[7]), float(fields[8])), expected, name)
+            # On the grounded contact frames the rigid body's feet move with its pelvis.
+            self.assertEqual([float(x) for x in fields[9:12]], [speed, speed, 0.0], name)
 
     def test_what_is_not_an_edit_output_is_named(self):
         os.makedirs(self.path("empty"))
