@@ -46,6 +46,9 @@ struct Method {
   bool yardstick =
       false;  // a reference row (copy, ground truth, shuffled, untrained): never "best"
   bool untrained = false;  // the untrained model's row (eval param yardstick: untrained)
+  // The paper rows an untrained row is the yardstick of (eval param untrained_of); empty: of
+  // every row that has no untrained row of its own.
+  std::vector<std::string> untrained_of;
 };
 
 // The yardstick rows an evaluation computed beside its method (metrics "yardsticks": key -> the
@@ -74,9 +77,28 @@ std::vector<Method> YardstickRows(const std::vector<const Method*>& methods,
   return {};
 }
 
+// The job's general untrained row: the untrained row that names no rows of its own (else the
+// first).
 const Method* UntrainedRow(const std::vector<const Method*>& methods) {
+  const Method* first = nullptr;
   for (const Method* m : methods) {
-    if (m->untrained) return m;
+    if (!m->untrained) continue;
+    if (m->untrained_of.empty()) return m;
+    if (!first) first = m;
+  }
+  return first;
+}
+
+// The untrained row a paper row is judged against: its own (untrained_of names it), else the
+// general one.
+const Method* UntrainedFor(const std::vector<const Method*>& methods, const std::string& row) {
+  for (const Method* m : methods) {
+    if (m->untrained &&
+        std::find(m->untrained_of.begin(), m->untrained_of.end(), row) != m->untrained_of.end())
+      return m;
+  }
+  for (const Method* m : methods) {
+    if (m->untrained && m->untrained_of.empty()) return m;
   }
   return nullptr;
 }
@@ -303,7 +325,8 @@ std::string StatText(const Stat& s, int decimals) {
 // compared model does not beat the untrained row, or with fewer than 3 seeds a side; it holds when
 // the difference of the means beats two standard errors, does not hold when the reverse does.
 ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better,
-                   const Method* worse, const Method* untrained, const std::string& pointer,
+                   const Method* worse, const Method* better_untrained,
+                   const Method* worse_untrained, const std::string& pointer,
                    const std::string& metric_name, bool higher_is_better, int decimals) {
   ClaimCheck out{paper, claim, "not measured", ""};
   if (!better || !worse) {
@@ -311,8 +334,11 @@ ClaimCheck Compare(const std::string& paper, const std::string& claim, const Met
     return out;
   }
   const std::vector<double> a_values = Values(*better, pointer), b_values = Values(*worse, pointer);
-  const std::vector<double> u_values =
-      untrained ? Values(*untrained, pointer) : std::vector<double>{};
+  const auto untrained_values = [&](const Method* u) {
+    return u ? Values(*u, pointer) : std::vector<double>{};
+  };
+  const std::vector<double> u_values = untrained_values(better_untrained),
+                            w_values = untrained_values(worse_untrained);
   if (a_values.empty() || b_values.empty()) {
     out.detail = "no " + metric_name + " for one of the methods";
     return out;
@@ -324,8 +350,18 @@ ClaimCheck Compare(const std::string& paper, const std::string& claim, const Met
   out.detail = metric_name + ": " + StatText(a, decimals) + " vs " + StatText(b, decimals) +
                "; difference " + Format(diff, decimals) + ", 2 standard errors " +
                Format(2 * se, decimals);
-  if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarize(u_values), decimals);
-  switch (DecideClaim(a_values, b_values, u_values, higher_is_better)) {
+  if (better_untrained == worse_untrained) {
+    if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarize(u_values), decimals);
+  } else {
+    const auto own = [&](const Method* side, const Method* u, const std::vector<double>& values) {
+      if (!values.empty())
+        out.detail += "; " + RowName(*side) + "'s untrained row (" + u->name + ") " +
+                      StatText(Summarize(values), decimals);
+    };
+    own(better, better_untrained, u_values);
+    own(worse, worse_untrained, w_values);
+  }
+  switch (DecideClaim(a_values, b_values, u_values, w_values, higher_is_better)) {
     case ClaimVerdict::kHolds:
       out.verdict = "holds";
       break;
@@ -576,12 +612,18 @@ bool BeatsUntrained(const Stat& model, const Stat& untrained, bool higher_is_bet
 
 ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
                          const std::vector<double>& untrained, bool higher_is_better) {
+  return DecideClaim(better, worse, untrained, untrained, higher_is_better);
+}
+
+ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
+                         const std::vector<double>& better_untrained,
+                         const std::vector<double>& worse_untrained, bool higher_is_better) {
   const Stat a = Summarize(better), b = Summarize(worse);
-  if (!untrained.empty()) {
-    const Stat u = Summarize(untrained);
-    if (!BeatsUntrained(a, u, higher_is_better)) return ClaimVerdict::kBetterNotTrained;
-    if (!BeatsUntrained(b, u, higher_is_better)) return ClaimVerdict::kWorseNotTrained;
-  }
+  if (!better_untrained.empty() &&
+      !BeatsUntrained(a, Summarize(better_untrained), higher_is_better))
+    return ClaimVerdict::kBetterNotTrained;
+  if (!worse_untrained.empty() && !BeatsUntrained(b, Summarize(worse_untrained), higher_is_better))
+    return ClaimVerdict::kWorseNotTrained;
   if (a.n < 3 || b.n < 3) return ClaimVerdict::kFewSeeds;
   const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
   const double se = std::sqrt(a.sd * a.sd / a.n + b.sd * b.sd / b.n);
@@ -634,6 +676,10 @@ JobRuns ReadJob(const std::string& job) {
         if (m.row.empty()) m.row = metrics->value("row", std::string());
         if (metrics->value("yardstick", std::string()) == "untrained")
           m.untrained = m.yardstick = true;
+        if (metrics->contains("untrained_of") && (*metrics)["untrained_of"].is_array()) {
+          for (const json& row : (*metrics)["untrained_of"])
+            if (row.is_string()) m.untrained_of.push_back(row.get<std::string>());
+        }
         m.runs.push_back({stage, task, *metrics});
       }
     }
@@ -677,7 +723,7 @@ std::vector<const Method*> ByPaper(std::map<std::string, Method>& methods, const
 
 const Method* ByRow(const std::vector<const Method*>& methods, const std::string& row) {
   for (const Method* m : methods) {
-    if (m->paper_row == row) return m;
+    if (!m->untrained && m->paper_row == row) return m;
   }
   return nullptr;
 }
@@ -687,7 +733,11 @@ std::vector<const Method*> WithYardsticks(const std::vector<Method>& yardsticks,
                                           const std::vector<const Method*>& methods) {
   std::vector<const Method*> rows;
   for (const Method& y : yardsticks) rows.push_back(&y);
-  if (const Method* u = UntrainedRow(methods)) rows.push_back(u);
+  const Method* general = UntrainedRow(methods);
+  if (general) rows.push_back(general);
+  for (const Method* m : methods) {
+    if (m->untrained && m != general) rows.push_back(m);  // the rows' own untrained rows
+  }
   for (const Method* m : methods) {
     if (!m->untrained) rows.push_back(m);
   }
@@ -816,11 +866,11 @@ std::vector<ClaimCheck> CheckClaims(const Paper& paper, const std::vector<const 
     const std::string key = pointer.substr(1, at > 1 ? at - 2 : 0);
     pointer.replace(at, 10, AllBatched(methods, key) ? "batches" : "all");
   }
-  const Method* untrained = UntrainedRow(methods);
   std::vector<ClaimCheck> checks;
   for (const PaperClaim& c : paper.claims) {
     checks.push_back(Compare(paper.name, c.claim, ByRow(methods, c.better), ByRow(methods, c.worse),
-                             untrained, pointer, paper.metric.name, paper.metric.higher_is_better,
+                             UntrainedFor(methods, c.better), UntrainedFor(methods, c.worse),
+                             pointer, paper.metric.name, paper.metric.higher_is_better,
                              paper.metric.decimals));
   }
   return checks;

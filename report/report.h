@@ -47,7 +47,7 @@ struct ReportSummary {
 Result<ReportSummary> WriteReport(const ReportOptions& options);
 
 // A paper's claim "better beats worse" on a metric, from each side's values over seeds (issue 15):
-// not decidable while a compared model does not beat the untrained row (`untrained` empty: no such
+// not decidable while a compared model does not beat its untrained row (`untrained` empty: no such
 // row) by more than two standard errors, or with fewer than 3 seeds a side; otherwise it holds when
 // the difference of the means goes the claimed way by more than two standard errors of the
 // difference, does not hold when it goes the other way by as much, and is within them in between.
@@ -61,6 +61,11 @@ enum class ClaimVerdict {
 };
 ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
                          const std::vector<double>& untrained, bool higher_is_better);
+// The same with each side's own untrained row (an untrained MDM generates noise where an untrained
+// source-prior editor copies its source: each model must beat its own).
+ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
+                         const std::vector<double>& better_untrained,
+                         const std::vector<double>& worse_untrained, bool higher_is_better);
 
 // Base64 (RFC 4648, with padding): the report's data: URIs.
 std::string Base64(std::string_view bytes);

@@ -298,7 +298,9 @@ class EvalEditStage : public StageExecutor {
          {"seed", set.seed}});
     if (checkpoints.size() > 1) metrics["by_evaluator"] = by_evaluator;
     if (p.contains("yardstick"))
-      metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
+      metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+    if (p.contains("untrained_of"))  // the paper rows it is the untrained row of (default: all)
+      metrics["untrained_of"] = p["untrained_of"];
     if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
     metrics["plausibility"] = {{"generated", MeanPlausibility(set.generated)},
                                {"target", MeanPlausibility(set.targets)}};

@@ -188,7 +188,9 @@ class EvalGenerateStage : public StageExecutor {
                     {"batch", batch},
                     {"seed", seed}});
     if (p.contains("yardstick"))
-      metrics["yardstick"] = p["yardstick"];           // "untrained": the report's untrained row
+      metrics["yardstick"] = p["yardstick"];  // "untrained": the report's untrained row
+    if (p.contains("untrained_of"))  // the paper rows it is the untrained row of (default: all)
+      metrics["untrained_of"] = p["untrained_of"];
     if (p.contains("row")) metrics["row"] = p["row"];  // its paper row (configs/papers)
     // The yardsticks, in the same evaluation (issue 15): the ground truth itself, and shuffled
     // ground truth (each test motion stands in for the one nearest in length to it).

@@ -27,6 +27,16 @@ TEST(Claims, NotDecidableWhileAComparedModelDoesNotBeatItsUntrainedRow) {
             ClaimVerdict::kWorseNotTrained);
 }
 
+TEST(Claims, EachSideIsJudgedAgainstItsOwnUntrainedRow) {
+  // A generator without a source (MDM, 15) is far below an untrained source-prior editor (a copy,
+  // 66) but far above its own untrained row (noise, 3): judged against its own, it learned.
+  EXPECT_EQ(DecideClaim({69, 70, 71}, {14, 15, 16}, {66}, {3}, true), ClaimVerdict::kHolds);
+  EXPECT_EQ(DecideClaim({69, 70, 71}, {14, 15, 16}, {66}, true), ClaimVerdict::kWorseNotTrained);
+  // The better side below its own untrained row, the worse above its own: still not decidable.
+  EXPECT_EQ(DecideClaim({60, 61, 62}, {14, 15, 16}, {66}, {3}, true),
+            ClaimVerdict::kBetterNotTrained);
+}
+
 TEST(Claims, FewerThanThreeSeedsDecideNothing) {
   EXPECT_EQ(DecideClaim({60, 61}, {30, 31}, {5}, true), ClaimVerdict::kFewSeeds);
   EXPECT_EQ(DecideClaim({60}, {30, 31, 32}, {}, true), ClaimVerdict::kFewSeeds);
@@ -139,6 +149,52 @@ TEST(Papers, EvaluationLayoutsAreDataAndErrorsNameTheirField) {
                   "preview: {references: [{role: r}], method_role: m, alt: A, "
                   "caption: C}\n"),
             "e.yaml: preview.references[0]: 'label' must be a string");
+}
+
+// In a job, an untrained evaluation with untrained_of is the yardstick of those rows only; the one
+// without is every other row's. Both show as rows; neither stands in for a trained row.
+TEST(Claims, AnUntrainedRowOfItsOwnJudgesTheRowsItNames) {
+  namespace fs = std::filesystem;
+  const std::string dir = ::testing::TempDir() + "/own_untrained";
+  fs::remove_all(dir);
+  const auto eval = [&](const std::string& stage, double r1, const nlohmann::json& extra) {
+    nlohmann::json m = {{"evaluation", "edit"},
+                        {"motions", 64},
+                        {"generated_to_target", {{"batches", {{"R@1", r1}, {"queries", 64}}}}}};
+    m.update(extra);
+    fs::create_directories(dir + "/job/" + stage + "/task-00000");
+    ASSERT_TRUE(WriteFileAtomic(dir + "/job/" + stage + "/task-00000/metrics.json", m.dump()).ok());
+  };
+  eval("eval_untrained", 66, {{"method", "untrained MDT"}, {"yardstick", "untrained"}});
+  eval("eval_mdm_untrained", 3,
+       {{"method", "untrained MDM"}, {"yardstick", "untrained"}, {"untrained_of", {"MDM"}}});
+  const double mdt[] = {69, 70, 71}, mdm[] = {14, 15, 16};
+  for (int k = 0; k < 3; ++k) {
+    const std::string replicate = k == 0 ? "" : "-s" + std::to_string(k + 1);
+    eval("eval_mdt" + replicate, mdt[k], {{"method", "MDT"}, {"row", "SimMotionEdit (MDT)"}});
+    eval("eval_mdm" + replicate, mdm[k], {{"method", "MDM"}, {"row", "MDM"}});
+  }
+  ReportOptions options;
+  options.job_dir = dir + "/job";
+  options.previews = false;
+  auto summary = WriteReport(options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  const auto claim = [&](const std::string& name) {
+    for (const ClaimCheck& c : summary->claims)
+      if (c.claim == name) return c;
+    return ClaimCheck{};
+  };
+  EXPECT_EQ(claim("MDT beats MDM").verdict, "holds") << claim("MDT beats MDM").detail;
+  EXPECT_NE(claim("MDT beats MDM").detail.find("MDM's untrained row (untrained MDM) 3.00"),
+            std::string::npos)
+      << claim("MDT beats MDM").detail;
+  // TMED has no row in this job; the MDT's own claims against the general row are unchanged.
+  EXPECT_EQ(claim("MDT beats TMED").verdict, "not measured");
+  auto html = ReadFile(dir + "/job/report.html");
+  ASSERT_TRUE(html.ok());
+  EXPECT_NE(html->find("<td>untrained MDT</td>"), std::string::npos);
+  EXPECT_NE(html->find("<td>untrained MDM</td>"), std::string::npos);
+  fs::remove_all(dir);
 }
 
 TEST(Papers, AThirdPapersTableIsOneFile) {
