@@ -107,11 +107,18 @@ class RealDataTest(EngineTest):
         job, tables = self.run_claims("claims_edit.yaml", EDITOR + ["vars.steps_tmr=2", "vars.triplets=120"])
         for stage in ("mdt-s2", "tmed-s2", "mdt_no_filter-s2", "eval_edit_mdm_bp-s2"):
             self.assertTrue(os.path.isdir(os.path.join(job, stage, "task-00000")), stage)
+        # Every edit judged by three TMRs trained alike (the figures are their means).
+        with open(os.path.join(job, "eval_edit_mdt-s2", "task-00000", "metrics.json")) as f:
+            judged = json.load(f)
+        self.assertEqual([os.path.basename(os.path.dirname(os.path.dirname(e))) for e in judged["evaluator"]],
+                         ["evaluator", "evaluator_b", "evaluator_c"])
+        self.assertEqual(len(judged["by_evaluator"]), 3)
         table1 = tables["Editing: retrieval of the edits (all)"]
         self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)",
                                                       "another triplet's target as the edit (chance)", "untrained MDT (initial weights)",
+                                                      "untrained MDM", "untrained MDM-BP", "untrained TMED",
                                                       "MDM", "MDM-BP", "TMED", "SimMotionEdit (MDT)", "w/o auxiliary loss", "w/o SNR filtering"])
-        self.assertEqual([r[1] for r in table1[6:]], ["2"] * 6)
+        self.assertEqual([r[1] for r in table1[9:]], ["2"] * 6)
         verdicts = {r[1]: r[2] for r in tables["Claims"][1:] if r[0] == "SimMotionEdit"}
         self.assertEqual(len(verdicts), 5)
         # Two seeds a side: never "holds"; either a model does not beat the untrained row or too few seeds.
