@@ -31,14 +31,14 @@ torch::Tensor LocalRotation(const torch::Tensor& features, int joint) {
   return Rot6dToMatrix(features.narrow(-1, 15 + 6 * (joint - 1), 6));
 }
 
-// Positions of the four foot joints relative to the pelvis in the heading-free frame: [T, N, 4, 3].
-torch::Tensor FootPositions(const torch::Tensor& features) {
+// Positions of the four foot joints relative to the pelvis in the heading-free frame, given the
+// heading-free pelvis orientation `pelvis` [T, N, 3, 3]: [T, N, 4, 3].
+torch::Tensor FootPositions(const torch::Tensor& features, const torch::Tensor& pelvis) {
   const Skeleton& skeleton = Skeleton::Smpl22();
   const auto offset = [&](int joint) {
     const Vec3& o = skeleton.rest_offsets()[static_cast<size_t>(joint)];
     return torch::tensor({o.x, o.y, o.z}, torch::kFloat64).to(torch::kFloat32);
   };
-  const auto pelvis = Rot6dToMatrix(features.narrow(-1, 3, 6));
   std::vector<torch::Tensor> feet;
   // hip, knee, ankle, foot of each leg (the parents chain).
   for (const std::array<int, 4>& leg : {std::array<int, 4>{1, 4, 7, 10}, {2, 5, 8, 11}}) {
@@ -58,8 +58,8 @@ torch::Tensor FootPositions(const torch::Tensor& features) {
 torch::Tensor FootDisplacements(const torch::Tensor& features) {
   const auto f = features.to(torch::kFloat32);
   const int64_t frames = f.size(0);
-  const auto q = FootPositions(f);                         // [T, N, 4, 3]
   const auto pelvis = Rot6dToMatrix(f.narrow(-1, 3, 6));   // G
+  const auto q = FootPositions(f, pelvis);                 // [T, N, 4, 3]
   const auto heading = Rot6dToMatrix(f.narrow(-1, 9, 6));  // H
   const auto velocity = f.narrow(-1, 0, 3);                // v
   const auto later = [&](const torch::Tensor& x) { return x.narrow(0, 1, frames - 1); };
