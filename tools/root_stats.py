@@ -59,25 +59,30 @@ def feet(trans, rotations, offsets):
     return np.stack(out, axis=1)
 
 
+def contact(positions, grounded):
+    """Foot-frames [T - 1, 4] within CONTACT_HEIGHT of the floor in both frames (grounded: of the
+    frame's lowest foot joint)."""
+    z = positions[..., 2] - (positions[..., 2].min(axis=1, keepdims=True) if grounded else 0)
+    return (z[1:] < CONTACT_HEIGHT) & (z[:-1] < CONTACT_HEIGHT)
+
+
 def contact_speeds(trans, positions, fps):
     """Sums of squared horizontal speeds (feet, pelvis, feet relative to the pelvis) over the grounded
     contact foot-frames, and their count."""
-    z = positions[..., 2] - positions[..., 2].min(axis=1, keepdims=True)
-    contact = (z[1:] < CONTACT_HEIGHT) & (z[:-1] < CONTACT_HEIGHT)
+    touching = contact(positions, grounded=True)
     def speed(xy):
         return np.linalg.norm(np.diff(xy, axis=0), axis=-1) * fps
     pelvis = np.repeat(speed(trans[:, :2])[:, None], positions.shape[1], axis=1)
     relative = speed(positions[..., :2] - trans[:, None, :2])
-    return np.array([(speed(positions[..., :2])[contact] ** 2).sum(), (pelvis[contact] ** 2).sum(),
-                     (relative[contact] ** 2).sum()]), contact.sum()
+    return np.array([(speed(positions[..., :2])[touching] ** 2).sum(), (pelvis[touching] ** 2).sum(),
+                     (relative[touching] ** 2).sum()]), touching.sum()
 
 
 def skate(positions, fps, grounded):
     """Fraction of contact foot-frames that slide (0 without contact)."""
-    z = positions[..., 2] - (positions[..., 2].min(axis=1, keepdims=True) if grounded else 0)
-    contact = (z[1:] < CONTACT_HEIGHT) & (z[:-1] < CONTACT_HEIGHT)
+    touching = contact(positions, grounded)
     speed = np.linalg.norm(np.diff(positions[..., :2], axis=0), axis=-1) * fps
-    return (speed[contact] > SKATE_SPEED).sum() / contact.sum() if contact.any() else 0.0
+    return (speed[touching] > SKATE_SPEED).sum() / touching.sum() if touching.any() else 0.0
 
 
 def tilt_height(trans, pelvis):
