@@ -1,6 +1,7 @@
 // Where a trained editor's error comes from (issue 15): a checkpoint's x0 error by diffusion step,
 // beside what copying the source and predicting the mean would score, and its sampled edits' error
-// against target and source in the normalised feature space, with their roughness.
+// against target and source in the normalised feature space, with their roughness; and the foot
+// skate of the decoded estimates, with what columns of the t = 0 estimate it comes from.
 //   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
 //             [--guidance g_m,g_t] [--no-sample]
 #include <torch/torch.h>
@@ -18,6 +19,7 @@
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/motionfix207.h"
+#include "motionpipe/motion/plausibility.h"
 
 using namespace motionpipe;
 using namespace motionpipe::mdt;
@@ -132,11 +134,74 @@ void PrintYardsticks(const Probe& p) {
   }
 }
 
+// The foot skate of normalised 207-d frames [T, N, 207] (the target's lengths), decoded at the
+// network's rate with every frame grounded (its lowest foot joint moved onto the floor, as
+// tools/root_stats.py's "skate grounded": the decoded height's drift does not count): the mean over
+// the examples of the fraction of contact foot-frames sliding faster than 0.15 m/s.
+double GroundedSkate(const Probe& p, const torch::Tensor& x) {
+  const auto frames_of = p.batch.tensors.at("target_padding").logical_not().sum(1);
+  const auto raw = (x.to(torch::kFloat32) * (2.0 * (p.stddev + 1e-5)) + p.mean).contiguous();
+  const double fps = p.options.fps > 0 ? p.options.fps : 30.0;
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  double sum = 0;
+  for (int64_t i = 0; i < p.n; ++i) {
+    const int64_t frames = frames_of[i].item<int64_t>();
+    FeatureMatrix features(frames, kMotionFixFeatureDim);
+    const auto xi = raw.select(1, i).narrow(0, 0, frames).contiguous();
+    std::memcpy(features.data.data(), xi.data_ptr<float>(),
+                sizeof(float) * static_cast<size_t>(frames * kMotionFixFeatureDim));
+    std::vector<float> joints = ComputeJoints(skeleton, DecodeMotionFix207(features, {}, fps));
+    for (int64_t f = 0; f < frames; ++f) {
+      float* frame = joints.data() + f * kNumJoints * 3;
+      float lowest = frame[skeleton.left_foot_joints()[0] * 3 + 2];
+      for (const auto& side : {skeleton.left_foot_joints(), skeleton.right_foot_joints()})
+        for (int joint : side) lowest = std::min(lowest, frame[joint * 3 + 2]);
+      for (int joint = 0; joint < kNumJoints; ++joint) frame[joint * 3 + 2] -= lowest;
+    }
+    sum += EvaluatePlausibility(skeleton, joints.data(), frames, fps, nullptr).foot_skate_ratio;
+  }
+  return sum / static_cast<double>(std::max<int64_t>(p.n, 1));
+}
+
+// x with the columns of `from` in `columns` ([begin, end) pairs).
+torch::Tensor WithColumns(torch::Tensor x, const torch::Tensor& from,
+                          const std::vector<std::pair<int64_t, int64_t>>& columns) {
+  x = x.clone();
+  for (const auto& [begin, end] : columns)
+    x.narrow(2, begin, end - begin).copy_(from.narrow(2, begin, end - begin));
+  return x;
+}
+
+// Where the t = 0 estimate's skate comes from: its skate with the target's pelvis velocity, the
+// target's leg rotations (hips, knees, ankles, feet), or both put back, and the target's with
+// only those of the estimate; and the leg rotations' mean angle error (degrees).
+void PrintSkateSources(const Probe& p, const torch::Tensor& estimate) {
+  const auto& target = p.batch.tensors.at("target");
+  const std::vector<std::pair<int64_t, int64_t>> pelvis = {{0, 3}};
+  std::vector<std::pair<int64_t, int64_t>> legs;
+  for (int joint : {1, 2, 4, 5, 7, 8, 10, 11})
+    legs.emplace_back(15 + (joint - 1) * 6, 15 + joint * 6);
+  auto both = legs;
+  both.insert(both.begin(), pelvis.begin(), pelvis.end());
+  std::printf("t = 0 estimate: foot skate (grounded) %.3f; the target's %.3f\n",
+              GroundedSkate(p, estimate), GroundedSkate(p, target));
+  for (const auto& [name, columns] :
+       std::vector<std::pair<const char*, std::vector<std::pair<int64_t, int64_t>>>>{
+           {"pelvis velocity (0:3)", pelvis}, {"leg rotations", legs}, {"both", both}}) {
+    std::printf(
+        "  %-22s  the estimate with the target's: %.3f   the target with the estimate's: %.3f\n",
+        name, GroundedSkate(p, WithColumns(estimate, target, columns)),
+        GroundedSkate(p, WithColumns(target, estimate, columns)));
+  }
+}
+
 // The x0 estimate's error by diffusion step, with and without text or source, beside x_t scaled.
 void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
   const auto& target = p.batch.tensors.at("target");
   const auto& padding = p.batch.tensors.at("target_padding");
-  std::printf("%6s %10s %10s %10s %10s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)");
+  std::printf("%6s %10s %10s %10s %10s %8s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)",
+              "skate");
+  torch::Tensor at_zero;
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
     if (t >= p.options.diffusion_steps) continue;
     const auto steps = torch::full({p.n}, t, torch::kInt64);
@@ -147,7 +212,9 @@ void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
     const auto estimate = [&](const Condition& condition) {
       return p.net->Decode(p.net->forward(xt, steps, padding, condition).x0);
     };
-    const double model = Mse(estimate(p.c), target, padding).mean().item<double>();
+    const auto x0 = estimate(p.c);
+    if (t == 0) at_zero = x0;
+    const double model = Mse(x0, target, padding).mean().item<double>();
     Condition no_text = p.c, no_source = p.c;
     no_text.drop_text = torch::ones({p.n}, torch::kBool);
     no_source.drop_source = torch::ones({p.n}, torch::kBool);
@@ -158,9 +225,10 @@ void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
             padding)
             .mean()
             .item<double>();
-    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f\n", static_cast<long long>(t), model,
-                without_text, without_source, scaled);
+    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f %8.3f\n", static_cast<long long>(t), model,
+                without_text, without_source, scaled, GroundedSkate(p, x0));
   }
+  PrintSkateSources(p, at_zero);
 }
 
 // Sampled edits (DDIM, three-way guidance) at g 1/1, traced, and at (g_m, g_t).
@@ -213,11 +281,11 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
         SampleDdim(schedule, p.net->Encode(target).sizes(), ddim, traced, generator, nullptr));
     std::printf(
         "DDIM-%lld g_m %.1f g_t %.1f: edit-target MSE %.4f, edit-source %.4f; roughness edit %.5f "
-        "target %.5f source %.5f\n",
+        "target %.5f source %.5f; foot skate (grounded) %.3f\n",
         static_cast<long long>(ddim), gm, gt, Mse(x, target, padding).mean().item<double>(),
         Mse(x, source, padding).mean().item<double>(), Roughness(x, padding).mean().item<double>(),
         Roughness(target, padding).mean().item<double>(),
-        Roughness(source, p.c.source_padding).mean().item<double>());
+        Roughness(source, p.c.source_padding).mean().item<double>(), GroundedSkate(p, x));
   }
 }
 
