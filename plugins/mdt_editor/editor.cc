@@ -40,7 +40,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
   RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.",
-                   {"velocity", "foot_contact"});
+                   {"velocity", "foot_contact", "foot_velocity"});
   RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
                    {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
                     "guidance_text", "preconditioning", "sigma_data", "snr_shift",
@@ -99,6 +99,10 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.foot_contact_weight =
       j.value("loss", nlohmann::json::object()).value("foot_contact", o.foot_contact_weight);
   if (!(o.foot_contact_weight >= 0)) throw std::invalid_argument("loss.foot_contact must be >= 0");
+  o.foot_velocity_weight =
+      j.value("loss", nlohmann::json::object()).value("foot_velocity", o.foot_velocity_weight);
+  if (!(o.foot_velocity_weight >= 0))
+    throw std::invalid_argument("loss.foot_velocity must be >= 0");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
@@ -154,7 +158,10 @@ nlohmann::json EditorOptions::ToJson() const {
           {"fps", fps},
           {"text_encoder_from", text_encoder_from},
           {"freeze_text_encoder", freeze_text_encoder},
-          {"loss", {{"velocity", velocity_weight}, {"foot_contact", foot_contact_weight}}},
+          {"loss",
+           {{"velocity", velocity_weight},
+            {"foot_contact", foot_contact_weight},
+            {"foot_velocity", foot_velocity_weight}}},
           {"diffusion",
            {{"steps", diffusion_steps},
             {"drop_text", drop_text},

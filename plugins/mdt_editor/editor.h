@@ -43,6 +43,9 @@ struct EditorOptions {
   // MDM's foot-contact loss L_foot (foot_contact.h) in (m/s)^2, added with this weight; 0 (the
   // reference) leaves it out. The frames' rate is `fps` (30, MotionFix's and the corpus's, when 0).
   double foot_contact_weight = 0;
+  // MDM's L_vel on the feet through forward kinematics (FootVelocityLoss) in (m/s)^2, added with
+  // this weight; 0 (the reference) leaves it out. The frames' rate as for foot_contact.
+  double foot_velocity_weight = 0;
   double snr_shift =
       1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
   // The training steps' density, proportional to t^k (SampleTrainingStep); 0: uniform (the

@@ -53,6 +53,15 @@ torch::Tensor FootPositions(const torch::Tensor& features, const torch::Tensor& 
   return torch::stack({feet[0], feet[1], feet[2], feet[3]}, -2);
 }
 
+// The frame pairs (i - 1, i) whose frames are both real: [T - 1, N, 1] (padding [N, T]).
+torch::Tensor RealPairs(const torch::Tensor& padding, int64_t frames) {
+  return padding.narrow(1, 1, frames - 1)
+      .logical_or(padding.narrow(1, 0, frames - 1))
+      .logical_not()
+      .t()
+      .unsqueeze(-1);
+}
+
 }  // namespace
 
 torch::Tensor FootDisplacements(const torch::Tensor& features) {
@@ -74,14 +83,19 @@ torch::Tensor FootContactLoss(const torch::Tensor& prediction, const torch::Tens
   const int64_t frames = prediction.size(0);
   const auto speed = [&](const torch::Tensor& x) { return FootDisplacements(x) * fps; };
   const auto target_speed = speed(target).detach().norm(2, -1);  // [T - 1, N, 4]
-  const auto real = padding.narrow(1, 1, frames - 1)
-                        .logical_or(padding.narrow(1, 0, frames - 1))
-                        .logical_not()
-                        .t()
-                        .unsqueeze(-1);  // [T - 1, N, 1]
+  const auto real = RealPairs(padding, frames);
   const auto contact = target_speed.lt(contact_speed).logical_and(real).to(torch::kFloat32);
   const auto squared = speed(prediction).pow(2).sum(-1);
   return (squared * contact).sum() / contact.sum().clamp_min(1.0);
+}
+
+torch::Tensor FootVelocityLoss(const torch::Tensor& prediction, const torch::Tensor& target,
+                               const torch::Tensor& padding, double fps) {
+  if (prediction.size(0) < 2) return torch::zeros({}, torch::kFloat32);
+  const auto real = RealPairs(padding, prediction.size(0)).to(torch::kFloat32);  // [T - 1, N, 1]
+  const auto squared =
+      ((FootDisplacements(prediction) - FootDisplacements(target).detach()) * fps).pow(2).sum(-1);
+  return (squared * real).sum() / (real.sum() * 4).clamp_min(1.0);
 }
 
 }  // namespace motionpipe::mdt

@@ -32,4 +32,14 @@ torch::Tensor FootDisplacements(const torch::Tensor& features);
 torch::Tensor FootContactLoss(const torch::Tensor& prediction, const torch::Tensor& target,
                               const torch::Tensor& padding, double fps, double contact_speed);
 
+// MDM's velocity loss L_vel (Tevet et al. 2023, sec. 3) on the feet, through forward kinematics:
+// the mean squared difference (m/s)^2 between the prediction's and the target's foot velocities
+// (FootDisplacements times fps) over the four foot joints and every pair of real frames, contact
+// or not. Where L_foot only asks standing feet to stop (and a prediction can meet it by lifting
+// them), this asks the pelvis velocity and the leg rotations to move each foot as the target's
+// moves: the coordination whose error makes the edits skate (issue 15: with the target's leg
+// rotations and pelvis velocity put back, the demo MDT's one-step estimate stops skating).
+torch::Tensor FootVelocityLoss(const torch::Tensor& prediction, const torch::Tensor& target,
+                               const torch::Tensor& padding, double fps);
+
 }  // namespace motionpipe::mdt

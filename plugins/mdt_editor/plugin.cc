@@ -129,12 +129,21 @@ class EditorModel : public plugin::Model {
       out["velocity"] = VelocityMse(p.x0, target, batch.tensors.at("target_padding"));
       loss = loss + options_.velocity_weight * out["velocity"];
     }
-    if (options_.foot_contact_weight > 0) {
-      const auto scale = 2.0 * (std_ + 1e-5);  // the features' normalisation (REFERENCE.md 2)
-      out["foot_contact"] = FootContactLoss(
-          p.x0 * scale + mean_, target * scale + mean_, batch.tensors.at("target_padding"),
-          options_.fps > 0 ? options_.fps : 30.0, PlausibilityOptions{}.skate_speed);
-      loss = loss + options_.foot_contact_weight * out["foot_contact"];
+    if (options_.foot_contact_weight > 0 || options_.foot_velocity_weight > 0) {
+      // The geometric losses read metres: the features' normalisation undone (REFERENCE.md 2).
+      const auto scale = 2.0 * (std_ + 1e-5);
+      const auto predicted = p.x0 * scale + mean_, actual = target * scale + mean_;
+      const auto& padding = batch.tensors.at("target_padding");
+      const double fps = options_.fps > 0 ? options_.fps : 30.0;
+      if (options_.foot_contact_weight > 0) {
+        out["foot_contact"] =
+            FootContactLoss(predicted, actual, padding, fps, PlausibilityOptions{}.skate_speed);
+        loss = loss + options_.foot_contact_weight * out["foot_contact"];
+      }
+      if (options_.foot_velocity_weight > 0) {
+        out["foot_velocity"] = FootVelocityLoss(predicted, actual, padding, fps);
+        loss = loss + options_.foot_velocity_weight * out["foot_velocity"];
+      }
     }
     if (p.similarity.defined()) {
       const auto aux =

@@ -880,6 +880,43 @@ TEST(Editor, FootContactLossPenalisesFeetThatMoveWhereTheTargetsStand) {
   EXPECT_EQ(g.narrow(0, 141, 66).sum().item<double>(), 0);         // derived positions
 }
 
+TEST(Editor, FootVelocityLossComparesTheFeetsVelocitiesOnEveryRealFramePair) {
+  const int64_t frames = 16;
+  const Motion standing = Motion::Rest(frames, 30, 0.9);
+  Motion sliding = standing;
+  for (int64_t f = 0; f < frames; ++f) sliding.SetTranslation(f, Vec3{0.5 * f / 30.0, 0, 0.9});
+  const auto stand = FeatureTensor(standing), slide = FeatureTensor(sliding);
+  const auto walk = FeatureTensor(TurningWalk(frames));
+  const auto none = torch::zeros({1, frames}, torch::kBool);
+  EXPECT_NEAR(FootVelocityLoss(walk, walk, none, 30).item<double>(), 0.0, 1e-6);
+  // Every foot 0.5 m/s off the target's, whichever moves: 0.25 (m/s)^2 both ways (L_foot asks
+  // nothing of a foot whose target moves).
+  EXPECT_NEAR(FootVelocityLoss(slide, stand, none, 30).item<double>(), 0.25, 1e-3);
+  EXPECT_NEAR(FootVelocityLoss(stand, slide, none, 30).item<double>(), 0.25, 1e-3);
+  EXPECT_NEAR(FootContactLoss(stand, slide, none, 30, 0.15).item<double>(), 0.0, 1e-8);
+  // Read as 10-fps frames, the same per-frame step is a third of the speed.
+  EXPECT_NEAR(FootVelocityLoss(slide, stand, none, 10).item<double>(), 0.25 / 9, 1e-4);
+  // Padded frame pairs do not count, and the mean is over the real ones only.
+  auto padding = torch::zeros({1, frames}, torch::kBool);
+  padding[0].narrow(0, 8, frames - 8).fill_(true);
+  auto late = stand.clone();
+  late.narrow(0, 8, frames - 8).copy_(slide.narrow(0, 8, frames - 8));
+  EXPECT_NEAR(FootVelocityLoss(late, stand, padding, 30).item<double>(), 0.0, 1e-8);
+  EXPECT_NEAR(FootVelocityLoss(slide, stand, padding, 30).item<double>(), 0.25, 1e-3);
+  // The gradient reaches the columns decoding reads for the feet, and no others; none reaches the
+  // target.
+  auto prediction = walk.clone().requires_grad_(true);
+  auto target = stand.clone().requires_grad_(true);
+  FootVelocityLoss(prediction, target, none, 30).backward();
+  const torch::Tensor g = prediction.grad().abs().sum(std::vector<int64_t>{0, 1});
+  EXPECT_GT(g.narrow(0, 0, 3).sum().item<double>(), 0);            // pelvis velocity
+  EXPECT_GT(g.narrow(0, 9, 6).sum().item<double>(), 0);            // heading change
+  EXPECT_GT(g.narrow(0, 15 + 6 * 3, 6).sum().item<double>(), 0);   // left knee (joint 4)
+  EXPECT_EQ(g.narrow(0, 15 + 6 * 15, 6).sum().item<double>(), 0);  // left shoulder (joint 16)
+  EXPECT_EQ(g.narrow(0, 141, 66).sum().item<double>(), 0);         // derived positions
+  EXPECT_FALSE(target.grad().defined() && target.grad().abs().sum().item<double>() > 0);
+}
+
 TEST(Editor, RegressionModePredictsTheNormalizedCurve) {
   EditorOptions o = Tiny("mdt", "regression");
   EXPECT_EQ(o.sim_outputs(), 1);
