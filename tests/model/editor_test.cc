@@ -843,15 +843,21 @@ TEST(Editor, FootDisplacementsAreTheForwardKinematicsFeet) {
   EXPECT_GT(largest, 0.02);  // the feet do move (at 30 fps, 0.6 m/s)
 }
 
+// The features of a rest pose standing still and of the same pose sliding forward at 0.5 m/s
+// (30 fps), [frames, 1, 207] each.
+std::pair<torch::Tensor, torch::Tensor> StandingAndSliding(int64_t frames) {
+  const Motion standing = Motion::Rest(frames, 30, 0.9);
+  Motion sliding = standing;
+  for (int64_t f = 0; f < frames; ++f) sliding.SetTranslation(f, Vec3{0.5 * f / 30.0, 0, 0.9});
+  return {FeatureTensor(standing), FeatureTensor(sliding)};
+}
+
 // L_foot penalises the prediction's feet only where the target's stand still, in (m/s)^2, and not
 // on padded frames; its gradient reaches the pelvis velocity and the legs, not the arms or the
 // derived positions.
 TEST(Editor, FootContactLossPenalisesFeetThatMoveWhereTheTargetsStand) {
   const int64_t frames = 16;
-  const Motion standing = Motion::Rest(frames, 30, 0.9);
-  Motion sliding = standing;
-  for (int64_t f = 0; f < frames; ++f) sliding.SetTranslation(f, Vec3{0.5 * f / 30.0, 0, 0.9});
-  const auto stand = FeatureTensor(standing), slide = FeatureTensor(sliding);
+  const auto [stand, slide] = StandingAndSliding(frames);
   const auto none = torch::zeros({1, frames}, torch::kBool);
   EXPECT_NEAR(FootContactLoss(stand, stand, none, 30, 0.15).item<double>(), 0.0, 1e-8);
   // Every foot slides at 0.5 m/s where the target stands: 0.25 (m/s)^2.
@@ -880,12 +886,11 @@ TEST(Editor, FootContactLossPenalisesFeetThatMoveWhereTheTargetsStand) {
   EXPECT_EQ(g.narrow(0, 141, 66).sum().item<double>(), 0);         // derived positions
 }
 
+// L_vel on the feet compares the prediction's foot velocities with the target's in (m/s)^2 on every
+// real frame pair, moving or standing; its gradient reaches the pelvis velocity and the legs only.
 TEST(Editor, FootVelocityLossComparesTheFeetsVelocitiesOnEveryRealFramePair) {
   const int64_t frames = 16;
-  const Motion standing = Motion::Rest(frames, 30, 0.9);
-  Motion sliding = standing;
-  for (int64_t f = 0; f < frames; ++f) sliding.SetTranslation(f, Vec3{0.5 * f / 30.0, 0, 0.9});
-  const auto stand = FeatureTensor(standing), slide = FeatureTensor(sliding);
+  const auto [stand, slide] = StandingAndSliding(frames);
   const auto walk = FeatureTensor(TurningWalk(frames));
   const auto none = torch::zeros({1, frames}, torch::kBool);
   EXPECT_NEAR(FootVelocityLoss(walk, walk, none, 30).item<double>(), 0.0, 1e-6);
