@@ -157,4 +157,10 @@ int64_t SampleTrainingStep(int64_t steps, double power, torch::Generator generat
   return std::clamp<int64_t>(t, 0, steps - 1);
 }
 
+torch::Tensor MinSnrWeights(const CosineSchedule& schedule, const torch::Tensor& t, double gamma) {
+  const auto abar = torch::tensor(schedule.alpha_bar(), torch::kFloat64);
+  const auto clamped = (abar / (1 - abar)).clamp_max(gamma);  // [steps]
+  return (clamped.index_select(0, t.to(torch::kInt64)) / clamped.mean()).to(torch::kFloat32);
+}
+
 }  // namespace motionpipe::mdt

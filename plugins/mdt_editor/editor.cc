@@ -44,7 +44,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
                    {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
                     "guidance_text", "preconditioning", "sigma_data", "snr_shift",
-                    "step_density_power", "learned_skip", "components", "whiten"});
+                    "step_density_power", "learned_skip", "components", "whiten", "min_snr_gamma"});
   EditorOptions o;
   o.variant = j.value("variant", o.variant);
   if (o.variant != "mdt" && o.variant != "tmed" && o.variant != "mdm") {
@@ -91,6 +91,8 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.diffusion_steps = d.value("steps", o.diffusion_steps);
   o.snr_shift = d.value("snr_shift", o.snr_shift);
   o.step_density_power = d.value("step_density_power", o.step_density_power);
+  o.min_snr_gamma = d.value("min_snr_gamma", o.min_snr_gamma);
+  if (!(o.min_snr_gamma >= 0)) throw std::invalid_argument("diffusion.min_snr_gamma must be >= 0");
   if (!(o.step_density_power >= 0 && o.step_density_power <= 10))
     throw std::invalid_argument("diffusion.step_density_power must be in [0, 10]");
   o.velocity_weight =
@@ -175,7 +177,8 @@ nlohmann::json EditorOptions::ToJson() const {
             {"whiten", whiten},
             {"sigma_data", sigma_data},
             {"snr_shift", snr_shift},
-            {"step_density_power", step_density_power}}}};
+            {"step_density_power", step_density_power},
+            {"min_snr_gamma", min_snr_gamma}}}};
 }
 
 DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
@@ -451,7 +454,7 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
 }
 
 torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,
-                               const torch::Tensor& padding) {
+                               const torch::Tensor& padding, const torch::Tensor& weight) {
   const auto keep = padding.logical_not().t().unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
   const auto frames = keep.sum(0).squeeze(1).clamp_min(1.0);                        // [N]
   const auto squared = (prediction - target).pow(2) * keep;
@@ -461,7 +464,8 @@ torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Ten
     groups.push_back(squared.narrow(2, g.begin, g.end - g.begin).sum(dims) /
                      (frames * (g.end - g.begin)));  // [N]
   }
-  return torch::stack(groups, 0).mean(0).mean();
+  const auto per_example = torch::stack(groups, 0).mean(0);
+  return weight.defined() ? (per_example * weight).mean() : per_example.mean();
 }
 
 torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target,

@@ -51,6 +51,9 @@ struct EditorOptions {
   // The training steps' density, proportional to t^k (SampleTrainingStep); 0: uniform (the
   // reference). Sampling is unchanged.
   double step_density_power = 0;
+  // > 0: the x0 loss of each example weighted by Min-SNR-gamma (MinSnrWeights); 0: unweighted
+  // (the reference).
+  double min_snr_gamma = 0;
   // How the network's output becomes the x0 estimate. "x0": the output is x0 (REFERENCE 3.2).
   // "edm": Karras et al.'s preconditioning, x0 = c_skip x~ + c_out F, so that near t = 0 the noisy
   // target passes through instead of being rebuilt from the width-d trunk (at d = 128 < 207 the
@@ -205,9 +208,10 @@ std::pair<torch::Tensor, torch::Tensor> PrincipalFrameBasis(const torch::Tensor&
                                                             double* explained);
 
 // Masked MSE on x0 averaged per feature group (the 207-d layout's five), then over the groups, per
-// example, then over the examples. prediction/target [T, N, 207], padding [N, T].
+// example, then over the examples (each times `weight` [N] when given). prediction/target
+// [T, N, 207], padding [N, T].
 torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,
-                               const torch::Tensor& padding);
+                               const torch::Tensor& padding, const torch::Tensor& weight = {});
 
 // GroupedMaskedMse of the first differences over time (frames t and t - 1 both real).
 torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target,

@@ -326,6 +326,37 @@ TEST(Diffusion, TheSnrShiftMovesLogSnrByTwoLogK) {
   EXPECT_THROW(CosineSchedule(300, 0.5), std::invalid_argument);
 }
 
+// Min-SNR-gamma: min(SNR_t, gamma) divided by its mean over the steps, so the weights average 1
+// under uniform steps; the clean end weighs gamma / mean, the noisiest almost nothing; and the
+// weighted x0 loss is the per-example losses' weighted mean.
+TEST(Diffusion, MinSnrWeightsClampTheSignalToNoiseRatioAndAverageOne) {
+  const CosineSchedule schedule(300, 1.0);
+  const auto all = torch::arange(300, torch::kInt64);
+  const auto w = MinSnrWeights(schedule, all, 5.0);
+  EXPECT_NEAR(w.mean().item<double>(), 1.0, 1e-5);
+  double mean = 0;
+  for (double abar : schedule.alpha_bar()) mean += std::min(abar / (1 - abar), 5.0) / 300;
+  EXPECT_NEAR(w[0].item<double>(), 5.0 / mean, 1e-4);  // SNR_0 is far above 5
+  const double abar = schedule.alpha_bar()[200];
+  ASSERT_LT(abar / (1 - abar), 5.0);
+  EXPECT_NEAR(w[200].item<double>(), abar / (1 - abar) / mean, 1e-4);
+  EXPECT_LT(w[299].item<double>(), 1e-3);
+  for (int64_t t = 1; t < 300; ++t) EXPECT_LE(w[t].item<double>(), w[t - 1].item<double>() + 1e-6);
+  // Two examples, errors 1 and 3 on every real entry, weights 2 and 0.5: (2 + 1.5) / 2.
+  const auto target = torch::zeros({4, 2, kEditFeatureDim});
+  auto prediction = target.clone();
+  prediction.select(1, 0).fill_(1.0);
+  prediction.select(1, 1).fill_(std::sqrt(3.0));
+  auto padding = torch::zeros({2, 4}, torch::kBool);
+  padding[1][3] = true;
+  EXPECT_NEAR(GroupedMaskedMse(prediction, target, padding).item<double>(), 2.0, 1e-5);
+  EXPECT_NEAR(
+      GroupedMaskedMse(prediction, target, padding, torch::tensor({2.0f, 0.5f})).item<double>(),
+      1.75, 1e-5);
+  EXPECT_THROW(EditorOptions::FromJson({{"diffusion", {{"min_snr_gamma", -1}}}}),
+               std::invalid_argument);
+}
+
 TEST(Diffusion, TrainingStepsFollowTheirDensity) {
   // Power 0 is the reference's uniform draw, the same numbers as torch::randint under one seed.
   auto a = at::make_generator<at::CPUGeneratorImpl>(7),
