@@ -199,8 +199,12 @@ void PrintSkateSources(const Probe& p, const torch::Tensor& estimate) {
 void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
   const auto& target = p.batch.tensors.at("target");
   const auto& padding = p.batch.tensors.at("target_padding");
-  std::printf("%6s %10s %10s %10s %10s %8s\n", "t", "model", "no text", "no source", "x_t/sqrt(a)",
-              "skate");
+  // "toward source": the estimate's error along (aligned source - target), as a fraction of it: 0
+  // when the estimate keeps nothing of the source it should not, 1 for the copy.
+  std::printf("%6s %10s %10s %10s %10s %8s %15s %14s\n", "t", "model", "no text", "no source",
+              "x_t/sqrt(a)", "skate", "skate no source", "toward source");
+  const auto keep = padding.logical_not().t().unsqueeze(2).to(torch::kFloat32);
+  const auto away = (AlignSource(p.c.source, p.c.source_padding, padding) - target) * keep;
   torch::Tensor at_zero;
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
     if (t >= p.options.diffusion_steps) continue;
@@ -219,16 +223,26 @@ void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
     no_text.drop_text = torch::ones({p.n}, torch::kBool);
     no_source.drop_source = torch::ones({p.n}, torch::kBool);
     const double without_text = Mse(estimate(no_text), target, padding).mean().item<double>();
-    const double without_source = Mse(estimate(no_source), target, padding).mean().item<double>();
+    const auto x0_no_source = estimate(no_source);
+    const double without_source = Mse(x0_no_source, target, padding).mean().item<double>();
+    const double toward = (((x0 - target) * away).sum() / away.pow(2).sum()).item<double>();
     const double scaled =
         Mse(p.net->Decode(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)])), target,
             padding)
             .mean()
             .item<double>();
-    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f %8.3f\n", static_cast<long long>(t), model,
-                without_text, without_source, scaled, GroundedSkate(p, x0));
+    std::printf("%6lld %10.4f %10.4f %10.4f %10.4f %8.3f %15.3f %14.3f\n",
+                static_cast<long long>(t), model, without_text, without_source, scaled,
+                GroundedSkate(p, x0), GroundedSkate(p, x0_no_source), toward);
   }
   PrintSkateSources(p, at_zero);
+  // Is the estimate's pull toward the source what makes it skate? The target moved the t = 0
+  // estimate's fraction of the way to the aligned source (a blend of two motions' legs).
+  const double toward = (((at_zero - target) * away).sum() / away.pow(2).sum()).item<double>();
+  std::printf(
+      "  the target moved %.3f of the way to the source: foot skate %.3f\n", toward,
+      GroundedSkate(
+          p, target + toward * (AlignSource(p.c.source, p.c.source_padding, padding) - target)));
 }
 
 // Sampled edits (DDIM, three-way guidance) at g 1/1, traced, and at (g_m, g_t).
