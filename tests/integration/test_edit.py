@@ -135,6 +135,22 @@ stages:
     kind: eval_edit
     inputs: [evaluator_b, corpus]
     params: {evaluator: ["JOBS/evaluator", evaluator_b], edits: "JOBS/edit_mdt", batch: 2}
+  guided:
+    kind: edit
+    inputs: [corpus]
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2}
+  unguided:
+    kind: edit
+    inputs: [corpus]
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {guidance_motion: 1, guidance_text: 1}}
+  guided_from_300:
+    kind: edit
+    inputs: [corpus]
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {guidance_from_step: 300}}
+  guided_from_150:
+    kind: edit
+    inputs: [corpus]
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {guidance_from_step: 150}}
 """
 
 
@@ -374,6 +390,14 @@ class EditTest(EngineTest):
         self.assertEqual([e["evaluator"] for e in both["by_evaluator"]], both["evaluator"])
         self.assertEqual([e["generated_to_target"] for e in both["by_evaluator"]],
                          [m["generated_to_target"]["batches"]["R@1"] for m in (one, two)])
+        # The guidance interval: guided from step 300 of 300 is never guided (the same edits as
+        # g_m = g_t = 1), from 150 is guided on the noisy half only (edits of their own).
+        def edits(stage):
+            with np.load(glob.glob(self.path("judges", "judges-*", stage, "task-*", "edited.npz"))[0]) as z:
+                return z["poses"].copy()
+        self.assertTrue(np.array_equal(edits("guided_from_300"), edits("unguided")))
+        for a, b in (("guided", "unguided"), ("guided_from_150", "guided"), ("guided_from_150", "unguided")):
+            self.assertFalse(np.array_equal(edits(a), edits(b)), (a, b))
         # A list that names what is neither an input nor a path is refused when the job is planned.
         bad = self.write_pipeline("bad.yaml", judges.replace("evaluator: [", "evaluator: [nowhere, "))
         result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
