@@ -174,7 +174,7 @@ torch::Tensor WithColumns(torch::Tensor x, const torch::Tensor& from,
 
 // Where the t = 0 estimate's skate comes from: its skate with the target's pelvis velocity, the
 // target's leg rotations (hips, knees, ankles, feet), or both put back, and the target's with
-// only those of the estimate; and the leg rotations' mean angle error (degrees).
+// only those of the estimate.
 void PrintSkateSources(const Probe& p, const torch::Tensor& estimate) {
   const auto& target = p.batch.tensors.at("target");
   const std::vector<std::pair<int64_t, int64_t>> pelvis = {{0, 3}};
@@ -204,7 +204,11 @@ void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
   std::printf("%6s %10s %10s %10s %10s %8s %15s %14s\n", "t", "model", "no text", "no source",
               "x_t/sqrt(a)", "skate", "skate no source", "toward source");
   const auto keep = padding.logical_not().t().unsqueeze(2).to(torch::kFloat32);
-  const auto away = (AlignSource(p.c.source, p.c.source_padding, padding) - target) * keep;
+  const auto aligned = AlignSource(p.c.source, p.c.source_padding, padding);
+  const auto away = (aligned - target) * keep;
+  const auto toward_source = [&](const torch::Tensor& x0) {
+    return (((x0 - target) * away).sum() / away.pow(2).sum()).item<double>();
+  };
   torch::Tensor at_zero;
   for (int64_t t : {0L, 10L, 30L, 60L, 100L, 150L, 200L, 250L, 299L}) {
     if (t >= p.options.diffusion_steps) continue;
@@ -225,7 +229,6 @@ void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
     const double without_text = Mse(estimate(no_text), target, padding).mean().item<double>();
     const auto x0_no_source = estimate(no_source);
     const double without_source = Mse(x0_no_source, target, padding).mean().item<double>();
-    const double toward = (((x0 - target) * away).sum() / away.pow(2).sum()).item<double>();
     const double scaled =
         Mse(p.net->Decode(xt / std::sqrt(schedule.alpha_bar()[static_cast<size_t>(t)])), target,
             padding)
@@ -233,16 +236,14 @@ void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
             .item<double>();
     std::printf("%6lld %10.4f %10.4f %10.4f %10.4f %8.3f %15.3f %14.3f\n",
                 static_cast<long long>(t), model, without_text, without_source, scaled,
-                GroundedSkate(p, x0), GroundedSkate(p, x0_no_source), toward);
+                GroundedSkate(p, x0), GroundedSkate(p, x0_no_source), toward_source(x0));
   }
   PrintSkateSources(p, at_zero);
   // Is the estimate's pull toward the source what makes it skate? The target moved the t = 0
   // estimate's fraction of the way to the aligned source (a blend of two motions' legs).
-  const double toward = (((at_zero - target) * away).sum() / away.pow(2).sum()).item<double>();
-  std::printf(
-      "  the target moved %.3f of the way to the source: foot skate %.3f\n", toward,
-      GroundedSkate(
-          p, target + toward * (AlignSource(p.c.source, p.c.source_padding, padding) - target)));
+  const double toward = toward_source(at_zero);
+  std::printf("  the target moved %.3f of the way to the source: foot skate %.3f\n", toward,
+              GroundedSkate(p, target + toward * (aligned - target)));
 }
 
 // Sampled edits (DDIM, three-way guidance) at g 1/1, traced, and at (g_m, g_t).
