@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -19,6 +20,16 @@ using Clock = std::chrono::steady_clock;
 
 inline double Since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Examples per second of `step` (one training step of `batch` examples) over `steps` calls, after
+// two calls that warm the allocator and the kernels up.
+template <typename Step>
+double ExamplesPerSecond(Step&& step, int64_t steps, int64_t batch) {
+  for (int k = 0; k < 2; ++k) step();
+  const auto started = Clock::now();
+  for (int64_t k = 0; k < steps; ++k) step();
+  return static_cast<double>(steps * batch) / Since(started);
 }
 
 // Starts `args` (args[0] a path) as a child process; its pid (the child exits 127 if exec fails).

@@ -31,6 +31,7 @@ namespace fs = std::filesystem;
 using namespace motionpipe;
 using namespace motionpipe::mdt;
 using bench::Clock;
+using bench::ExamplesPerSecond;
 using bench::Run;
 using bench::Since;
 using nlohmann::json;
@@ -242,10 +243,7 @@ void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
     return loss.item<double>();
   };
   const auto rate = [&](nn::Precision precision) {
-    for (int k = 0; k < 2; ++k) step(precision);
-    const auto started = Clock::now();
-    for (int64_t k = 0; k < a.steps; ++k) step(precision);
-    return static_cast<double>(a.steps * batch) / Since(started);
+    return ExamplesPerSecond([&] { step(precision); }, a.steps, batch);
   };
   const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
   const double python = a.reference ? PythonReference(a, size, net, b) : 0;

@@ -32,6 +32,7 @@
 namespace fs = std::filesystem;
 using namespace motionpipe;
 using bench::Clock;
+using bench::ExamplesPerSecond;
 using bench::Run;
 using bench::Since;
 using nlohmann::json;
@@ -177,10 +178,7 @@ void BenchSize(const Args& a, const Size& size) {
     return losses.at("loss").item<double>();
   };
   const auto rate = [&](nn::Precision precision) {
-    for (int k = 0; k < 2; ++k) step(precision);
-    const auto started = Clock::now();
-    for (int64_t k = 0; k < a.steps; ++k) step(precision);
-    return static_cast<double>(a.steps * a.batch) / Since(started);
+    return ExamplesPerSecond([&] { step(precision); }, a.steps, a.batch);
   };
   const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
   const double python = a.reference ? PythonReference(a, size, net, texts, b) : 0;
