@@ -12,6 +12,7 @@ import os
 import sqlite3
 import statistics
 import subprocess
+import sys
 import threading
 import unittest
 
@@ -20,6 +21,10 @@ import numpy as np
 from harness import MOTIONPIPE, EngineTest, free_port
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+# Rodrigues, the NumPy reference's (one copy in the repository; tools/root_stats.py reads it too).
+sys.path.insert(0, os.path.join(HERE, "..", "..", "bench", "reference"))
+from similarity_ref import rotation_matrices  # noqa: E402
+
 CMU = os.path.join(HERE, "..", "..", "data", "mocap", "cmu", "131_01.bvh")
 
 PIPELINE = """
@@ -76,17 +81,6 @@ stages:
     inputs: [eval_mdt, showcase]
     params: {history: HISTORY, panel_size: 96}
 """
-
-
-def rotation_matrices(axis_angle):
-    """Rodrigues: [..., 3] axis-angle -> [..., 3, 3] (compared as matrices: axis-angle is not unique)."""
-    angle = np.linalg.norm(axis_angle, axis=-1, keepdims=True)
-    axis = axis_angle / np.maximum(angle, 1e-12)
-    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
-    zero = np.zeros_like(x)
-    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(axis.shape[:-1] + (3, 3))
-    s, c = np.sin(angle)[..., None], np.cos(angle)[..., None]
-    return np.eye(3) + s * k + (1 - c) * (k @ k)
 
 
 NIGHTLY = """
