@@ -60,9 +60,10 @@ int64_t SampleTrainingStep(int64_t steps, double power, torch::Generator generat
 // Min-SNR-gamma loss weights (Hang et al. 2023, "Efficient Diffusion Training via Min-SNR Weighting
 // Strategy", for x0 prediction: w_t = min(SNR_t, gamma), SNR_t = abar_t / (1 - abar_t)) of the
 // steps t [N], divided by their mean over the schedule's steps so that under uniform steps the loss
-// keeps its scale: the low-noise steps, where the fine detail (the feet's contacts) is made, weigh
-// up to gamma times the noisiest. Not in the paper (issue 15: the MDT's estimate from a clean
-// target still skates). Returns float32 [N].
+// keeps its scale: every step with SNR above gamma (the low-noise end, where the fine detail such
+// as the feet's contacts is made) weighs the same, the noisiest steps almost nothing. Not in the
+// paper (issue 15: the MDT's estimate from a clean target still skates; measured, it does not
+// help). Returns float32 [N].
 torch::Tensor MinSnrWeights(const CosineSchedule& schedule, const torch::Tensor& t, double gamma);
 
 // The model's x0 prediction at step t for the current x_t (guidance already applied).

@@ -91,10 +91,10 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.diffusion_steps = d.value("steps", o.diffusion_steps);
   o.snr_shift = d.value("snr_shift", o.snr_shift);
   o.step_density_power = d.value("step_density_power", o.step_density_power);
-  o.min_snr_gamma = d.value("min_snr_gamma", o.min_snr_gamma);
-  if (!(o.min_snr_gamma >= 0)) throw std::invalid_argument("diffusion.min_snr_gamma must be >= 0");
   if (!(o.step_density_power >= 0 && o.step_density_power <= 10))
     throw std::invalid_argument("diffusion.step_density_power must be in [0, 10]");
+  o.min_snr_gamma = d.value("min_snr_gamma", o.min_snr_gamma);
+  if (!(o.min_snr_gamma >= 0)) throw std::invalid_argument("diffusion.min_snr_gamma must be >= 0");
   o.velocity_weight =
       j.value("loss", nlohmann::json::object()).value("velocity", o.velocity_weight);
   if (!(o.velocity_weight >= 0)) throw std::invalid_argument("loss.velocity must be >= 0");
