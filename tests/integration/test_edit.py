@@ -145,6 +145,13 @@ stages:
     kind: edit
     inputs: [corpus]
     params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {guidance_from_step: 150}}
+  locked:
+    kind: foot_lock
+    params: {motions: "JOBS/edit_mdt", max_speed: 5}
+  eval_locked:
+    kind: eval_edit
+    inputs: [evaluator_b, locked, corpus]
+    params: {evaluator: evaluator_b, edits: locked, batch: 2}
 """
 
 
@@ -366,7 +373,7 @@ class EditTest(EngineTest):
                                 capture_output=True, text=True, timeout=600)
         self.assertEqual(result.returncode, 0, result.stdout[-2000:] + result.stderr[-2000:])
         judged = {}
-        for name in ("eval_b", "eval_both"):
+        for name in ("eval_b", "eval_both", "eval_locked"):
             with open(glob.glob(self.path("judges", "judges-*", name, "task-00000", "metrics.json"))[0]) as f:
                 judged[name] = json.load(f)
         one, two, both = metrics, judged["eval_b"], judged["eval_both"]
@@ -392,11 +399,35 @@ class EditTest(EngineTest):
         self.assertTrue(np.array_equal(edits("guided_from_300"), edits("unguided")))
         for a, b in (("guided", "unguided"), ("guided_from_150", "guided"), ("guided_from_150", "unguided")):
             self.assertFalse(np.array_equal(edits(a), edits(b)), (a, b))
+        # foot_lock: the same edits with only the legs' rotations changed (hips, knees, ankles),
+        # scored as a row of their own, never skating more than the raw edits.
+        raw, locked = {}, {}
+        for pattern, into in ((os.path.join(job, "edit_mdt"), raw), (self.path("judges", "judges-*", "locked"), locked)):
+            for path in glob.glob(os.path.join(pattern, "task-*", "edited.npz")):
+                with np.load(path) as z:
+                    for i, clip in enumerate(z["ids"]):
+                        a, b = z["offsets"][i], z["offsets"][i + 1]
+                        into[str(clip)] = (z["poses"][a:b].copy(), z["trans"][a:b].copy())
+        self.assertEqual(sorted(locked), sorted(raw))
+        legs = [1, 2, 4, 5, 7, 8]
+        others = [j for j in range(22) if j not in legs]
+        for clip, (poses, trans) in locked.items():
+            self.assertTrue(np.array_equal(trans, raw[clip][1]), clip)
+            self.assertLess(np.abs(rotation_matrices(poses[:, others]) - rotation_matrices(raw[clip][0][:, others])).max(), 1e-5)
+        scored = judged["eval_locked"]
+        self.assertEqual(scored["method"], "mdt_editor/mdt + foot lock")
+        self.assertEqual(scored["motions"], 3)
+        self.assertLessEqual(scored["plausibility"]["generated"]["foot_skate_ratio"],
+                             two["plausibility"]["generated"]["foot_skate_ratio"])
         # A list that names what is neither an input nor a path is refused when the job is planned.
         bad = self.write_pipeline("bad.yaml", judges.replace("evaluator: [", "evaluator: [nowhere, "))
         result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
         self.assertNotEqual(result.returncode, 0)
         self.assertIn("stages.eval_both.params.evaluator: must name one of the stage's inputs", result.stdout + result.stderr)
+        bad = self.write_pipeline("bad_lock.yaml", judges.replace("max_speed: 5", "max_speed: -1"))
+        result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("stages.locked.params.max_speed: a positive number", result.stdout + result.stderr)
 
         # motionpipe edit on a real CMU clip: the source's length, finite, repeatable under a seed.
         model = os.path.join(job, "mdt")

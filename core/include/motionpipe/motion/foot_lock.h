@@ -1,0 +1,39 @@
+// Foot locking: a post-process that plants a motion's feet where it already puts them on the floor.
+// Each foot joint (ankle, toe) that stays below a contact height and slower than a speed for a run
+// of frames is held at one horizontal place over that run (the run's mean), and the leg reaches it
+// by two-bone IK: the knee folds in its own bending plane, the hip swings by the smallest rotation,
+// the ankle keeps the foot's world orientation (turned, where the toe is held too, to point at the
+// toe's place). Only the hips', knees' and ankles' local rotations change; the pelvis, its path and
+// the upper body are the motion's own. What the model generated is the input; this is not the
+// model: the evaluation reports both.
+#pragma once
+
+#include <cstdint>
+
+#include "motionpipe/motion/motion.h"
+#include "motionpipe/skeleton/skeleton.h"
+
+namespace motionpipe {
+
+struct FootLockOptions {
+  double floor = 0;              // z of the floor (joint level), metres
+  double contact_height = 0.05;  // a foot joint below floor + this may be in contact (the metric's)
+  double max_speed = 1.0;        // m/s: a foot joint faster than this is swinging, not sliding
+  int min_frames = 2;            // shortest run of contact frames that is held
+  int blend_frames = 3;          // frames on each side of a run over which the hold fades in/out
+};
+
+struct FootLockReport {
+  int64_t held = 0;            // foot-joint frames held at a run's place
+  int64_t runs = 0;            // contact runs held
+  int64_t unreached = 0;       // held ankle frames the leg could not reach (> 1 cm short)
+  double mean_shift = 0;       // m: mean horizontal distance a held joint was moved
+  double max_reach_error = 0;  // m: the largest distance an ankle stayed from its place
+};
+
+// The motion with its feet held (frames, fps, translation and every other joint unchanged).
+// `report` (optional) receives the counts above.
+Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options = {},
+                FootLockReport* report = nullptr);
+
+}  // namespace motionpipe

@@ -1,0 +1,164 @@
+#include "motionpipe/motion/foot_lock.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <vector>
+
+namespace motionpipe {
+
+namespace {
+
+// Where one foot joint is held: per frame a weight (1 inside a contact run, fading to 0 over the
+// blend frames beside it) and the run's horizontal place.
+struct Hold {
+  std::vector<double> weight;
+  std::vector<Vec3> place;  // z unused: a held joint keeps its own height
+};
+
+Hold FindHold(const std::vector<Vec3>& path, double fps, const FootLockOptions& options,
+              FootLockReport* report) {
+  const int64_t frames = static_cast<int64_t>(path.size());
+  Hold hold{std::vector<double>(path.size(), 0.0), std::vector<Vec3>(path.size())};
+  std::vector<char> contact(path.size(), 0);
+  for (int64_t f = 0; f < frames; ++f) {
+    // Central difference (one-sided at the ends): a single jittery frame does not split a run.
+    const int64_t a = std::max<int64_t>(0, f - 1), b = std::min(frames - 1, f + 1);
+    const Vec3 step = path[static_cast<size_t>(b)] - path[static_cast<size_t>(a)];
+    const double speed = std::hypot(step.x, step.y) * fps / static_cast<double>(b - a);
+    contact[static_cast<size_t>(f)] =
+        path[static_cast<size_t>(f)].z < options.floor + options.contact_height &&
+        speed < options.max_speed;
+  }
+  for (int64_t begin = 0; begin < frames;) {
+    if (!contact[static_cast<size_t>(begin)]) {
+      ++begin;
+      continue;
+    }
+    int64_t end = begin;
+    while (end < frames && contact[static_cast<size_t>(end)]) ++end;
+    if (end - begin >= options.min_frames) {
+      Vec3 place{0, 0, 0};
+      for (int64_t f = begin; f < end; ++f) place = place + path[static_cast<size_t>(f)];
+      place = (1.0 / static_cast<double>(end - begin)) * place;
+      const int64_t blend = options.blend_frames;
+      for (int64_t f = std::max<int64_t>(0, begin - blend); f < std::min(frames, end + blend);
+           ++f) {
+        const int64_t outside = f < begin ? begin - f : (f >= end ? f - end + 1 : 0);
+        const double w = 1.0 - static_cast<double>(outside) / static_cast<double>(blend + 1);
+        if (w > hold.weight[static_cast<size_t>(f)]) {
+          hold.weight[static_cast<size_t>(f)] = w;
+          hold.place[static_cast<size_t>(f)] = place;
+        }
+      }
+      if (report) {
+        ++report->runs;
+        for (int64_t f = begin; f < end; ++f) {
+          const Vec3 d = place - path[static_cast<size_t>(f)];
+          report->mean_shift += std::hypot(d.x, d.y);
+          ++report->held;
+        }
+      }
+    }
+    begin = end;
+  }
+  return hold;
+}
+
+// The joint's goal at `frame`: its own position, moved horizontally towards its place by the
+// hold's weight.
+Vec3 Goal(const Hold& hold, int64_t frame, const Vec3& own) {
+  const double w = hold.weight[static_cast<size_t>(frame)];
+  const Vec3& place = hold.place[static_cast<size_t>(frame)];
+  return {own.x + w * (place.x - own.x), own.y + w * (place.y - own.y), own.z};
+}
+
+}  // namespace
+
+Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options,
+                FootLockReport* report) {
+  Motion out = motion;
+  const int64_t frames = motion.num_frames();
+  if (frames < 2) return out;
+  const auto& parents = skeleton.parents();
+  const std::array<std::array<int, 2>, 2> feet = {skeleton.left_foot_joints(),
+                                                  skeleton.right_foot_joints()};
+  std::vector<std::array<Mat3, kNumJoints>> global(static_cast<size_t>(frames));
+  std::vector<std::array<Vec3, kNumJoints>> position(static_cast<size_t>(frames));
+  std::array<Mat3, kNumJoints> local{};
+  for (int64_t f = 0; f < frames; ++f) {
+    for (int joint = 0; joint < kNumJoints; ++joint)
+      local[static_cast<size_t>(joint)] = motion.LocalRotation(f, joint);
+    ForwardKinematicsFrame(skeleton, local.data(), motion.Translation(f),
+                           global[static_cast<size_t>(f)].data(),
+                           position[static_cast<size_t>(f)].data());
+  }
+  FootLockReport counts;
+  for (const auto& foot : feet) {
+    const int ankle = foot[0], toe = foot[1];
+    const int knee = parents[static_cast<size_t>(ankle)];
+    const int hip = parents[static_cast<size_t>(knee)];
+    const int pelvis = parents[static_cast<size_t>(hip)];
+    std::array<Hold, 2> holds;
+    for (int k = 0; k < 2; ++k) {
+      std::vector<Vec3> path(static_cast<size_t>(frames));
+      for (int64_t f = 0; f < frames; ++f)
+        path[static_cast<size_t>(f)] =
+            position[static_cast<size_t>(f)][static_cast<size_t>(foot[k])];
+      holds[static_cast<size_t>(k)] = FindHold(path, motion.fps, options, &counts);
+    }
+    for (int64_t f = 0; f < frames; ++f) {
+      const double w_ankle = holds[0].weight[static_cast<size_t>(f)];
+      const double w_toe = holds[1].weight[static_cast<size_t>(f)];
+      if (w_ankle <= 0 && w_toe <= 0) continue;
+      const auto& G = global[static_cast<size_t>(f)];
+      const auto& P = position[static_cast<size_t>(f)];
+      const Vec3 H = P[static_cast<size_t>(hip)], K = P[static_cast<size_t>(knee)],
+                 A = P[static_cast<size_t>(ankle)];
+      Mat3 g_hip = G[static_cast<size_t>(hip)], g_knee = G[static_cast<size_t>(knee)];
+      Vec3 ankle_at = A;
+      if (w_ankle > 0) {
+        const Vec3 goal = Goal(holds[0], f, A);
+        const double l1 = Norm(K - H), l2 = Norm(A - K);
+        const double d = std::clamp(Norm(goal - H), std::abs(l1 - l2) + 1e-6, (l1 + l2) * 0.9999);
+        // The knee's bend (angle between thigh and shin) that puts the ankle at distance d from
+        // the hip, by the law of cosines; the knee turns about its bending plane's normal.
+        const Vec3 thigh = (1.0 / l1) * (K - H), shin = (1.0 / l2) * (A - K);
+        const double bend = std::acos(std::clamp(Dot(thigh, shin), -1.0, 1.0));
+        const double wanted =
+            std::acos(std::clamp((d * d - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1.0, 1.0));
+        Vec3 normal = Cross(thigh, shin);
+        // A straight leg has no bending plane: SMPL's knee flexes about its parent's x axis.
+        if (Norm(normal) < 1e-6) normal = g_hip * Vec3{1, 0, 0};
+        const Mat3 fold = AxisAngleToMatrix(((wanted - bend) / Norm(normal)) * normal);
+        const Mat3 knee_local = Transpose(g_hip) * (fold * g_knee);
+        const Vec3 folded = K + fold * (A - K);
+        // The hip swings by the smallest rotation that points the folded leg at the goal.
+        const Mat3 swing = RotationBetween(folded - H, goal - H);
+        g_hip = swing * g_hip;
+        g_knee = g_hip * knee_local;
+        ankle_at = H + swing * (folded - H);
+        const double reach = Norm(ankle_at - goal);
+        counts.max_reach_error = std::max(counts.max_reach_error, reach);
+        if (w_ankle >= 1 && reach > 0.01) ++counts.unreached;
+        out.SetLocalRotation(f, hip, Transpose(G[static_cast<size_t>(pelvis)]) * g_hip);
+        out.SetLocalRotation(f, knee, knee_local);
+      }
+      // The foot keeps its world orientation; a held toe turns it to point at the toe's place.
+      Mat3 g_ankle = G[static_cast<size_t>(ankle)];
+      if (w_toe > 0) {
+        const Vec3 T = P[static_cast<size_t>(toe)];
+        const Vec3 to_goal = Goal(holds[1], f, T) - ankle_at;
+        if (Norm(to_goal) > 1e-6) g_ankle = RotationBetween(T - A, to_goal) * g_ankle;
+      }
+      out.SetLocalRotation(f, ankle, Transpose(g_knee) * g_ankle);
+    }
+  }
+  if (report) {
+    *report = counts;
+    if (counts.held > 0) report->mean_shift = counts.mean_shift / static_cast<double>(counts.held);
+  }
+  return out;
+}
+
+}  // namespace motionpipe

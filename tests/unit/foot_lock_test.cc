@@ -1,0 +1,151 @@
+#include "motionpipe/motion/foot_lock.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+
+#include "motionpipe/motion/plausibility.h"
+#include "motionpipe/motion/pose_solver.h"
+
+namespace motionpipe {
+namespace {
+
+constexpr int kLeftHip = 1, kLeftKnee = 4, kLeftAnkle = 7, kRightAnkle = 8;
+
+// A body standing with its pelvis at `pelvis_x(frame)` (default still), 30 frames at 30 fps, whose
+// left ankle is put where `left_ankle(frame)` says (the right ankle stays under the pelvis), solved
+// by the pose solver's IK.
+Motion Standing(
+    const std::function<Vec3(int)>& left_ankle,
+    const std::function<double(int)>& pelvis_x = [](int) { return 0.0; }) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  constexpr int kFrames = 30;
+  Motion motion = Motion::Rest(kFrames, 30.0, skeleton.RestPelvisHeight());
+  for (int frame = 0; frame < kFrames; ++frame) {
+    PoseTargets t;
+    t.pelvis = {pelvis_x(frame), 0.0, 0.78};
+    t.facing = 0.0;  // facing +x; the body's left is +y
+    for (int side = 0; side < 2; ++side) {
+      FootTarget& foot = t.feet[static_cast<size_t>(side)];
+      foot.ankle = side == 0 ? left_ankle(frame) : Vec3{pelvis_x(frame) + 0.02, -0.1, 0.03};
+      foot.toe_dir = {1, 0, 0};
+      foot.knee_pole = {1, 0, 0};
+    }
+    for (auto& hand : t.hands)
+      hand.wrist = {pelvis_x(frame), 0.0, 0.55}, hand.elbow_pole = {-1, 0, 0};
+    t.hands[0].wrist.y = 0.25, t.hands[1].wrist.y = -0.25;
+    const SolvedPose pose = SolvePose(skeleton, t);
+    for (int joint = 0; joint < kNumJoints; ++joint)
+      motion.SetLocalRotation(frame, joint, pose.local[static_cast<size_t>(joint)]);
+    motion.SetTranslation(frame, pose.translation);
+  }
+  return motion;
+}
+
+Vec3 JointAt(const std::vector<float>& joints, int frame, int joint) {
+  const float* p =
+      &joints[(static_cast<size_t>(frame) * kNumJoints + static_cast<size_t>(joint)) * 3];
+  return {p[0], p[1], p[2]};
+}
+
+TEST(FootLock, HoldsASlidingContactFootAtOnePlaceAndLeavesTheRestOfTheBody) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  // The left foot slides forward on the floor at 0.3 m/s (a skate, slower than max_speed 1 m/s).
+  const Motion sliding = Standing([](int frame) { return Vec3{0.01 * frame - 0.1, 0.1, 0.03}; });
+  ASSERT_GT(EvaluateMotionPlausibility(skeleton, sliding).foot_skate_ratio, 0.4);
+  FootLockReport report;
+  const Motion locked = LockFeet(skeleton, sliding, {}, &report);
+  ASSERT_EQ(locked.num_frames(), sliding.num_frames());
+  EXPECT_EQ(locked.trans, sliding.trans);
+  EXPECT_EQ(report.unreached, 0);
+  EXPECT_GE(report.runs, 2);  // at least the left ankle's run and the right ankle's
+  // Held at one place, the run's mean (every frame is one run of contact), at its own height.
+  const std::vector<float> before = ComputeJoints(skeleton, sliding);
+  const std::vector<float> joints = ComputeJoints(skeleton, locked);
+  Vec3 place{0, 0, 0};
+  for (int frame = 0; frame < sliding.num_frames(); ++frame) {
+    ASSERT_LT(JointAt(before, frame, kLeftAnkle).z, 0.05) << frame;
+    place = place +
+            (1.0 / static_cast<double>(sliding.num_frames())) * JointAt(before, frame, kLeftAnkle);
+  }
+  for (int frame = 0; frame < locked.num_frames(); ++frame) {
+    const Vec3 at = JointAt(joints, frame, kLeftAnkle);
+    EXPECT_NEAR(at.x, place.x, 1e-6) << frame;
+    EXPECT_NEAR(at.y, place.y, 1e-6) << frame;
+    EXPECT_NEAR(at.z, JointAt(before, frame, kLeftAnkle).z, 1e-6) << frame;
+  }
+  EXPECT_EQ(EvaluateMotionPlausibility(skeleton, locked).foot_skate_ratio, 0.0);
+  // Only the legs below the pelvis change: every other joint's rotation is the motion's own.
+  for (int frame = 0; frame < locked.num_frames(); ++frame) {
+    for (int joint : {0, 3, 6, 9, 12, 15, 16, 17, 18, 19, 20, 21}) {
+      EXPECT_LT(MaxAbsDiff(locked.LocalRotation(frame, joint), sliding.LocalRotation(frame, joint)),
+                1e-6)
+          << frame << " " << joint;
+    }
+    // The right foot already stood still: held where it stood, its leg is unchanged.
+    EXPECT_LT(Norm(JointAt(joints, frame, kRightAnkle) - JointAt(before, frame, kRightAnkle)),
+              1e-6);
+  }
+}
+
+TEST(FootLock, TheKneeStillBendsOnlyAboutItsHinge) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  const Motion sliding = Standing([](int frame) { return Vec3{0.01 * frame - 0.1, 0.1, 0.03}; });
+  const Motion locked = LockFeet(skeleton, sliding);
+  for (int frame = 0; frame < locked.num_frames(); ++frame) {
+    const Vec3 axis = MatrixToAxisAngle(locked.LocalRotation(frame, kLeftKnee));
+    EXPECT_GT(axis.x, 0.0) << frame;  // flexion, not hyperextension
+    EXPECT_NEAR(axis.y, 0.0, 1e-6) << frame;
+    EXPECT_NEAR(axis.z, 0.0, 1e-6) << frame;
+  }
+}
+
+TEST(FootLock, ASwingingFootIsLeftAloneAwayFromItsContacts) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  // Planted at x = -0.1 for frames 0-9, swung 0.4 m through the air in frames 10-19 (lifted by
+  // 0.15 m), planted again at x = 0.3 from frame 20.
+  const Motion stepping = Standing([](int frame) {
+    if (frame < 10) return Vec3{-0.1, 0.1, 0.03};
+    if (frame >= 20) return Vec3{0.3, 0.1, 0.03};
+    const double s = (frame - 9) / 11.0;
+    return Vec3{-0.1 + 0.4 * s, 0.1, 0.03 + 0.15 * std::sin(kPi * s)};
+  });
+  FootLockOptions options;
+  options.blend_frames = 3;
+  const Motion locked = LockFeet(skeleton, stepping, options);
+  // The swing's middle, more than blend_frames from either run of contact, is untouched.
+  for (int frame = 13; frame <= 16; ++frame) {
+    for (int joint : {kLeftHip, kLeftKnee, kLeftAnkle})
+      EXPECT_EQ(locked.LocalRotation(frame, joint).m, stepping.LocalRotation(frame, joint).m)
+          << frame << " " << joint;
+  }
+  // The planted runs stay where they were (they did not slide).
+  const std::vector<float> before = ComputeJoints(skeleton, stepping);
+  const std::vector<float> after = ComputeJoints(skeleton, locked);
+  for (int frame : {0, 5, 25, 29})
+    EXPECT_LT(Norm(JointAt(after, frame, kLeftAnkle) - JointAt(before, frame, kLeftAnkle)), 1e-4);
+}
+
+TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  // The left foot drags along the floor under a pelvis that walks 0.87 m at 0.9 m/s: from the
+  // run's ends its mean place is out of the leg's reach.
+  const auto pelvis_x = [](int frame) { return 0.03 * frame - 0.45; };
+  const Motion dragging = Standing(
+      [&](int frame) {
+        return Vec3{pelvis_x(frame), 0.1, 0.03};
+      },
+      pelvis_x);
+  FootLockReport report;
+  FootLockOptions options;
+  options.max_speed = 2;
+  const Motion locked = LockFeet(skeleton, dragging, options, &report);
+  EXPECT_GT(report.unreached, 0);
+  EXPECT_GT(report.max_reach_error, 0.01);
+  // Bone lengths are the skeleton's by construction (rotations only).
+  EXPECT_LT(EvaluateMotionPlausibility(skeleton, locked).bone_length_error, 1e-5);
+}
+
+}  // namespace
+}  // namespace motionpipe
