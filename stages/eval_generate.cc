@@ -105,7 +105,9 @@ Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& tab
 }
 
 // params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
-// evaluator), generated (the generate stage), batch (32), seed, diversity_pairs (300), method.
+// evaluator), generated (the generate stage), singles (the spans and ground truth; default the
+// input that has them; each of these an input's name or a path pattern such as
+// "out/demo-1/gen_sinc"), batch (32), seed, diversity_pairs (300), method.
 // yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the
 // TMR's own retrieval on the test singles and two-action spans).
 class EvalGenerateStage : public StageExecutor {
@@ -115,7 +117,7 @@ class EvalGenerateStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     plan.shards = 1;
     plan.reduce = false;
-    CheckInputParams(plan, path, {"evaluator", "temos", "generated"}, errors);
+    CheckInputParams(plan, path, {"evaluator", "temos", "generated", "singles"}, errors);
   }
   explicit EvalGenerateStage(const PluginHost* plugins) : plugins_(plugins) {}
   std::string Description() const override {
@@ -140,7 +142,7 @@ class EvalGenerateStage : public StageExecutor {
     if (!temos_stage.empty() && !temos.ok())
       return TaskReport::BadInput("eval_generate: " + temos.status().message());
     plugin::Generator& temos_encoder = temos_stage.empty() ? **tmr : **temos;
-    auto table = InputSpans(ctx);
+    auto table = InputSpans(ctx, p.value("singles", std::string()));
     if (!table.ok()) return TaskReport::BadInput("eval_generate: " + table.status().message());
     std::map<std::string, int64_t> span_of;
     for (int64_t i = 0; i < table->size(); ++i) span_of[table->ids[static_cast<size_t>(i)]] = i;
@@ -149,22 +151,19 @@ class EvalGenerateStage : public StageExecutor {
     std::vector<Motion> generated, truth;
     std::vector<std::string> texts, ids;
     std::string method = p.value("method", std::string()), generated_checkpoint;
-    for (const auto& input : ctx.spec.inputs()) {
-      if (!generated_stage.empty() && input.stage() != generated_stage) continue;
-      for (const auto& dir : input.dirs()) {
-        if (!fs::exists(dir + "/generated.npz")) continue;
-        auto clips = ReadClips(dir + "/generated.npz");
-        if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
-        for (auto& clip : *clips) {
-          const auto it = span_of.find(clip.id);
-          if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
-          ids.push_back(clip.id);
-          texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
-          generated.push_back(std::move(clip.motion));
-          truth.push_back(table->MotionOf(it->second));
-        }
-        ReadSummary(dir + "/generate.json", &method, &generated_checkpoint);
+    for (const std::string& dir : StageDirs(ctx, generated_stage)) {
+      if (!fs::exists(dir + "/generated.npz")) continue;
+      auto clips = ReadClips(dir + "/generated.npz");
+      if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
+      for (auto& clip : *clips) {
+        const auto it = span_of.find(clip.id);
+        if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
+        ids.push_back(clip.id);
+        texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
+        generated.push_back(std::move(clip.motion));
+        truth.push_back(table->MotionOf(it->second));
       }
+      ReadSummary(dir + "/generate.json", &method, &generated_checkpoint);
     }
     if (generated.size() < 2)
       return TaskReport::BadInput(

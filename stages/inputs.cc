@@ -127,13 +127,12 @@ Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins
   return LoadGenerator(plugins, *checkpoint, options);
 }
 
-Result<sinc::SpanTable> InputSpans(const TaskContext& ctx) {
-  for (const auto& input : ctx.spec.inputs()) {
-    for (const auto& dir : input.dirs()) {
-      if (fs::exists(dir + "/spans.npz")) return sinc::ReadSpans(dir + "/spans.npz");
-    }
+Result<sinc::SpanTable> InputSpans(const TaskContext& ctx, const std::string& stage) {
+  for (const std::string& dir : StageDirs(ctx, stage)) {
+    if (fs::exists(dir + "/spans.npz")) return sinc::ReadSpans(dir + "/spans.npz");
   }
-  return NotFound("no spans.npz in the inputs (a `singles` stage)");
+  return NotFound("no spans.npz in " + (stage.empty() ? std::string("the inputs") : stage) +
+                  " (a `singles` stage)");
 }
 
 std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p) {

@@ -37,8 +37,9 @@ std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage);
 Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins,
                                const json& options, std::string* checkpoint);
 
-// The spans table of an input `singles` stage.
-Result<sinc::SpanTable> InputSpans(const TaskContext& ctx);
+// The spans table of a `singles` stage: `stage` (an input's name or a path pattern, as StageDirs),
+// or the first input that has one.
+Result<sinc::SpanTable> InputSpans(const TaskContext& ctx, const std::string& stage = "");
 
 // The spans a generation covers: split, kind (pairs | singles | all), limit; in table order.
 std::vector<int64_t> SelectSpans(const sinc::SpanTable& table, const json& p);
