@@ -5,7 +5,7 @@
 //
 // params: motions (the edit or generate stage, or a path pattern such as "out/demo-1/edit_mdt";
 //   default: every input), contact_height (m, 0.05), max_speed (m/s, 1.0), min_frames (2),
-//   blend_frames (3)
+//   blend_seconds (0.1)
 #include "motionpipe/motion/foot_lock.h"
 
 #include <filesystem>
@@ -38,15 +38,8 @@ class FootLockStage : public StageExecutor {
     if (plan.inputs.empty() && !plan.params.contains("motions"))
       errors->push_back(path + ": needs an input (an edit or generate stage) or params.motions");
     CheckInputParams(plan, path, {"motions"}, errors);
-    const auto& p = plan.params;
-    for (const char* key : {"contact_height", "max_speed"}) {
-      if (p.contains(key) && !(p[key].is_number() && p[key].get<double>() > 0))
-        errors->push_back(path + ".params." + key + ": a positive number");
-    }
-    for (const char* key : {"min_frames", "blend_frames"}) {
-      if (p.contains(key) && !(p[key].is_number_integer() && p[key].get<int>() >= 0))
-        errors->push_back(path + ".params." + key + ": a whole number >= 0");
-    }
+    if (auto options = FootLockOptionsFromJson(plan.params, path + ".params"); !options.ok())
+      errors->push_back(options.status().message());
   }
   std::string Description() const override {
     return "plants the feet of an edit or generate stage's motions (a post-process)";
@@ -54,11 +47,9 @@ class FootLockStage : public StageExecutor {
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
-    FootLockOptions options;
-    options.contact_height = p.value("contact_height", options.contact_height);
-    options.max_speed = p.value("max_speed", options.max_speed);
-    options.min_frames = p.value("min_frames", options.min_frames);
-    options.blend_frames = p.value("blend_frames", options.blend_frames);
+    auto parsed = FootLockOptionsFromJson(p, "foot_lock.params");
+    if (!parsed.ok()) return TaskReport::BadInput(parsed.status().message());
+    const FootLockOptions& options = *parsed;
     fs::create_directories(ctx.output_dir());
     const Skeleton& skeleton = Skeleton::Smpl22();
     int64_t motions = 0, held = 0, unreached = 0;
@@ -109,7 +100,7 @@ class FootLockStage : public StageExecutor {
            {{"contact_height", options.contact_height},
             {"max_speed", options.max_speed},
             {"min_frames", options.min_frames},
-            {"blend_frames", options.blend_frames}}}};
+            {"blend_seconds", options.blend_seconds}}}};
       if (Status s =
               WriteFileAtomic(ctx.output_dir() + "/" + layout.summary, summary.dump(1) + "\n");
           !s.ok())

@@ -76,12 +76,12 @@ torch::Tensor CosineSchedule::DdimStep(const torch::Tensor& x0, const torch::Ten
 
 torch::Tensor SampleDdpm(const CosineSchedule& schedule, at::IntArrayRef shape,
                          const Denoise& denoise, torch::Generator generator,
-                         const std::function<torch::Tensor(const torch::Tensor&)>& project) {
+                         const Projection& project) {
   torch::NoGradGuard no_grad;
   auto x = torch::randn(shape, generator);
   for (int64_t t = schedule.steps() - 1; t >= 0; --t) {
     auto x0 = denoise(x, t);
-    if (project) x0 = project(x0);
+    if (project) x0 = project(x0, t);
     if (t == 0) return x0;
     x = schedule.PosteriorMean(x0, x, t) +
         std::sqrt(schedule.PosteriorVariance(t)) * torch::randn(shape, generator);
@@ -104,22 +104,21 @@ std::vector<int64_t> DdimTimesteps(int64_t total, int64_t steps) {
 
 torch::Tensor SampleDdim(const CosineSchedule& schedule, at::IntArrayRef shape, int64_t steps,
                          const Denoise& denoise, torch::Generator generator,
-                         const std::function<torch::Tensor(const torch::Tensor&)>& project) {
+                         const Projection& project) {
   torch::NoGradGuard no_grad;
   auto x = torch::randn(shape, generator);
   const auto ts = DdimTimesteps(schedule.steps(), steps);
   for (size_t k = 0; k < ts.size(); ++k) {
     auto x0 = denoise(x, ts[k]);
-    if (project) x0 = project(x0);
+    if (project) x0 = project(x0, ts[k]);
     x = schedule.DdimStep(x0, x, ts[k], k + 1 < ts.size() ? ts[k + 1] : -1);
   }
   return x;
 }
 
-torch::Tensor SampleDdimFromNoised(
-    const CosineSchedule& schedule, const torch::Tensor& start, int64_t t_start, int64_t steps,
-    const Denoise& denoise, torch::Generator generator,
-    const std::function<torch::Tensor(const torch::Tensor&)>& project) {
+torch::Tensor SampleDdimFromNoised(const CosineSchedule& schedule, const torch::Tensor& start,
+                                   int64_t t_start, int64_t steps, const Denoise& denoise,
+                                   torch::Generator generator, const Projection& project) {
   torch::NoGradGuard no_grad;
   if (t_start < 0 || t_start >= schedule.steps())
     throw std::invalid_argument("SampleDdimFromNoised: t_start outside the schedule");
@@ -128,7 +127,7 @@ torch::Tensor SampleDdimFromNoised(
   const auto ts = DdimTimesteps(t_start + 1, std::min(steps, t_start + 1));
   for (size_t k = 0; k < ts.size(); ++k) {
     auto x0 = denoise(x, ts[k]);
-    if (project) x0 = project(x0);
+    if (project) x0 = project(x0, ts[k]);
     x = schedule.DdimStep(x0, x, ts[k], k + 1 < ts.size() ? ts[k + 1] : -1);
   }
   return x;

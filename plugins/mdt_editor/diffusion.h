@@ -68,25 +68,26 @@ torch::Tensor MinSnrWeights(const CosineSchedule& schedule, const torch::Tensor&
 
 // The model's x0 prediction at step t for the current x_t (guidance already applied).
 using Denoise = std::function<torch::Tensor(const torch::Tensor& xt, int64_t t)>;
+// An edit of the x0 prediction at step t before the sampler steps from it (MDM-BP's body-part
+// inpainting, foot locking); empty: none.
+using Projection = std::function<torch::Tensor(const torch::Tensor& x0, int64_t t)>;
 
 // DDPM ancestral sampling over every step: x_T ~ N(0, I), x_{t-1} = mean + sqrt(beta~_t) z (no
-// noise at the last step). `project` (optional) edits each x0 prediction (MDM-BP's body-part
-// inpainting).
+// noise at the last step). `project` (optional) edits each x0 prediction.
 torch::Tensor SampleDdpm(const CosineSchedule& schedule, at::IntArrayRef shape,
                          const Denoise& denoise, torch::Generator generator,
-                         const std::function<torch::Tensor(const torch::Tensor&)>& project = {});
+                         const Projection& project = {});
 // DDIM with `steps` evenly spaced steps (the last one is T - 1).
 torch::Tensor SampleDdim(const CosineSchedule& schedule, at::IntArrayRef shape, int64_t steps,
                          const Denoise& denoise, torch::Generator generator,
-                         const std::function<torch::Tensor(const torch::Tensor&)>& project = {});
+                         const Projection& project = {});
 // SDEdit (Meng et al. 2022), not in SimMotionEdit: `start` noised to step t_start (x_t =
 // sqrt(abar) start + sqrt(1 - abar) eps) and DDIM from there to the end in `steps` evenly spaced
 // steps. The sample keeps what the noise at t_start leaves of `start`; t_start = T - 1 is close
 // to SampleDdim.
-torch::Tensor SampleDdimFromNoised(
-    const CosineSchedule& schedule, const torch::Tensor& start, int64_t t_start, int64_t steps,
-    const Denoise& denoise, torch::Generator generator,
-    const std::function<torch::Tensor(const torch::Tensor&)>& project = {});
+torch::Tensor SampleDdimFromNoised(const CosineSchedule& schedule, const torch::Tensor& start,
+                                   int64_t t_start, int64_t steps, const Denoise& denoise,
+                                   torch::Generator generator, const Projection& project = {});
 // The DDIM step indices, descending, for `steps` of a `total`-step schedule.
 std::vector<int64_t> DdimTimesteps(int64_t total, int64_t steps);
 

@@ -23,6 +23,7 @@
 #include "motionpipe/features/anchor.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/labels/labeler.h"
+#include "motionpipe/motion/foot_lock.h"
 #include "motionpipe/motion/plausibility.h"
 
 namespace motionpipe::mdt {
@@ -214,6 +215,20 @@ class EditorGenerator : public plugin::Generator {
                                   std::to_string(model_->schedule().steps() - 1) + "]");
     if (start_step_ > 0 && !model_->options().uses_source())
       throw std::invalid_argument("start_step starts from the source: an mdt or tmed checkpoint");
+    // foot_lock: {below_step: t, ...}: PhysDiff's projection (Yuan et al. 2023; not in the
+    // paper) with foot locking (motion/foot_lock.h) as the projection: each x0 estimate at a
+    // step below t is decoded, its feet planted and encoded back, so that the later steps build
+    // on planted feet. plant: false does the decoding and encoding only (the control). The other
+    // keys are foot_lock's (FootLockOptionsFromJson), applied at the network's frame rate.
+    const nlohmann::json lock = options.value("foot_lock", nlohmann::json::object());
+    auto lock_options = FootLockOptionsFromJson(lock, "foot_lock");
+    if (!lock_options.ok()) throw std::invalid_argument(lock_options.status().message());
+    foot_lock_ = *lock_options;
+    foot_lock_below_step_ = lock.value("below_step", int64_t{0});
+    plant_feet_ = lock.value("plant", true);
+    if (foot_lock_below_step_ < 0 || foot_lock_below_step_ > model_->schedule().steps())
+      throw std::invalid_argument("foot_lock.below_step must be in [0, " +
+                                  std::to_string(model_->schedule().steps()) + "]");
   }
 
   std::string Name() const override {
@@ -240,8 +255,8 @@ class EditorGenerator : public plugin::Generator {
  private:
   // MDM-BP: a projection of each x0 estimate that gives back the source's values for the body
   // parts its edit text does not involve (`source`: [T, n, 207], normalised, at the target length).
-  Result<std::function<torch::Tensor(const torch::Tensor&)>> KeepUneditedParts(
-      const std::vector<std::string>& texts, const torch::Tensor& source) const {
+  Result<Projection> KeepUneditedParts(const std::vector<std::string>& texts,
+                                       const torch::Tensor& source) const {
     const auto n = static_cast<int64_t>(texts.size());
     auto labeler = labels::MakeBuiltinLabeler(labeler_, nlohmann::json::object());
     if (!labeler.ok()) return labeler.status();
@@ -262,10 +277,39 @@ class EditorGenerator : public plugin::Generator {
       }
     }
     const auto net = model_->net();
-    return std::function<torch::Tensor(const torch::Tensor&)>(
-        [keep, source, net](const torch::Tensor& x0) {
-          return net->Encode(torch::where(keep, source, net->Decode(x0)));
-        });
+    return Projection([keep, source, net](const torch::Tensor& x0, int64_t) {
+      return net->Encode(torch::where(keep, source, net->Decode(x0)));
+    });
+  }
+
+  // The foot-lock projection of x0 estimates [T, n, D] at steps below foot_lock_below_step_:
+  // each edit's first `lengths[i]` frames decoded (at `rates[i]`, placed at `anchors[i]`), its
+  // feet planted and encoded back; padding frames as they were.
+  Projection PlantFeet(const std::vector<MotionAnchor>& anchors, const std::vector<double>& rates,
+                       const std::vector<int64_t>& lengths, const torch::Tensor& scale) const {
+    const auto net = model_->net();
+    const torch::Tensor mean = model_->mean();
+    return [=, below = foot_lock_below_step_, options = foot_lock_, plant = plant_feet_](
+               const torch::Tensor& x0, int64_t t) {
+      if (t >= below) return x0;
+      auto features = (net->Decode(x0) * scale + mean).contiguous();  // [T, n, 207]
+      for (size_t i = 0; i < lengths.size(); ++i) {
+        const int64_t frames = lengths[i];
+        FeatureMatrix f(frames, kEditFeatureDim);
+        const auto fi =
+            features.select(1, static_cast<int64_t>(i)).narrow(0, 0, frames).contiguous();
+        std::memcpy(f.data.data(), fi.data_ptr<float>(),
+                    sizeof(float) * static_cast<size_t>(frames * kEditFeatureDim));
+        Motion m = DecodeMotionFix207(f, anchors[i], rates[i]);
+        if (plant) m = LockFeet(Skeleton::Smpl22(), m, options);
+        FeatureMatrix back = EditFeatures(m, nullptr);
+        if (back.rows != frames) throw std::logic_error("foot_lock: features changed length");
+        features.select(1, static_cast<int64_t>(i))
+            .narrow(0, 0, frames)
+            .copy_(torch::from_blob(back.data.data(), {frames, kEditFeatureDim}));
+      }
+      return net->Encode((features - mean) / scale);
+    };
   }
 
   Result<std::vector<Motion>> Edit(const std::vector<plugin::GenerateRequest>& requests) {
@@ -365,9 +409,21 @@ class EditorGenerator : public plugin::Generator {
       if (branches == 3) return GuideThreeWay(parts[0], parts[1], parts[2], g_m, g_t);
       return parts[0] + g_t * (parts[1] - parts[0]);
     };
-    std::function<torch::Tensor(const torch::Tensor&)> project;
+    Projection project;
     if (body_parts_) {
       MP_ASSIGN_OR_RETURN(project, KeepUneditedParts(texts, source.narrow(0, 0, tt)));
+    }
+    if (foot_lock_below_step_ > 0) {
+      std::vector<MotionAnchor> anchors;
+      std::vector<double> rates;
+      for (const auto& r : requests) {
+        anchors.push_back(r.source ? AnchorOf(*r.source) : MotionAnchor{});
+        rates.push_back(o.fps > 0 ? o.fps : (r.source ? r.source->fps : r.fps));
+      }
+      project = [keep = project, plant = PlantFeet(anchors, rates, lengths, scale)](
+                    const torch::Tensor& x0, int64_t t) {
+        return plant(keep ? keep(x0, t) : x0, t);
+      };
     }
     const auto& r0 = requests[0];
     auto generator = at::make_generator<at::CPUGeneratorImpl>(r0.seed);
@@ -412,6 +468,9 @@ class EditorGenerator : public plugin::Generator {
   bool body_parts_ = false;
   int64_t start_step_ = 0;
   int64_t guidance_from_step_ = 0;
+  FootLockOptions foot_lock_;
+  int64_t foot_lock_below_step_ = 0;
+  bool plant_feet_ = true;
   std::string labeler_;
   double guidance_motion_ = 2, guidance_text_ = 2;
 };

@@ -145,6 +145,14 @@ stages:
     kind: edit
     inputs: [corpus]
     params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {guidance_from_step: 150}}
+  planted_never:
+    kind: edit
+    inputs: [corpus]
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {below_step: 0}}}
+  planted:
+    kind: edit
+    inputs: [corpus]
+    params: {model: "JOBS/mdt", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {below_step: 300, max_speed: 5}}}
   locked:
     kind: foot_lock
     params: {motions: "JOBS/edit_mdt", max_speed: 5}
@@ -399,6 +407,11 @@ class EditTest(EngineTest):
         self.assertTrue(np.array_equal(edits("guided_from_300"), edits("unguided")))
         for a, b in (("guided", "unguided"), ("guided_from_150", "guided"), ("guided_from_150", "unguided")):
             self.assertFalse(np.array_equal(edits(a), edits(b)), (a, b))
+        # Foot locking inside the sampler: below step 0 is never (the guided edits bit for bit);
+        # at every step the edits are its own and finite.
+        self.assertTrue(np.array_equal(edits("planted_never"), edits("guided")))
+        self.assertFalse(np.array_equal(edits("planted"), edits("guided")))
+        self.assertTrue(np.isfinite(edits("planted")).all())
         # foot_lock: the same edits with only the legs' rotations changed (hips, knees, ankles),
         # scored as a row of their own, never skating more than the raw edits.
         raw, locked = {}, {}
@@ -427,7 +440,7 @@ class EditTest(EngineTest):
         bad = self.write_pipeline("bad_lock.yaml", judges.replace("max_speed: 5", "max_speed: -1"))
         result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
         self.assertNotEqual(result.returncode, 0)
-        self.assertIn("stages.locked.params.max_speed: a positive number", result.stdout + result.stderr)
+        self.assertIn("stages.locked.params.max_speed: must be > 0 m/s", result.stdout + result.stderr)
 
         # motionpipe edit on a real CMU clip: the source's length, finite, repeatable under a seed.
         model = os.path.join(job, "mdt")

@@ -112,9 +112,9 @@ TEST(FootLock, ASwingingFootIsLeftAloneAwayFromItsContacts) {
     return Vec3{-0.1 + 0.4 * s, 0.1, 0.03 + 0.15 * std::sin(kPi * s)};
   });
   FootLockOptions options;
-  options.blend_frames = 3;
+  options.blend_seconds = 0.1;  // 3 frames at 30 fps
   const Motion locked = LockFeet(skeleton, stepping, options);
-  // The swing's middle, more than blend_frames from either run of contact, is untouched.
+  // The swing's middle, more than the blend's 3 frames from either run of contact, is untouched.
   for (int frame = 13; frame <= 16; ++frame) {
     for (int joint : {kLeftHip, kLeftKnee, kLeftAnkle})
       EXPECT_EQ(locked.LocalRotation(frame, joint).m, stepping.LocalRotation(frame, joint).m)
@@ -143,6 +143,12 @@ TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
   const Motion locked = LockFeet(skeleton, dragging, options, &report);
   EXPECT_GT(report.unreached, 0);
   EXPECT_GT(report.max_reach_error, 0.01);
+  // Short of its place, the ankle stays on the floor at its own height: it does not float.
+  const std::vector<float> before = ComputeJoints(skeleton, dragging);
+  const std::vector<float> after = ComputeJoints(skeleton, locked);
+  for (int frame = 0; frame < locked.num_frames(); ++frame)
+    EXPECT_NEAR(JointAt(after, frame, kLeftAnkle).z, JointAt(before, frame, kLeftAnkle).z, 1e-6)
+        << frame;
   // Bone lengths are the skeleton's by construction (rotations only).
   EXPECT_LT(EvaluateMotionPlausibility(skeleton, locked).bone_length_error, 1e-5);
 }

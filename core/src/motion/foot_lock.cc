@@ -41,7 +41,7 @@ Hold FindHold(const std::vector<Vec3>& path, double fps, const FootLockOptions& 
       Vec3 place{0, 0, 0};
       for (int64_t f = begin; f < end; ++f) place = place + path[static_cast<size_t>(f)];
       place = (1.0 / static_cast<double>(end - begin)) * place;
-      const int64_t blend = options.blend_frames;
+      const auto blend = static_cast<int64_t>(std::lround(options.blend_seconds * fps));
       for (int64_t f = std::max<int64_t>(0, begin - blend); f < std::min(frames, end + blend);
            ++f) {
         const int64_t outside = f < begin ? begin - f : (f >= end ? f - end + 1 : 0);
@@ -74,6 +74,25 @@ Vec3 Goal(const Hold& hold, int64_t frame, const Vec3& own) {
 }
 
 }  // namespace
+
+Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p,
+                                                const std::string& origin) {
+  FootLockOptions o;
+  if (!p.is_object()) return InvalidArgument(origin + ": a map of foot-lock options");
+  try {
+    o.contact_height = p.value("contact_height", o.contact_height);
+    o.max_speed = p.value("max_speed", o.max_speed);
+    o.min_frames = p.value("min_frames", o.min_frames);
+    o.blend_seconds = p.value("blend_seconds", o.blend_seconds);
+  } catch (const nlohmann::json::exception& e) {
+    return InvalidArgument(origin + ": " + e.what());
+  }
+  if (!(o.contact_height > 0)) return InvalidArgument(origin + ".contact_height: must be > 0 m");
+  if (!(o.max_speed > 0)) return InvalidArgument(origin + ".max_speed: must be > 0 m/s");
+  if (o.min_frames < 1) return InvalidArgument(origin + ".min_frames: must be >= 1");
+  if (!(o.blend_seconds >= 0)) return InvalidArgument(origin + ".blend_seconds: must be >= 0");
+  return o;
+}
 
 Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options,
                 FootLockReport* report) {
@@ -118,9 +137,20 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       Mat3 g_hip = G[static_cast<size_t>(hip)], g_knee = G[static_cast<size_t>(knee)];
       Vec3 ankle_at = A;
       if (w_ankle > 0) {
-        const Vec3 goal = Goal(holds[0], f, A);
+        const Vec3 wanted_goal = Goal(holds[0], f, A);
         const double l1 = Norm(K - H), l2 = Norm(A - K);
-        const double d = std::clamp(Norm(goal - H), std::abs(l1 - l2) + 1e-6, (l1 + l2) * 0.9999);
+        // Out of the leg's reach, the goal comes horizontally towards the hip, at its own height:
+        // a foot that cannot reach its place slides (and the skate counts it) rather than lift
+        // off the floor along the hip-to-goal line.
+        Vec3 goal = wanted_goal;
+        const double reach = (l1 + l2) * 0.9999, drop = goal.z - H.z;
+        const double across = std::hypot(goal.x - H.x, goal.y - H.y);
+        const double across_max = std::sqrt(std::max(0.0, reach * reach - drop * drop));
+        if (across > across_max) {
+          goal.x = H.x + (goal.x - H.x) * across_max / across;
+          goal.y = H.y + (goal.y - H.y) * across_max / across;
+        }
+        const double d = std::clamp(Norm(goal - H), std::abs(l1 - l2) + 1e-6, reach);
         // The knee's bend (angle between thigh and shin) that puts the ankle at distance d from
         // the hip, by the law of cosines; the knee turns about its bending plane's normal.
         const Vec3 thigh = (1.0 / l1) * (K - H), shin = (1.0 / l2) * (A - K);
@@ -138,9 +168,9 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
         g_hip = swing * g_hip;
         g_knee = g_hip * knee_local;
         ankle_at = H + swing * (folded - H);
-        const double reach = Norm(ankle_at - goal);
-        counts.max_reach_error = std::max(counts.max_reach_error, reach);
-        if (w_ankle >= 1 && reach > 0.01) ++counts.unreached;
+        const double missed = Norm(ankle_at - wanted_goal);
+        counts.max_reach_error = std::max(counts.max_reach_error, missed);
+        if (w_ankle >= 1 && missed > 0.01) ++counts.unreached;
         out.SetLocalRotation(f, hip, Transpose(G[static_cast<size_t>(pelvis)]) * g_hip);
         out.SetLocalRotation(f, knee, knee_local);
       }

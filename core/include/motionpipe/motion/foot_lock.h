@@ -3,13 +3,18 @@
 // of frames is held at one horizontal place over that run (the run's mean), and the leg reaches it
 // by two-bone IK: the knee folds in its own bending plane, the hip swings by the smallest rotation,
 // the ankle keeps the foot's world orientation (turned, where the toe is held too, to point at the
-// toe's place). Only the hips', knees' and ankles' local rotations change; the pelvis, its path and
+// toe's place). A place out of the leg's reach is approached horizontally, at the joint's own
+// height, so that a foot that cannot reach it slides rather than floats. Only the hips', knees'
+// and ankles' local rotations change; the pelvis, its path and
 // the upper body are the motion's own. What the model generated is the input; this is not the
 // model: the evaluation reports both.
 #pragma once
 
 #include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
 
+#include "motionpipe/base/status.h"
 #include "motionpipe/motion/motion.h"
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -20,7 +25,7 @@ struct FootLockOptions {
   double contact_height = 0.05;  // a foot joint below floor + this may be in contact (the metric's)
   double max_speed = 1.0;        // m/s: a foot joint faster than this is swinging, not sliding
   int min_frames = 2;            // shortest run of contact frames that is held
-  int blend_frames = 3;          // frames on each side of a run over which the hold fades in/out
+  double blend_seconds = 0.1;    // on each side of a run the hold fades in/out over this long
 };
 
 struct FootLockReport {
@@ -30,6 +35,12 @@ struct FootLockReport {
   double mean_shift = 0;       // m: mean horizontal distance a held joint was moved
   double max_reach_error = 0;  // m: the largest distance an ankle stayed from its place
 };
+
+// The options from a map (contact_height, max_speed, min_frames, blend_seconds; missing keys
+// keep their defaults, other keys are ignored); InvalidArgument naming `origin` and the key when a
+// value is of the wrong type or out of range.
+Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& params,
+                                                const std::string& origin);
 
 // The motion with its feet held (frames, fps, translation and every other joint unchanged).
 // `report` (optional) receives the counts above.
