@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The pelvis trajectory of an edit stage's motions, beside another's (issue 15: where plausibility is lost).
+"""The pelvis trajectory of an edit (or generate) stage's motions, beside another's (issue 15: where plausibility is lost).
 
 The 207-d editing feature stores the pelvis as a velocity (REFERENCE.md section 2), so its height is
 integrated when a generated motion is decoded: an edit whose height drifts floats above or sinks
@@ -94,8 +94,10 @@ def tilt_height(trans, pelvis):
 
 
 def motions(stage_dir):
-    """(trans [T, 3], local rotations [T, 22, 3, 3], fps) of every motion in the stage's task-*/edited.npz."""
-    files = sorted(glob.glob(os.path.join(stage_dir, "task-*", "edited.npz")))
+    """(trans [T, 3], local rotations [T, 22, 3, 3], fps) of every motion in the stage's task-*/edited.npz
+    (an edit or foot_lock stage) or task-*/generated.npz (a generate stage)."""
+    files = sorted(glob.glob(os.path.join(stage_dir, "task-*", "edited.npz")) or
+                   glob.glob(os.path.join(stage_dir, "task-*", "generated.npz")))
     if not files:
         sys.exit(f"{stage_dir}: no task-*/edited.npz (is it an edit stage's output directory?)")
     for path in files:
@@ -136,7 +138,7 @@ def row(stage_dir):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("stages", nargs="+", help="edit stage output directories (out/JOB/STAGE)")
+    parser.add_argument("stages", nargs="+", help="edit, generate or foot_lock stage output directories (out/JOB/STAGE)")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
