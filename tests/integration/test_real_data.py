@@ -82,10 +82,11 @@ class RealDataTest(EngineTest):
         table1 = tables["Editing: retrieval of the edits (all)"]
         self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)",
                                                       "another triplet's target as the edit (chance)",
-                                                      "untrained MDT (initial weights)", "SimMotionEdit (MDT)"])
+                                                      "untrained MDT (initial weights)", "SimMotionEdit (MDT)",
+                                                      "MDT + foot lock (post-process)"])
         sinc = tables["Composition: generated motions against the ground truth"]
         self.assertEqual([r[0] for r in sinc[2:]], ["ground truth", "shuffled ground truth (same length class)", "untrained SINC (initial weights)",
-                                                    "SINC + synthetic pairs (GPT labels)"])
+                                                    "SINC + synthetic pairs (GPT labels)", "SINC + foot lock (post-process)"])
         self.assertEqual(sinc[2][2], "1.000")  # the ground truth's TEMOS score with itself
         evaluators = [r[0] for r in tables["Evaluator quality"][1:]]
         self.assertIn("TMR: test two-action spans (\"A while B\")", evaluators)
