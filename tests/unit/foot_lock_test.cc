@@ -153,5 +153,21 @@ TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
   EXPECT_LT(EvaluateMotionPlausibility(skeleton, locked).bone_length_error, 1e-5);
 }
 
+TEST(FootLock, OptionsFromAMapNameTheBadKey) {
+  auto options = FootLockOptionsFromJson(
+      nlohmann::json{{"max_speed", 2.0}, {"blend_seconds", 0.2}, {"unknown", 1}}, "stage.params");
+  ASSERT_TRUE(options.ok()) << options.status().message();
+  EXPECT_EQ(options->max_speed, 2.0);
+  EXPECT_EQ(options->blend_seconds, 0.2);
+  EXPECT_EQ(options->contact_height, FootLockOptions{}.contact_height);
+  const auto negative = FootLockOptionsFromJson(nlohmann::json{{"max_speed", -1}}, "stage.params");
+  ASSERT_FALSE(negative.ok());
+  EXPECT_EQ(negative.status().message(), "stage.params.max_speed: must be > 0 m/s");
+  const auto text = FootLockOptionsFromJson(nlohmann::json{{"min_frames", "two"}}, "x");
+  ASSERT_FALSE(text.ok());
+  EXPECT_EQ(text.status().message().rfind("x: ", 0), 0u) << text.status().message();
+  EXPECT_FALSE(FootLockOptionsFromJson(nlohmann::json::array(), "x").ok());
+}
+
 }  // namespace
 }  // namespace motionpipe
