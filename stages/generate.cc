@@ -16,7 +16,9 @@ namespace {
 namespace fs = std::filesystem;
 
 // params: model (the train stage), split (test), spans (pairs | singles | all), limit, compositing
-// (single-action checkpoints: the GPT-compositing baseline), samples (generations per text, 1).
+// (single-action checkpoints: the GPT-compositing baseline), samples (generations per text, 1),
+// reconstruct (true: each span's ground truth through the model's motion encoder and decoder
+// instead of its text: what the decoder can give back).
 class GenerateStage : public StageExecutor {
  public:
   // `shards` tasks (default 2) over the test spans.
@@ -45,6 +47,8 @@ class GenerateStage : public StageExecutor {
     fs::create_directories(ctx.output_dir());
     json options = p.value("options", json::object());
     if (p.value("compositing", false)) options["compositing"] = true;
+    const bool reconstruct = p.value("reconstruct", false);
+    if (reconstruct) options["reconstruct"] = true;
     std::string checkpoint;
     auto generator = OpenModel(ctx, *plugins_, options, &checkpoint);
     if (!generator.ok()) return TaskReport::BadInput("generate: " + generator.status().message());
@@ -67,6 +71,8 @@ class GenerateStage : public StageExecutor {
         r.frames = table->frames(i);
         r.fps = table->fps[static_cast<size_t>(i)];
         r.seed = MixSeed(ctx.spec.seed(), static_cast<uint64_t>(i * 1000 + sample));
+        const Motion truth = reconstruct ? table->MotionOf(i) : Motion{};
+        if (reconstruct) r.source = &truth;
         auto motion = (*generator)->Generate(r);
         if (!motion.ok()) return TaskReport::Error(motion.status().message());
         Clip clip;

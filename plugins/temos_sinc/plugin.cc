@@ -143,7 +143,9 @@ class SincModel : public plugin::Model {
 // Runs a trained checkpoint (torch-free interface for the CLI and evaluators).
 class SincGenerator : public plugin::Generator {
  public:
-  // options: {"compositing": true} runs a single-action checkpoint as the GPT-compositing baseline.
+  // options: {"compositing": true} runs a single-action checkpoint as the GPT-compositing baseline;
+  // {"reconstruct": true} decodes each request's source motion from the motion encoder's mean
+  // (the VAE's reconstruction: what the decoder can give back, beside what the text asks of it).
   SincGenerator(const std::string& dir, const nlohmann::json& options) {
     auto text = ReadFile(layout::ModelConfigFile(dir));
     if (!text.ok()) throw std::invalid_argument(text.status().message());
@@ -155,13 +157,17 @@ class SincGenerator : public plugin::Generator {
     model_->Module().load(archive);
     model_->Module().eval();
     compositing_ = model_->variant() == "compositing" || options.value("compositing", false);
+    reconstruct_ = options.value("reconstruct", false);
+    if (reconstruct_ && compositing_)
+      throw std::invalid_argument("reconstruct and compositing do not go together");
     if (compositing_ && model_->variant() != "single" && model_->variant() != "compositing") {
       throw std::invalid_argument("compositing runs single-action models, this one is '" +
                                   model_->variant() + "'");
     }
   }
   std::string Name() const override {
-    return "temos_sinc/" + std::string(compositing_ ? "compositing" : model_->variant());
+    return "temos_sinc/" + std::string(compositing_ ? "compositing" : model_->variant()) +
+           (reconstruct_ ? " (reconstruction)" : "");
   }
 
   Result<Motion> Generate(const plugin::GenerateRequest& request) override {
@@ -178,6 +184,10 @@ class SincGenerator : public plugin::Generator {
       torch::NoGradGuard no_grad;
       torch::manual_seed(request.seed);
       if (compositing_ && request.texts.size() > 1) return Compose(request, frames);
+      if (reconstruct_) {
+        if (!request.source) return InvalidArgument("generate: reconstruct needs a source motion");
+        return Reconstruct(*request.source);
+      }
       std::vector<std::vector<std::string>> texts;
       if (model_->net()->options().separate_texts) {
         texts = {request.texts};
@@ -199,11 +209,7 @@ class SincGenerator : public plugin::Generator {
     for (const Motion& m : motions) {
       const int64_t frames = m.num_frames();
       std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
-      EncodeTemos135Fast(m.poses.data(), m.trans.data(), frames, features.data());
-      auto x = (torch::from_blob(features.data(), {frames, kFeatureDim}).clone() - model_->mean()) /
-               (model_->stddev() + 1e-5);
-      const auto d = model_->net()->EncodeMotion(x.unsqueeze(1),
-                                                 torch::zeros({1, frames}, torch::kBool), false);
+      const auto d = EncodeOne(m);
       out.emplace_back(d.mu.data_ptr<float>(), d.mu.data_ptr<float>() + d.mu.numel());
     }
     return out;
@@ -222,11 +228,31 @@ class SincGenerator : public plugin::Generator {
   }
 
  private:
+  // The motion encoder's distribution of one motion.
+  Distribution EncodeOne(const Motion& m) const {
+    const int64_t frames = m.num_frames();
+    std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
+    EncodeTemos135Fast(m.poses.data(), m.trans.data(), frames, features.data());
+    auto x = (torch::from_blob(features.data(), {frames, kFeatureDim}).clone() - model_->mean()) /
+             (model_->stddev() + 1e-5);
+    return model_->net()->EncodeMotion(x.unsqueeze(1), torch::zeros({1, frames}, torch::kBool),
+                                       false);
+  }
+
+  Result<Motion> Reconstruct(const Motion& source) {
+    if (source.num_frames() < 2) return InvalidArgument("generate: a source of under 2 frames");
+    return DecodeLatent(EncodeOne(source).mu, source.num_frames(), source.fps);
+  }
+
   Result<Motion> DecodeOne(const std::vector<std::vector<std::string>>& texts, int64_t frames,
                            double fps) {
-    const auto d = model_->net()->EncodeText(texts, false);
+    return DecodeLatent(model_->net()->EncodeText(texts, false).z, frames, fps);
+  }
+
+  // A latent [1, latent] decoded to a motion of `frames` frames at `fps`.
+  Result<Motion> DecodeLatent(const torch::Tensor& z, int64_t frames, double fps) {
     const auto padding = torch::zeros({1, frames}, torch::kBool);
-    auto x = model_->net()->Decode(d.z, padding).select(1, 0);  // [T, 135]
+    auto x = model_->net()->Decode(z, padding).select(1, 0);  // [T, 135]
     x = (x * (model_->stddev() + 1e-5) + model_->mean()).contiguous();
     FeatureMatrix features(frames, kFeatureDim);
     std::memcpy(features.data.data(), x.data_ptr<float>(),
@@ -253,6 +279,7 @@ class SincGenerator : public plugin::Generator {
 
   std::unique_ptr<SincModel> model_;
   bool compositing_ = false;
+  bool reconstruct_ = false;
 };
 
 const mp_object_factory kFactories[] = {

@@ -48,6 +48,11 @@ stages:
     kind: eval_generate
     inputs: [sinc, gen, singles]
     params: {evaluator: sinc, generated: gen, batch: 2}
+  recon:
+    kind: generate
+    inputs: [sinc, singles]
+    shards: 1
+    params: {model: sinc, split: "${vars.split}", spans: all, limit: 4, reconstruct: true}
 """
 
 
@@ -109,6 +114,20 @@ class TrainStageTest(EngineTest):
         self.assertGreater(metrics["APE"]["mean_global"], 0)
         self.assertEqual(metrics["text_to_generated"]["batches"]["queries"], 4)
         self.assertEqual(metrics["generated_to_truth"]["all"]["queries"], 4)
+        # reconstruct: each span's ground truth through the motion encoder and the decoder, at its
+        # length, named as a reconstruction, and not the text's generation.
+        with np.load(os.path.join(two, "recon", "task-00000", "generated.npz")) as z:
+            recon = {str(sid): z["poses"][z["offsets"][i]:z["offsets"][i + 1]] for i, sid in enumerate(z["ids"])}
+        self.assertEqual({k: len(v) for k, v in recon.items()}, generated)
+        for k, v in recon.items():
+            self.assertTrue(np.isfinite(v).all(), k)
+        with open(os.path.join(two, "recon", "task-00000", "generate.json")) as f:
+            self.assertEqual(json.load(f)["model"], "temos_sinc/sinc (reconstruction)")
+        texts = {}
+        for path in glob.glob(os.path.join(two, "gen", "task-*", "generated.npz")):
+            with np.load(path) as z:
+                texts.update({str(sid): z["poses"][z["offsets"][i]:z["offsets"][i + 1]] for i, sid in enumerate(z["ids"])})
+        self.assertFalse(all(np.array_equal(texts[k], recon[k]) for k in recon))
         # generate: the requested duration, finite, as a clip file and as BVH.
         clip = self.path("walk.npz")
         self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "walk forward while waving the right hand",
