@@ -18,7 +18,8 @@ namespace fs = std::filesystem;
 // params: model (the train stage), split (test), spans (pairs | singles | all), limit, compositing
 // (single-action checkpoints: the GPT-compositing baseline), samples (generations per text, 1),
 // reconstruct (true: each span's ground truth through the model's motion encoder and decoder
-// instead of its text: what the decoder can give back).
+// instead of its text: what the decoder can give back), singles (the spans: an input's name or a
+// path pattern such as "out/demo-1/singles"; default the input that has them).
 class GenerateStage : public StageExecutor {
  public:
   // `shards` tasks (default 2) over the test spans.
@@ -26,9 +27,10 @@ class GenerateStage : public StageExecutor {
             std::vector<std::string>* errors) const override {
     if (!plan.shards_set) plan.shards = 2;
     plan.reduce = false;
-    if (plan.inputs.empty())
+    if (plan.inputs.empty() && !(plan.params.contains("model") && plan.params.contains("singles")))
       errors->push_back(path +
                         ": needs inputs: the train stage of the model and a `singles` stage");
+    CheckInputParams(plan, path, {"model", "singles"}, errors);
     const auto& p = plan.params;
     if (p.contains("spans") && p["spans"] != "pairs" && p["spans"] != "singles" &&
         p["spans"] != "all") {
@@ -52,7 +54,7 @@ class GenerateStage : public StageExecutor {
     std::string checkpoint;
     auto generator = OpenModel(ctx, *plugins_, options, &checkpoint);
     if (!generator.ok()) return TaskReport::BadInput("generate: " + generator.status().message());
-    auto table = InputSpans(ctx);
+    auto table = InputSpans(ctx, p.value("singles", std::string()));
     if (!table.ok()) return TaskReport::BadInput("generate: " + table.status().message());
     const auto spans = SelectSpans(*table, p);
     if (spans.empty())
