@@ -64,6 +64,8 @@ TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
   o.dropout = j.value("dropout", o.dropout);
   o.kl_weight = j.value("kl_weight", o.kl_weight);
   o.latent_weight = j.value("latent_weight", o.latent_weight);
+  o.text_reconstruction = j.value("text_reconstruction", o.text_reconstruction);
+  if (o.text_reconstruction < 0) throw std::invalid_argument("text_reconstruction must be >= 0");
   o.contrastive = j.value("contrastive", o.contrastive);
   o.temperature = j.value("temperature", o.temperature);
   o.duplicate_threshold = j.value("duplicate_threshold", o.duplicate_threshold);
@@ -87,6 +89,7 @@ nlohmann::json TemosOptions::ToJson() const {
           {"dropout", dropout},
           {"kl_weight", kl_weight},
           {"latent_weight", latent_weight},
+          {"text_reconstruction", text_reconstruction},
           {"contrastive", contrastive},
           {"temperature", temperature},
           {"duplicate_threshold", duplicate_threshold},
@@ -190,7 +193,7 @@ std::map<std::string, torch::Tensor> TemosImpl::Losses(
   out["kl_text"] = KlDivergence(t.mu, t.logvar, zeros, zeros);
   out["kl_motion"] = KlDivergence(m.mu, m.logvar, zeros, zeros);
   out["latent"] = torch::smooth_l1_loss(t.z, m.z);
-  auto loss = out["recon_text"] + out["recon_motion"] +
+  auto loss = options_.text_reconstruction * out["recon_text"] + out["recon_motion"] +
               options_.kl_weight * (out["kl_text_motion"] + out["kl_motion_text"] + out["kl_text"] +
                                     out["kl_motion"]) +
               options_.latent_weight * out["latent"];

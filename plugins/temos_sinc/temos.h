@@ -27,6 +27,10 @@ struct TemosOptions {
   double dropout = 0.1;
   double kl_weight = 1e-5;
   double latent_weight = 1e-5;
+  // Weight of the text branch's reconstruction (the reference's 1). 0 with latent_weight 0 leaves
+  // a motion VAE beside a text encoder that only the KL terms reach: an ablation (issue 15: does
+  // decoding the text's latent, which cannot know a walk's phase, average the gait out?).
+  double text_reconstruction = 1;
   double contrastive = 0;  // TMR: 0.1
   double temperature = 0.1;
   double duplicate_threshold = 0.6;

@@ -229,6 +229,31 @@ TEST(Temos, OverfitsASmallBatch) {
   EXPECT_LT(last, 0.25 * first) << "first " << first << " last " << last;
 }
 
+TEST(Temos, TextReconstructionWeightScalesOnlyTheTextBranchsReconstruction) {
+  const TinyBatch batch;
+  const auto seeds = torch::tensor({1, 2, 3, 4}, torch::kInt64);
+  for (const double weight : {1.0, 0.0, 0.5}) {
+    torch::manual_seed(4);
+    nlohmann::json config = {{"latent", 32},
+                             {"layers", 1},
+                             {"heads", 2},
+                             {"ff", 64},
+                             {"dropout", 0.0},
+                             {"text_reconstruction", weight},
+                             {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
+    temos::Temos net(temos::TemosOptions::FromJson(config));
+    net->text_encoder()->Fit({"walk forward", "wave the right hand", "jump in place"});
+    const auto l = net->Losses(batch.texts, batch.features, batch.padding, seeds);
+    const auto kl =
+        l.at("kl_text_motion") + l.at("kl_motion_text") + l.at("kl_text") + l.at("kl_motion");
+    const auto expected =
+        weight * l.at("recon_text") + l.at("recon_motion") + 1e-5 * kl + 1e-5 * l.at("latent");
+    EXPECT_NEAR(l.at("loss").item<double>(), expected.item<double>(), 1e-6) << weight;
+    EXPECT_GT(l.at("recon_text").item<double>(), 0.01);  // reported whatever its weight
+  }
+  EXPECT_THROW(temos::TemosOptions::FromJson({{"text_reconstruction", -1}}), std::invalid_argument);
+}
+
 TEST(Temos, SavedAndLoadedModelGivesIdenticalOutputs) {
   torch::manual_seed(3);
   auto net = TinyTemos(0.1);
