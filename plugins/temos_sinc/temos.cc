@@ -66,6 +66,8 @@ TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
   o.latent_weight = j.value("latent_weight", o.latent_weight);
   o.text_reconstruction = j.value("text_reconstruction", o.text_reconstruction);
   if (o.text_reconstruction < 0) throw std::invalid_argument("text_reconstruction must be >= 0");
+  o.latent_noise = j.value("latent_noise", o.latent_noise);
+  if (o.latent_noise < 0) throw std::invalid_argument("latent_noise must be >= 0");
   o.contrastive = j.value("contrastive", o.contrastive);
   o.temperature = j.value("temperature", o.temperature);
   o.duplicate_threshold = j.value("duplicate_threshold", o.duplicate_threshold);
@@ -90,6 +92,7 @@ nlohmann::json TemosOptions::ToJson() const {
           {"kl_weight", kl_weight},
           {"latent_weight", latent_weight},
           {"text_reconstruction", text_reconstruction},
+          {"latent_noise", latent_noise},
           {"contrastive", contrastive},
           {"temperature", temperature},
           {"duplicate_threshold", duplicate_threshold},
@@ -179,8 +182,8 @@ std::map<std::string, torch::Tensor> TemosImpl::Losses(
   // seeds (the same eps whichever rank the example lands on), else from torch's generator.
   const auto eps = example_seeds.defined() ? ExampleNoise(example_seeds, 2, t.mu.size(1))
                                            : torch::randn({2, t.mu.size(0), t.mu.size(1)});
-  t.z = t.mu + torch::exp(0.5 * t.logvar) * eps[0];
-  m.z = m.mu + torch::exp(0.5 * m.logvar) * eps[1];
+  t.z = t.mu + options_.latent_noise * torch::exp(0.5 * t.logvar) * eps[0];
+  m.z = m.mu + options_.latent_noise * torch::exp(0.5 * m.logvar) * eps[1];
   std::map<std::string, torch::Tensor> out;
   // Both branches decode in one batch [text; motion] (the same layers; bigger matrix products).
   const int64_t n = features.size(1);

@@ -31,6 +31,10 @@ struct TemosOptions {
   // a motion VAE beside a text encoder that only the KL terms reach: an ablation (issue 15: does
   // decoding the text's latent, which cannot know a walk's phase, average the gait out?).
   double text_reconstruction = 1;
+  // Scale of the reparameterisation noise in training (the reference's 1: z = mu + sigma * eps);
+  // 0 decodes the means (an autoencoder): an ablation (issue 15: does the posterior's noise, not
+  // small beside the means' spread, average the gait out?).
+  double latent_noise = 1;
   double contrastive = 0;  // TMR: 0.1
   double temperature = 0.1;
   double duplicate_threshold = 0.6;

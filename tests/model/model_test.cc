@@ -254,6 +254,28 @@ TEST(Temos, TextReconstructionWeightScalesOnlyTheTextBranchsReconstruction) {
   EXPECT_THROW(temos::TemosOptions::FromJson({{"text_reconstruction", -1}}), std::invalid_argument);
 }
 
+TEST(Temos, WithoutLatentNoiseTheLossesDoNotDependOnTheNoiseSeeds) {
+  const TinyBatch batch;
+  for (const double noise : {0.0, 1.0}) {
+    torch::manual_seed(5);
+    nlohmann::json config = {{"latent", 32},
+                             {"layers", 1},
+                             {"heads", 2},
+                             {"ff", 64},
+                             {"dropout", 0.0},
+                             {"latent_noise", noise},
+                             {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
+    temos::Temos net(temos::TemosOptions::FromJson(config));
+    net->text_encoder()->Fit({"walk forward", "wave the right hand", "jump in place"});
+    const auto a = net->Losses(batch.texts, batch.features, batch.padding,
+                               torch::tensor({1, 2, 3, 4}, torch::kInt64));
+    const auto b = net->Losses(batch.texts, batch.features, batch.padding,
+                               torch::tensor({5, 6, 7, 8}, torch::kInt64));
+    EXPECT_EQ(torch::equal(a.at("recon_motion"), b.at("recon_motion")), noise == 0) << noise;
+    EXPECT_EQ(torch::equal(a.at("recon_text"), b.at("recon_text")), noise == 0) << noise;
+  }
+}
+
 TEST(Temos, SavedAndLoadedModelGivesIdenticalOutputs) {
   torch::manual_seed(3);
   auto net = TinyTemos(0.1);
