@@ -123,11 +123,13 @@ TEST(Transformer, DropoutMaskHasTheRightRateAndScale) {
   EXPECT_TRUE(torch::equal(nn::Dropout(x, 0.0, true), x));
 }
 
-temos::Temos TinyTemos(double dropout) {
-  const nlohmann::json config = {
+// `options` (optional) adds or overrides TemosOptions keys.
+temos::Temos TinyTemos(double dropout, const nlohmann::json& options = nlohmann::json::object()) {
+  nlohmann::json config = {
       {"latent", 32},       {"layers", 1},
       {"heads", 2},         {"ff", 64},
       {"dropout", dropout}, {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
+  config.update(options);
   temos::Temos net(temos::TemosOptions::FromJson(config));
   net->text_encoder()->Fit(
       {"walk forward", "wave the right hand", "jump in place", "sit down slowly", "turn left"});
@@ -234,15 +236,7 @@ TEST(Temos, TextReconstructionWeightScalesOnlyTheTextBranchsReconstruction) {
   const auto seeds = torch::tensor({1, 2, 3, 4}, torch::kInt64);
   for (const double weight : {1.0, 0.0, 0.5}) {
     torch::manual_seed(4);
-    nlohmann::json config = {{"latent", 32},
-                             {"layers", 1},
-                             {"heads", 2},
-                             {"ff", 64},
-                             {"dropout", 0.0},
-                             {"text_reconstruction", weight},
-                             {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
-    temos::Temos net(temos::TemosOptions::FromJson(config));
-    net->text_encoder()->Fit({"walk forward", "wave the right hand", "jump in place"});
+    auto net = TinyTemos(0.0, {{"text_reconstruction", weight}});
     const auto l = net->Losses(batch.texts, batch.features, batch.padding, seeds);
     const auto kl =
         l.at("kl_text_motion") + l.at("kl_motion_text") + l.at("kl_text") + l.at("kl_motion");
@@ -258,15 +252,7 @@ TEST(Temos, WithoutLatentNoiseTheLossesDoNotDependOnTheNoiseSeeds) {
   const TinyBatch batch;
   for (const double noise : {0.0, 1.0}) {
     torch::manual_seed(5);
-    nlohmann::json config = {{"latent", 32},
-                             {"layers", 1},
-                             {"heads", 2},
-                             {"ff", 64},
-                             {"dropout", 0.0},
-                             {"latent_noise", noise},
-                             {"text_encoder", {{"layers", 1}, {"vocab", 60}, {"ff", 64}}}};
-    temos::Temos net(temos::TemosOptions::FromJson(config));
-    net->text_encoder()->Fit({"walk forward", "wave the right hand", "jump in place"});
+    auto net = TinyTemos(0.0, {{"latent_noise", noise}});
     const auto a = net->Losses(batch.texts, batch.features, batch.padding,
                                torch::tensor({1, 2, 3, 4}, torch::kInt64));
     const auto b = net->Losses(batch.texts, batch.features, batch.padding,
