@@ -38,7 +38,8 @@ class FootLockStage : public StageExecutor {
     if (plan.inputs.empty() && !plan.params.contains("motions"))
       errors->push_back(path + ": needs an input (an edit or generate stage) or params.motions");
     CheckInputParams(plan, path, {"motions"}, errors);
-    if (auto options = FootLockOptionsFromJson(plan.params, path + ".params"); !options.ok())
+    if (auto options = FootLockOptionsFromJson(plan.params, path + ".params", {"motions"});
+        !options.ok())
       errors->push_back(options.status().message());
   }
   std::string Description() const override {
@@ -47,7 +48,7 @@ class FootLockStage : public StageExecutor {
 
   TaskReport Run(TaskContext& ctx) override {
     const json& p = ctx.params;
-    auto parsed = FootLockOptionsFromJson(p, "foot_lock.params");
+    auto parsed = FootLockOptionsFromJson(p, "foot_lock.params", {"motions"});
     if (!parsed.ok()) return TaskReport::BadInput(parsed.status().message());
     const FootLockOptions& options = *parsed;
     fs::create_directories(ctx.output_dir());

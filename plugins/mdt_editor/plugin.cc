@@ -219,9 +219,10 @@ class EditorGenerator : public plugin::Generator {
     // paper) with foot locking (motion/foot_lock.h) as the projection: each x0 estimate at a
     // step below t is decoded, its feet planted and encoded back, so that the later steps build
     // on planted feet. plant: false does the decoding and encoding only (the control). The other
-    // keys are foot_lock's (FootLockOptionsFromJson), applied at the network's frame rate.
+    // keys are foot_lock's (FootLockOptionsFromJson; an unknown key is an error), applied at the
+    // network's frame rate.
     const nlohmann::json lock = options.value("foot_lock", nlohmann::json::object());
-    auto lock_options = FootLockOptionsFromJson(lock, "foot_lock");
+    auto lock_options = FootLockOptionsFromJson(lock, "foot_lock", {"below_step", "plant"});
     if (!lock_options.ok()) throw std::invalid_argument(lock_options.status().message());
     foot_lock_ = *lock_options;
     foot_lock_below_step_ = lock.value("below_step", int64_t{0});

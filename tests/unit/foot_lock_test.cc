@@ -155,7 +155,8 @@ TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
 
 TEST(FootLock, OptionsFromAMapNameTheBadKey) {
   auto options = FootLockOptionsFromJson(
-      nlohmann::json{{"max_speed", 2.0}, {"blend_seconds", 0.2}, {"unknown", 1}}, "stage.params");
+      nlohmann::json{{"max_speed", 2.0}, {"blend_seconds", 0.2}, {"motions", "edit"}},
+      "stage.params", {"motions"});
   ASSERT_TRUE(options.ok()) << options.status().message();
   EXPECT_EQ(options->max_speed, 2.0);
   EXPECT_EQ(options->blend_seconds, 0.2);
@@ -167,6 +168,11 @@ TEST(FootLock, OptionsFromAMapNameTheBadKey) {
   ASSERT_FALSE(text.ok());
   EXPECT_EQ(text.status().message().rfind("x: ", 0), 0u) << text.status().message();
   EXPECT_FALSE(FootLockOptionsFromJson(nlohmann::json::array(), "x").ok());
+  // A misspelt option is an error, not the default.
+  const auto misspelt = FootLockOptionsFromJson(nlohmann::json{{"max_sped", 2.0}}, "x");
+  ASSERT_FALSE(misspelt.ok());
+  EXPECT_EQ(misspelt.status().message().rfind("x.max_sped: unknown", 0), 0u)
+      << misspelt.status().message();
 }
 
 }  // namespace

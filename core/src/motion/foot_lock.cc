@@ -75,10 +75,21 @@ Vec3 Goal(const Hold& hold, int64_t frame, const Vec3& own) {
 
 }  // namespace
 
-Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p,
-                                                const std::string& origin) {
+Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const std::string& origin,
+                                                const std::vector<std::string>& other_keys) {
   FootLockOptions o;
   if (!p.is_object()) return InvalidArgument(origin + ": a map of foot-lock options");
+  static const std::vector<std::string> kKeys = {"contact_height", "max_speed", "min_frames",
+                                                 "blend_seconds"};
+  for (const auto& item : p.items()) {
+    const auto known = [&](const std::vector<std::string>& keys) {
+      return std::find(keys.begin(), keys.end(), item.key()) != keys.end();
+    };
+    if (!known(kKeys) && !known(other_keys))
+      return InvalidArgument(origin + "." + item.key() +
+                             ": unknown (known: contact_height, max_speed, min_frames, "
+                             "blend_seconds)");
+  }
   try {
     o.contact_height = p.value("contact_height", o.contact_height);
     o.max_speed = p.value("max_speed", o.max_speed);

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "motionpipe/base/status.h"
 #include "motionpipe/motion/motion.h"
@@ -37,10 +38,12 @@ struct FootLockReport {
 };
 
 // The options from a map (contact_height, max_speed, min_frames, blend_seconds; missing keys
-// keep their defaults, other keys are ignored); InvalidArgument naming `origin` and the key when a
-// value is of the wrong type or out of range.
+// keep their defaults; `other_keys` are the caller's own and skipped); InvalidArgument naming
+// `origin` and the key when a value is of the wrong type or out of range, or a key is unknown (a
+// misspelt option must not pass for the default).
 Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& params,
-                                                const std::string& origin);
+                                                const std::string& origin,
+                                                const std::vector<std::string>& other_keys = {});
 
 // The motion with its feet held (frames, fps, translation and every other joint unchanged).
 // `report` (optional) receives the counts above.
