@@ -53,10 +53,10 @@ class FootLockStage : public StageExecutor {
     const FootLockOptions& options = *parsed;
     fs::create_directories(ctx.output_dir());
     const Skeleton& skeleton = Skeleton::Smpl22();
-    int64_t motions = 0, held = 0, unreached = 0;
+    int64_t motions = 0;
+    FootLockReport all;
     for (const Layout& layout : kLayouts) {
       FootLockReport total;
-      double shift_sum = 0;
       std::vector<Clip> clips;
       json summary;
       for (const std::string& dir : StageDirs(ctx, p.value("motions", std::string()))) {
@@ -67,11 +67,7 @@ class FootLockStage : public StageExecutor {
           if (ctx.cancelled()) return TaskReport::Error("cancelled");
           FootLockReport one;
           clip.motion = LockFeet(skeleton, clip.motion, options, &one);
-          total.held += one.held;
-          total.runs += one.runs;
-          total.unreached += one.unreached;
-          total.max_reach_error = std::max(total.max_reach_error, one.max_reach_error);
-          shift_sum += one.mean_shift * static_cast<double>(one.held);
+          total.Add(one);
           clips.push_back(std::move(clip));
         }
         if (summary.is_null()) {
@@ -81,8 +77,7 @@ class FootLockStage : public StageExecutor {
       }
       if (clips.empty()) continue;
       motions += static_cast<int64_t>(clips.size());
-      held += total.held;
-      unreached += total.unreached;
+      all.Add(total);
       if (Status s = WriteClips(ctx.output_dir() + "/" + layout.clips, clips); !s.ok())
         return TaskReport::Error(s.message());
       // The input's model and checkpoint (what eval_edit/eval_generate name the row by), marked.
@@ -90,18 +85,17 @@ class FootLockStage : public StageExecutor {
       summary = {{"model", input.value("model", std::string("motions")) + " + foot lock"},
                  {"checkpoint", input.value("checkpoint", std::string())},
                  {"input", input}};
-      summary["foot_lock"] = {
-          {"motions", clips.size()},
-          {"held_foot_frames", total.held},
-          {"runs", total.runs},
-          {"unreached_ankle_frames", total.unreached},
-          {"mean_shift_m", total.held > 0 ? shift_sum / static_cast<double>(total.held) : 0.0},
-          {"max_reach_error_m", total.max_reach_error},
-          {"options",
-           {{"contact_height", options.contact_height},
-            {"max_speed", options.max_speed},
-            {"min_frames", options.min_frames},
-            {"blend_seconds", options.blend_seconds}}}};
+      summary["foot_lock"] = {{"motions", clips.size()},
+                              {"held_foot_frames", total.held},
+                              {"runs", total.runs},
+                              {"unreached_ankle_frames", total.unreached},
+                              {"mean_shift_m", total.MeanShift()},
+                              {"max_reach_error_m", total.max_reach_error},
+                              {"options",
+                               {{"contact_height", options.contact_height},
+                                {"max_speed", options.max_speed},
+                                {"min_frames", options.min_frames},
+                                {"blend_seconds", options.blend_seconds}}}};
       if (Status s =
               WriteFileAtomic(ctx.output_dir() + "/" + layout.summary, summary.dump(1) + "\n");
           !s.ok())
@@ -112,8 +106,8 @@ class FootLockStage : public StageExecutor {
           "foot_lock: no edited.npz or generated.npz in the inputs (an edit or generate stage)");
     TaskReport out = TaskReport::Ok();
     out.metrics["motions"] = static_cast<double>(motions);
-    out.metrics["held_foot_frames"] = static_cast<double>(held);
-    out.metrics["unreached_ankle_frames"] = static_cast<double>(unreached);
+    out.metrics["held_foot_frames"] = static_cast<double>(all.held);
+    out.metrics["unreached_ankle_frames"] = static_cast<double>(all.unreached);
     return out;
   }
 };

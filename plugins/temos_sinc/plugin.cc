@@ -207,8 +207,6 @@ class SincGenerator : public plugin::Generator {
     torch::NoGradGuard no_grad;
     std::vector<std::vector<float>> out;
     for (const Motion& m : motions) {
-      const int64_t frames = m.num_frames();
-      std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
       const auto d = EncodeOne(m);
       out.emplace_back(d.mu.data_ptr<float>(), d.mu.data_ptr<float>() + d.mu.numel());
     }

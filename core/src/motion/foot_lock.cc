@@ -55,7 +55,7 @@ Hold FindHold(const std::vector<Vec3>& path, double fps, const FootLockOptions& 
         ++report->runs;
         for (int64_t f = begin; f < end; ++f) {
           const Vec3 d = place - path[static_cast<size_t>(f)];
-          report->mean_shift += std::hypot(d.x, d.y);
+          report->shift += std::hypot(d.x, d.y);
           ++report->held;
         }
       }
@@ -103,6 +103,14 @@ Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const s
   if (o.min_frames < 1) return InvalidArgument(origin + ".min_frames: must be >= 1");
   if (!(o.blend_seconds >= 0)) return InvalidArgument(origin + ".blend_seconds: must be >= 0");
   return o;
+}
+
+void FootLockReport::Add(const FootLockReport& other) {
+  held += other.held;
+  runs += other.runs;
+  unreached += other.unreached;
+  shift += other.shift;
+  max_reach_error = std::max(max_reach_error, other.max_reach_error);
 }
 
 Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options,
@@ -195,10 +203,7 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       out.SetLocalRotation(f, ankle, Transpose(g_knee) * g_ankle);
     }
   }
-  if (report) {
-    *report = counts;
-    if (counts.held > 0) report->mean_shift = counts.mean_shift / static_cast<double>(counts.held);
-  }
+  if (report) *report = counts;
   return out;
 }
 

@@ -33,8 +33,13 @@ struct FootLockReport {
   int64_t held = 0;            // foot-joint frames held at a run's place
   int64_t runs = 0;            // contact runs held
   int64_t unreached = 0;       // held ankle frames the leg could not reach (> 1 cm short)
-  double mean_shift = 0;       // m: mean horizontal distance a held joint was moved
+  double shift = 0;            // m: horizontal distances the held joints were moved, summed
   double max_reach_error = 0;  // m: the largest distance an ankle stayed from its place
+
+  // Another motion's counts added to these (a stage's total over its motions).
+  void Add(const FootLockReport& other);
+  // m: the mean horizontal distance a held joint was moved (0 when none was held).
+  double MeanShift() const { return held > 0 ? shift / static_cast<double>(held) : 0.0; }
 };
 
 // The options from a map (contact_height, max_speed, min_frames, blend_seconds; missing keys
