@@ -14,9 +14,14 @@ mean over the motions), and the same with every frame moved vertically so that i
 joint stands on the floor: if the height's drift made the feet skate (a sunken swing foot counted
 as a sliding contact), the second would fall to the targets' level. Then, on those grounded
 contact foot-frames, the root mean square horizontal speed of the feet, of the pelvis and of the
-feet relative to the pelvis: a planted foot has the first near 0 while the other two cancel.
+feet relative to the pelvis: a planted foot has the first near 0 while the other two cancel. Last,
+whether the legs step at all: the knees' swing (the standard deviation over a motion of each knee's
+flexion angle, the angle of its local rotation, in degrees; the mean over both knees and the
+motions) and their mean angular speed (degrees/s). With --truth SINGLES_DIR, each generate stage's
+row is followed by one for the ground truth of the same span ids (the singles stage's spans.npz).
 
     /usr/bin/python3 tools/root_stats.py out/demo-1/edit_mdt_untrained out/demo-1/edit_mdt
+    /usr/bin/python3 tools/root_stats.py --truth out/demo-1/singles out/demo-1/gen_sinc
 """
 import argparse
 import glob
@@ -32,6 +37,7 @@ from similarity_ref import rotation_matrices  # noqa: E402
 
 SKELETON = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "skeleton", "smpl22.json")
 LEGS = ((1, 4, 7, 10), (2, 5, 8, 11))  # hip, knee, ankle, foot (SMPL-22); the feet are 7, 10, 8, 11
+KNEES = (4, 5)
 CONTACT_HEIGHT, SKATE_SPEED = 0.05, 0.15  # core's PlausibilityOptions
 
 
@@ -93,30 +99,61 @@ def tilt_height(trans, pelvis):
     return abs(sum((previous[:, 2, k] * velocity[:, k]).sum() for k in range(3) if k != up))
 
 
-def motions(stage_dir):
-    """(trans [T, 3], local rotations [T, 22, 3, 3], fps) of every motion in the stage's task-*/edited.npz
-    (an edit or foot_lock stage) or task-*/generated.npz (a generate stage)."""
+def knee_swing(rotations, fps):
+    """(sd of the flexion angle, mean |angular speed|) in degrees and degrees/s, over both knees."""
+    trace = np.trace(rotations[:, list(KNEES)], axis1=-2, axis2=-1)  # [T, 2]
+    angle = np.degrees(np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0)))
+    return angle.std(axis=0).mean(), np.abs(np.diff(angle, axis=0)).mean() * fps
+
+
+def stage_files(stage_dir):
+    """The stage's task-*/edited.npz (an edit or foot_lock stage) or task-*/generated.npz (a generate stage)."""
     files = sorted(glob.glob(os.path.join(stage_dir, "task-*", "edited.npz")) or
                    glob.glob(os.path.join(stage_dir, "task-*", "generated.npz")))
     if not files:
         sys.exit(f"{stage_dir}: no task-*/edited.npz (is it an edit stage's output directory?)")
+    return files
+
+
+def motions(files, only_ids=None):
+    """(id, trans [T, 3], local rotations [T, 22, 3, 3], fps) of every motion in the npz files (with
+    only_ids, of those ids alone, in the files' order)."""
     for path in files:
         with np.load(path) as z:
             missing = [k for k in ("trans", "poses", "offsets", "fps") if k not in z.files]
             if missing:
                 sys.exit(f"{path}: not an edit output (no {', '.join(missing)})")
             offsets, trans, poses, fps = z["offsets"], z["trans"], z["poses"], z["fps"]
+            ids = [str(i) for i in z["ids"]] if "ids" in z.files else [None] * (len(offsets) - 1)
         for i in range(len(offsets) - 1):
+            if only_ids is not None and ids[i] not in only_ids:
+                continue
             frames = slice(offsets[i], offsets[i + 1])
             rotations = rotation_matrices(poses[frames].reshape(-1, 3)).reshape(-1, 22, 3, 3)
-            yield trans[frames], rotations, float(fps[i])
+            yield ids[i], trans[frames], rotations, float(fps[i])
 
 
-def row(stage_dir):
+def truth_of(stage_dir, singles_dir):
+    """The ground truth (singles_dir's spans.npz) of the span ids a generate stage generated."""
+    ids = {i for i, *_ in motions(stage_files(stage_dir))}
+    if None in ids:
+        sys.exit(f"{stage_dir}: its motions carry no ids (--truth needs a generate stage)")
+    files = sorted(glob.glob(os.path.join(singles_dir, "task-*", "spans.npz")))
+    if not files:
+        sys.exit(f"{singles_dir}: no task-*/spans.npz (is it a singles stage's output directory?)")
+    found = list(motions(files, only_ids=ids))
+    absent = ids - {i for i, *_ in found}
+    if absent:
+        sys.exit(f"{singles_dir}: no span {sorted(absent)[0]} (of {len(absent)} ids of {stage_dir} not found)")
+    return found
+
+
+def row(stage_dir, motion_list):
     drift, spread, vertical, accel, tilt, skating, grounded = [], [], [], [], [], [], []
     offsets = leg_offsets()
     squares, contacts = np.zeros(3), 0
-    for trans, rotations, fps in motions(stage_dir):
+    knees = []
+    for _, trans, rotations, fps in motion_list:
         if len(trans) < 3:
             continue
         z = trans[:, 2]
@@ -130,23 +167,34 @@ def row(stage_dir):
         grounded.append(skate(positions, fps, grounded=True))
         sums, count = contact_speeds(trans, positions, fps)
         squares, contacts = squares + sums, contacts + count
+        knees.append(knee_swing(rotations, fps))
     if not drift:
         sys.exit(f"{stage_dir}: no motion of 3 frames or more")
     return (len(drift), np.mean(drift), np.mean(spread), np.mean(vertical), np.mean(accel), np.mean(tilt),
-            np.mean(skating), np.mean(grounded), *np.sqrt(squares / max(contacts, 1)))
+            np.mean(skating), np.mean(grounded), *np.sqrt(squares / max(contacts, 1)), *np.mean(knees, axis=0))
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stages", nargs="+", help="edit, generate or foot_lock stage output directories (out/JOB/STAGE)")
+    parser.add_argument("--truth", metavar="SINGLES_DIR",
+                        help="after each generate stage, its spans' ground truth from this singles stage")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
-          f"{'contact speed: feet':>19} {'pelvis':>6} {'feet - pelvis (m/s)':>19}")
+          f"{'contact speed: feet':>19} {'pelvis':>6} {'feet - pelvis (m/s)':>19} {'knee sd (deg)':>13} "
+          f"{'knee speed (deg/s)':>18}")
+    rows = []
     for stage in args.stages:
-        n, drift, spread, vertical, accel, tilt, skating, grounded, feet_speed, pelvis_speed, relative = row(stage)
-        print(f"{stage:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f} {tilt:>13.3f} "
-              f"{skating:>6.3f} {grounded:>14.3f} {feet_speed:>19.3f} {pelvis_speed:>6.3f} {relative:>19.3f}")
+        rows.append((stage, list(motions(stage_files(stage)))))
+        if args.truth:
+            rows.append((stage + " (truth)", truth_of(stage, args.truth)))
+    for name, motion_list in rows:
+        (n, drift, spread, vertical, accel, tilt, skating, grounded, feet_speed, pelvis_speed, relative,
+         knee_sd, knee_speed) = row(name, motion_list)
+        print(f"{name:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f} {tilt:>13.3f} "
+              f"{skating:>6.3f} {grounded:>14.3f} {feet_speed:>19.3f} {pelvis_speed:>6.3f} {relative:>19.3f} "
+              f"{knee_sd:>13.2f} {knee_speed:>18.1f}")
 
 
 if __name__ == "__main__":

@@ -10,19 +10,24 @@ import numpy as np
 TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "root_stats.py")
 
 
-def write_edits(stage_dir, motions, fps=10.0, drop=(), pelvis=None):
-    """One task-00000/edited.npz holding `motions` (each [T, 3] pelvis translations, z up), the
-    pelvis at the axis-angle `pelvis` (identity by default) and the other joints at rest."""
+def write_edits(stage_dir, motions, fps=10.0, drop=(), pelvis=None, knees=None, ids=None, name="edited.npz"):
+    """One task-00000/edited.npz (or `name`) holding `motions` (each [T, 3] pelvis translations, z up),
+    the pelvis at the axis-angle `pelvis` (identity by default), both knees bent about x by `knees`
+    (radians, one per frame of all motions; none by default), the other joints at rest; `ids` if given."""
     os.makedirs(os.path.join(stage_dir, "task-00000"))
     offsets = np.cumsum([0] + [len(m) for m in motions])
     poses = np.zeros((offsets[-1], 22, 3), np.float32)
     if pelvis is not None:
         poses[:, 0] = pelvis
+    if knees is not None:
+        poses[:, 4, 0] = poses[:, 5, 0] = knees
     arrays = {"trans": np.concatenate(motions).astype(np.float32), "offsets": offsets.astype(np.int64),
               "poses": poses, "fps": np.full(len(motions), fps, np.float32)}
+    if ids is not None:
+        arrays["ids"] = np.array(ids)
     for key in drop:
         del arrays[key]
-    np.savez(os.path.join(stage_dir, "task-00000", "edited.npz"), **arrays)
+    np.savez(os.path.join(stage_dir, "task-00000", name), **arrays)
 
 
 def run(*stages):
@@ -92,6 +97,27 @@ class RootStatsTest(unittest.TestCase):
             self.assertEqual((float(fields[7]), float(fields[8])), expected, name)
             # On the grounded contact frames the rigid body's feet move with its pelvis.
             self.assertEqual([float(x) for x in fields[9:12]], [speed, speed, 0.0], name)
+
+    def test_knee_swing_and_the_ground_truth_of_generated_spans(self):
+        # Knees alternating 0 and 0.2 rad at 10 fps: sd 0.1 rad (5.73 deg), 0.2 rad a frame (114.6 deg/s).
+        still = np.zeros((4, 3))
+        write_edits(self.path("gen"), [still], knees=[0.0, 0.2, 0.0, 0.2], ids=["b"], name="generated.npz")
+        # The singles stage's spans: "a" (not generated, knees still) and "b" (knees 0, 0.4, 0, 0.4).
+        write_edits(self.path("singles"), [still, still], knees=[0.3] * 4 + [0.0, 0.4, 0.0, 0.4], ids=["a", "b"],
+                    name="spans.npz")
+        result = run("--truth", self.path("singles"), self.path("gen"))
+        self.assertEqual(result.returncode, 0, result.stderr)
+        generated, truth = result.stdout.splitlines()[1:3]
+        self.assertEqual([float(x) for x in generated.split()[12:14]], [5.73, 114.6])
+        self.assertTrue(truth.startswith(self.path("gen") + " (truth)"), truth)
+        self.assertEqual(truth.split()[2], "1")  # span "b" alone
+        self.assertEqual([float(x) for x in truth.split()[13:15]], [11.46, 229.2])
+        # Without --truth, no truth row; a generated id the singles stage lacks is named.
+        self.assertEqual(len(run(self.path("gen")).stdout.splitlines()), 2)
+        write_edits(self.path("gen_c"), [still], ids=["c"], name="generated.npz")
+        result = run("--truth", self.path("singles"), self.path("gen_c"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn(self.path("singles") + ": no span c", result.stderr)
 
     def test_what_is_not_an_edit_output_is_named(self):
         os.makedirs(self.path("empty"))
