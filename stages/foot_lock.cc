@@ -91,11 +91,7 @@ class FootLockStage : public StageExecutor {
                               {"unreached_ankle_frames", total.unreached},
                               {"mean_shift_m", total.MeanShift()},
                               {"max_reach_error_m", total.max_reach_error},
-                              {"options",
-                               {{"contact_height", options.contact_height},
-                                {"max_speed", options.max_speed},
-                                {"min_frames", options.min_frames},
-                                {"blend_seconds", options.blend_seconds}}}};
+                              {"options", FootLockOptionsToJson(options)}};
       if (Status s =
               WriteFileAtomic(ctx.output_dir() + "/" + layout.summary, summary.dump(1) + "\n");
           !s.ok())

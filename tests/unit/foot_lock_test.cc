@@ -173,6 +173,17 @@ TEST(FootLock, OptionsFromAMapNameTheBadKey) {
   ASSERT_FALSE(misspelt.ok());
   EXPECT_EQ(misspelt.status().message().rfind("x.max_sped: unknown", 0), 0u)
       << misspelt.status().message();
+  // The map the stage's summary records reads back as the same options.
+  FootLockOptions changed;
+  changed.contact_height = 0.07;
+  changed.max_speed = 2.5;
+  changed.min_frames = 3;
+  changed.blend_seconds = 0.2;
+  const auto back = FootLockOptionsFromJson(FootLockOptionsToJson(changed), "x");
+  ASSERT_TRUE(back.ok()) << back.status().message();
+  EXPECT_EQ(FootLockOptionsToJson(*back), FootLockOptionsToJson(changed));
+  EXPECT_EQ(back->min_frames, 3);
+  EXPECT_EQ(back->contact_height, 0.07);
 }
 
 }  // namespace

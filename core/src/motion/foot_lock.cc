@@ -75,20 +75,25 @@ Vec3 Goal(const Hold& hold, int64_t frame, const Vec3& own) {
 
 }  // namespace
 
+nlohmann::json FootLockOptionsToJson(const FootLockOptions& o) {
+  return {{"contact_height", o.contact_height},
+          {"max_speed", o.max_speed},
+          {"min_frames", o.min_frames},
+          {"blend_seconds", o.blend_seconds}};
+}
+
 Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const std::string& origin,
                                                 const std::vector<std::string>& other_keys) {
   FootLockOptions o;
   if (!p.is_object()) return InvalidArgument(origin + ": a map of foot-lock options");
-  static const std::vector<std::string> kKeys = {"contact_height", "max_speed", "min_frames",
-                                                 "blend_seconds"};
+  const nlohmann::json defaults = FootLockOptionsToJson(o);
   for (const auto& item : p.items()) {
-    const auto known = [&](const std::vector<std::string>& keys) {
-      return std::find(keys.begin(), keys.end(), item.key()) != keys.end();
-    };
-    if (!known(kKeys) && !known(other_keys))
-      return InvalidArgument(origin + "." + item.key() +
-                             ": unknown (known: contact_height, max_speed, min_frames, "
-                             "blend_seconds)");
+    if (defaults.contains(item.key()) ||
+        std::find(other_keys.begin(), other_keys.end(), item.key()) != other_keys.end())
+      continue;
+    std::string known;
+    for (const auto& key : defaults.items()) known += (known.empty() ? "" : ", ") + key.key();
+    return InvalidArgument(origin + "." + item.key() + ": unknown (known: " + known + ")");
   }
   try {
     o.contact_height = p.value("contact_height", o.contact_height);

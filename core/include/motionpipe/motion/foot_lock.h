@@ -42,6 +42,9 @@ struct FootLockReport {
   double MeanShift() const { return held > 0 ? shift / static_cast<double>(held) : 0.0; }
 };
 
+// The options as a map, the keys FootLockOptionsFromJson reads (their one list).
+nlohmann::json FootLockOptionsToJson(const FootLockOptions& options);
+
 // The options from a map (contact_height, max_speed, min_frames, blend_seconds; missing keys
 // keep their defaults; `other_keys` are the caller's own and skipped); InvalidArgument naming
 // `origin` and the key when a value is of the wrong type or out of range, or a key is unknown (a
