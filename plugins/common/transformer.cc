@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 
 namespace motionpipe::nn {
 
@@ -161,9 +162,18 @@ OneTokenDecoderImpl::OneTokenDecoderImpl(const TransformerOptions& o) {
 }
 
 torch::Tensor OneTokenDecoderImpl::forward(torch::Tensor x, const torch::Tensor& memory,
-                                           const torch::Tensor& padding) {
-  for (const auto& layer : *layers_)
+                                           const torch::Tensor& padding,
+                                           const torch::Tensor& modulation) {
+  if (modulation.defined() && modulation.size(0) != static_cast<int64_t>(layers_->size()))
+    throw std::invalid_argument("OneTokenDecoder: modulation needs one row per layer");
+  int64_t k = 0;
+  for (const auto& layer : *layers_) {
+    if (modulation.defined()) {
+      const auto scale_shift = modulation[k++].chunk(2, -1);  // [N, dim] each
+      x = x * (1 + scale_shift[0]) + scale_shift[1];
+    }
     x = layer->as<OneTokenDecoderLayer>()->forward(x, memory, padding);
+  }
   return x;
 }
 

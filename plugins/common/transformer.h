@@ -81,7 +81,10 @@ TORCH_MODULE(OneTokenDecoderLayer);
 class OneTokenDecoderImpl : public torch::nn::Module {
  public:
   explicit OneTokenDecoderImpl(const TransformerOptions& o);
-  torch::Tensor forward(torch::Tensor x, const torch::Tensor& memory, const torch::Tensor& padding);
+  // modulation [layers, N, 2 * dim] (optional, FiLM): before layer k the queries become
+  // x * (1 + scale_k) + shift_k, with [scale_k; shift_k] = modulation[k].
+  torch::Tensor forward(torch::Tensor x, const torch::Tensor& memory, const torch::Tensor& padding,
+                        const torch::Tensor& modulation = {});
 
  private:
   torch::nn::ModuleList layers_;

@@ -68,6 +68,9 @@ TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
   if (o.text_reconstruction < 0) throw std::invalid_argument("text_reconstruction must be >= 0");
   o.latent_noise = j.value("latent_noise", o.latent_noise);
   if (o.latent_noise < 0) throw std::invalid_argument("latent_noise must be >= 0");
+  o.decoder = j.value("decoder", o.decoder);
+  if (o.decoder != "memory" && o.decoder != "film")
+    throw std::invalid_argument("decoder must be memory or film, not '" + o.decoder + "'");
   o.contrastive = j.value("contrastive", o.contrastive);
   o.temperature = j.value("temperature", o.temperature);
   o.duplicate_threshold = j.value("duplicate_threshold", o.duplicate_threshold);
@@ -93,6 +96,7 @@ nlohmann::json TemosOptions::ToJson() const {
           {"latent_weight", latent_weight},
           {"text_reconstruction", text_reconstruction},
           {"latent_noise", latent_noise},
+          {"decoder", decoder},
           {"contrastive", contrastive},
           {"temperature", temperature},
           {"duplicate_threshold", duplicate_threshold},
@@ -118,15 +122,24 @@ std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Ten
   return {out[0], out[1]};
 }
 
-DecoderImpl::DecoderImpl(const TemosOptions& o) : latent_(o.latent) {
+DecoderImpl::DecoderImpl(const TemosOptions& o) : latent_(o.latent), layers_(o.layers) {
   decoder_ = register_module("decoder", nn::OneTokenDecoder(Layers(o)));
   out_ = register_module("out", torch::nn::Linear(o.latent, kFeatureDim));
+  if (o.decoder == "film") {
+    // Zero-initialised (as DiT's adaLN-Zero): the decoder starts as TEMOS's.
+    film_ = register_module("film", torch::nn::Linear(o.latent, o.layers * 2 * o.latent));
+    torch::NoGradGuard no_grad;
+    film_->weight.zero_();
+    film_->bias.zero_();
+  }
 }
 
 torch::Tensor DecoderImpl::forward(const torch::Tensor& z, const torch::Tensor& padding) {
   const int64_t n = z.size(0), length = padding.size(1);
   const auto queries = nn::PositionalEncoding(length, latent_).expand({length, n, latent_});
-  const auto h = decoder_->forward(queries, z, padding);
+  torch::Tensor modulation;
+  if (film_) modulation = film_->forward(z).view({n, layers_, 2 * latent_}).transpose(0, 1);
+  const auto h = decoder_->forward(queries, z, padding, modulation);
   auto y = out_->forward(h);
   return y.masked_fill(padding.transpose(0, 1).unsqueeze(2), 0.0);
 }

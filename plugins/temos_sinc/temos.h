@@ -35,6 +35,12 @@ struct TemosOptions {
   // 0 decodes the means (an autoencoder): an ablation (issue 15: does the posterior's noise, not
   // small beside the means' spread, average the gait out?).
   double latent_noise = 1;
+  // How the decoder's frames see the latent: "memory" (TEMOS: z is the cross-attention's one memory
+  // token, so it reaches every frame as the same added vector) or "film" (also, before every layer,
+  // z scales and shifts the frames' queries, zero-initialised: a gait's phase is a product of z and
+  // the frame's position, which an added vector gives only through the feed-forward layers; issue
+  // 15).
+  std::string decoder = "memory";
   double contrastive = 0;  // TMR: 0.1
   double temperature = 0.1;
   double duplicate_threshold = 0.6;
@@ -67,9 +73,10 @@ class DecoderImpl : public torch::nn::Module {
   torch::Tensor forward(const torch::Tensor& z, const torch::Tensor& padding);
 
  private:
-  int64_t latent_;
+  int64_t latent_, layers_;
   nn::OneTokenDecoder decoder_{nullptr};
   torch::nn::Linear out_{nullptr};
+  torch::nn::Linear film_{nullptr};  // decoder "film": z -> [layers, 2 * latent]
 };
 TORCH_MODULE(Decoder);
 

@@ -262,6 +262,40 @@ TEST(Temos, WithoutLatentNoiseTheLossesDoNotDependOnTheNoiseSeeds) {
   }
 }
 
+TEST(Temos, FilmDecoderStartsAsTemossDecoder) {
+  // The same draws for every shared weight; the FiLM layer is zero-initialised, so the decoders
+  // agree.
+  const auto z = torch::randn({3, 32});
+  const auto padding = torch::zeros({3, 10}, torch::kBool);
+  torch::manual_seed(6);
+  auto memory = TinyTemos(0.0, {{"layers", 2}});
+  torch::manual_seed(6);
+  auto film = TinyTemos(0.0, {{"layers", 2}, {"decoder", "film"}});
+  EXPECT_TRUE(torch::allclose(memory->Decode(z, padding), film->Decode(z, padding), 1e-6, 1e-6));
+  EXPECT_EQ(film->options().ToJson().at("decoder"), "film");
+  EXPECT_EQ(memory->options().ToJson().at("decoder"), "memory");
+  EXPECT_THROW(temos::TemosOptions::FromJson({{"decoder", "films"}}), std::invalid_argument);
+}
+
+TEST(Transformer, OneTokenDecoderModulationScalesAndShiftsEachLayersQueries) {
+  torch::manual_seed(8);
+  nn::OneTokenDecoder decoder(nn::TransformerOptions{16, 2, 32, 2, 0.0});
+  const auto x = torch::randn({6, 3, 16}), memory = torch::randn({3, 16});
+  const auto padding = torch::zeros({3, 6}, torch::kBool);
+  // Scale -1 before the first layer: every frame's query becomes the shift, so every frame decodes
+  // alike; an identity modulation (all zeros) changes nothing.
+  auto modulation = torch::zeros({2, 3, 32});
+  EXPECT_TRUE(torch::allclose(decoder->forward(x, memory, padding, modulation),
+                              decoder->forward(x, memory, padding), 1e-6, 1e-6));
+  modulation[0].narrow(1, 0, 16).fill_(-1.0);
+  modulation[0].narrow(1, 16, 16).copy_(torch::randn({3, 16}));
+  const auto y = decoder->forward(x, memory, padding, modulation);
+  EXPECT_TRUE(torch::allclose(y, y[0].unsqueeze(0).expand_as(y), 1e-5, 1e-5));
+  EXPECT_FALSE(torch::allclose(y, decoder->forward(x, memory, padding), 1e-3, 1e-3));
+  EXPECT_THROW(decoder->forward(x, memory, padding, torch::zeros({1, 3, 32})),
+               std::invalid_argument);
+}
+
 TEST(Temos, SavedAndLoadedModelGivesIdenticalOutputs) {
   torch::manual_seed(3);
   auto net = TinyTemos(0.1);
