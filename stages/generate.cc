@@ -66,6 +66,7 @@ class GenerateStage : public StageExecutor {
          k += static_cast<size_t>(std::max(1, ctx.spec.count()))) {
       if (ctx.cancelled()) return TaskReport::Error("cancelled");
       const int64_t i = spans[k];
+      const Motion truth = reconstruct ? table->MotionOf(i) : Motion{};  // once per span
       for (int sample = 0; sample < samples; ++sample) {
         plugin::GenerateRequest r;
         r.texts = {table->text_a[static_cast<size_t>(i)]};
@@ -73,7 +74,6 @@ class GenerateStage : public StageExecutor {
         r.frames = table->frames(i);
         r.fps = table->fps[static_cast<size_t>(i)];
         r.seed = MixSeed(ctx.spec.seed(), static_cast<uint64_t>(i * 1000 + sample));
-        const Motion truth = reconstruct ? table->MotionOf(i) : Motion{};
         if (reconstruct) r.source = &truth;
         auto motion = (*generator)->Generate(r);
         if (!motion.ok()) return TaskReport::Error(motion.status().message());

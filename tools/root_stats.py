@@ -37,7 +37,7 @@ from similarity_ref import rotation_matrices  # noqa: E402
 
 SKELETON = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "skeleton", "smpl22.json")
 LEGS = ((1, 4, 7, 10), (2, 5, 8, 11))  # hip, knee, ankle, foot (SMPL-22); the feet are 7, 10, 8, 11
-KNEES = (4, 5)
+KNEES = tuple(leg[1] for leg in LEGS)
 CONTACT_HEIGHT, SKATE_SPEED = 0.05, 0.15  # core's PlausibilityOptions
 
 
@@ -133,9 +133,9 @@ def motions(files, only_ids=None):
             yield ids[i], trans[frames], rotations, float(fps[i])
 
 
-def truth_of(stage_dir, singles_dir):
-    """The ground truth (singles_dir's spans.npz) of the span ids a generate stage generated."""
-    ids = {i for i, *_ in motions(stage_files(stage_dir))}
+def truth_of(stage_dir, stage_motions, singles_dir):
+    """The ground truth (singles_dir's spans.npz) of the span ids of a generate stage's motions."""
+    ids = {i for i, *_ in stage_motions}
     if None in ids:
         sys.exit(f"{stage_dir}: its motions carry no ids (--truth needs a generate stage)")
     files = sorted(glob.glob(os.path.join(singles_dir, "task-*", "spans.npz")))
@@ -186,9 +186,10 @@ def main():
           f"{'knee speed (deg/s)':>18}")
     rows = []
     for stage in args.stages:
-        rows.append((stage, list(motions(stage_files(stage)))))
+        stage_motions = list(motions(stage_files(stage)))
+        rows.append((stage, stage_motions))
         if args.truth:
-            rows.append((stage + " (truth)", truth_of(stage, args.truth)))
+            rows.append((stage + " (truth)", truth_of(stage, stage_motions, args.truth)))
     for name, motion_list in rows:
         (n, drift, spread, vertical, accel, tilt, skating, grounded, feet_speed, pelvis_speed, relative,
          knee_sd, knee_speed) = row(name, motion_list)
