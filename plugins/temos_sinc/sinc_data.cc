@@ -39,6 +39,8 @@ SincDataOptions SincDataOptions::FromContext(const plugin::DataContext& context)
   o.crop = *crop;
   o.max_frames = j.value("max_frames", o.max_frames);
   o.augment_texts = j.value("augment_texts", o.augment_texts);
+  o.limit = j.value("limit", o.limit);
+  if (o.limit < 0) throw std::invalid_argument("data.limit must be >= 0");
   if (o.synthetic_p < 0 || o.synthetic_p > 1)
     throw std::invalid_argument("data.synthetic_p must be in [0, 1]");
   return o;
@@ -52,6 +54,7 @@ SincDataset::SincDataset(std::shared_ptr<const sinc::SpanTable> table,
       continue;
     if (table_->single(i) ? options_.singles : options_.real_pairs)
       items_.push_back(static_cast<int32_t>(i));
+    if (options_.limit > 0 && static_cast<int64_t>(items_.size()) == options_.limit) break;
   }
   if (items_.empty())
     throw std::invalid_argument("no training examples in split '" + options_.split + "' of " +

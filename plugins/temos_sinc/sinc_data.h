@@ -5,7 +5,7 @@
 //
 // params.data: {spans: PATH (default: an input stage's spans.npz), split: train, singles: true,
 // real_pairs: true, synthetic_p: 0.5 (probability that a real single is composed with a partner),
-// parts: labels | random, crop: first | centre, max_frames: 200, augment_texts: true}
+// parts: labels | random, crop: first | centre, max_frames: 200, augment_texts: true, limit: 0}
 #pragma once
 
 #include <torch/torch.h>
@@ -30,6 +30,10 @@ struct SincDataOptions {
   sinc::CropMode crop = sinc::CropMode::kFirst;
   int64_t max_frames = 200;
   bool augment_texts = true;
+  // The first `limit` examples of the split in the table's order (0: all): the spans a generate
+  // stage with the same split, kind and limit reads, so that a model fitted to a few motions can be
+  // asked to give them back (issue 15: can the decoder make a gait at all?).
+  int64_t limit = 0;
   static SincDataOptions FromContext(const plugin::DataContext& context);
 };
 

@@ -41,6 +41,12 @@ struct TemosOptions {
   // the frame's position, which an added vector gives only through the feed-forward layers; issue
   // 15).
   std::string decoder = "memory";
+  // Weight of a reconstruction term on the features' frame-to-frame differences (0: the
+  // reference's losses alone). Issue 15: the legs' within-motion part (the gait) is a small share
+  // of those features' variance beside the between-motion part (posture); the differences are the
+  // gait alone. Measured: at 1 the legs come out stiller, not livelier (README "What does: views of
+  // each motion"); an ablation, no shipped config uses it.
+  double velocity_weight = 0;
   double contrastive = 0;  // TMR: 0.1
   double temperature = 0.1;
   double duplicate_threshold = 0.6;
@@ -117,6 +123,11 @@ torch::Tensor ExampleNoise(const torch::Tensor& seeds, int64_t rows, int64_t lat
 // [T, N, D], padding [N, T].
 torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target,
                              const torch::Tensor& padding);
+// MaskedSmoothL1 of the frame-to-frame differences (pairs of unpadded frames), both divided by the
+// root mean square of the batch's target differences (a detached scalar), so that the term weighs
+// the same whatever the frame rate.
+torch::Tensor MaskedVelocitySmoothL1(const torch::Tensor& prediction, const torch::Tensor& target,
+                                     const torch::Tensor& padding);
 // KL(q || p) of diagonal Gaussians, averaged over the batch and the latent dimensions.
 torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q,
                            const torch::Tensor& mu_p, const torch::Tensor& logvar_p);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <array>
 #include <filesystem>
 #include <fstream>
 
@@ -163,6 +164,86 @@ TEST(Temos, MaskedLossIgnoresPaddingAndWeighsExamplesEqually) {
   // example 0's mean: 0.125 / 4; example 1's: 0 -> batch mean 0.015625
   EXPECT_NEAR(temos::MaskedSmoothL1(prediction, target, padding).item<double>(), 0.125 / 4 / 2,
               1e-7);
+}
+
+// Issue 15: the velocity term sees the within-motion change alone (a constant posture offset costs
+// nothing, a motion held still costs its whole movement), ignores padded frames, and does not
+// depend on the features' scale.
+TEST(Temos, VelocityLossSeesMovementNotPostureAndIgnoresPadding) {
+  const int64_t frames = 8;
+  const auto t = torch::arange(frames, torch::kFloat32).view({frames, 1, 1});
+  const auto target = torch::sin(t * torch::tensor({0.7f, 1.1f, 0.4f}).view({1, 1, 3}))
+                          .expand({frames, 2, 3})
+                          .contiguous();
+  auto padding = torch::zeros({2, frames}, torch::kBool);
+  padding[1].narrow(0, 5, 3).fill_(true);  // example 1 has 5 frames
+  using temos::MaskedVelocitySmoothL1;
+  EXPECT_NEAR(MaskedVelocitySmoothL1(target + 3.0, target, padding).item<double>(), 0.0, 1e-7);
+  const auto still = target.mean(0, true).expand_as(target).contiguous();
+  const double held = MaskedVelocitySmoothL1(still, target, padding).item<double>();
+  EXPECT_GT(held, 0.1);
+  auto garbage = still.clone();
+  garbage.select(1, 1).narrow(0, 5, 3).fill_(100.0);  // on example 1's padded frames: ignored
+  EXPECT_NEAR(MaskedVelocitySmoothL1(garbage, target, padding).item<double>(), held, 1e-6);
+  EXPECT_NEAR(MaskedVelocitySmoothL1(10 * still, 10 * target, padding).item<double>(), held, 1e-5);
+  // One frame: no difference to compare.
+  EXPECT_EQ(
+      MaskedVelocitySmoothL1(still.narrow(0, 0, 1), target.narrow(0, 0, 1), padding.narrow(1, 0, 1))
+          .item<double>(),
+      0.0);
+}
+
+TEST(Temos, VelocityWeightAddsTheVelocityTermsToTheLoss) {
+  const TinyBatch batch;
+  const auto seeds = torch::tensor({1, 2, 3, 4}, torch::kInt64);
+  torch::manual_seed(4);
+  auto plain = TinyTemos(0.0);
+  torch::manual_seed(4);
+  auto net = TinyTemos(0.0, {{"velocity_weight", 0.5}, {"text_reconstruction", 0.25}});
+  const auto a = plain->Losses(batch.texts, batch.features, batch.padding, seeds);
+  const auto b = net->Losses(batch.texts, batch.features, batch.padding, seeds);
+  EXPECT_EQ(a.count("velocity_motion"), 0u);  // the reference's losses alone by default
+  EXPECT_GT(b.at("velocity_motion").item<double>(), 0.01);
+  const auto expected = a.at("loss") - 0.75 * a.at("recon_text") +
+                        0.5 * (0.25 * b.at("velocity_text") + b.at("velocity_motion"));
+  EXPECT_NEAR(b.at("loss").item<double>(), expected.item<double>(), 1e-5);
+  EXPECT_EQ(net->options().ToJson().at("velocity_weight").get<double>(), 0.5);
+  EXPECT_THROW(temos::TemosOptions::FromJson({{"velocity_weight", -1}}), std::invalid_argument);
+}
+
+// data.limit: the first examples of the split in the table's order, the spans a generate stage with
+// the same split, kind and limit reads (issue 15's fitting diagnostic).
+TEST(SincData, LimitKeepsTheSplitsFirstExamplesInTheTablesOrder) {
+  auto table = std::make_shared<sinc::SpanTable>();
+  const std::vector<std::array<std::string, 3>> spans = {{"train", "walk", "wave"},
+                                                         {"test", "jump", "clap"},
+                                                         {"train", "sit", ""},
+                                                         {"train", "kick", "bow"},
+                                                         {"train", "run", "nod"}};
+  for (size_t i = 0; i < spans.size(); ++i) {
+    table->Add("s" + std::to_string(i), spans[i][0], "made", Motion::Rest(20 + 5 * i, 30, 0.9),
+               spans[i][1], spans[i][2]);
+  }
+  temos::SincDataOptions options;
+  options.spans = "made.npz";
+  options.singles = false;
+  options.synthetic_p = 0;
+  options.augment_texts = false;
+  auto actions = [&](const temos::SincDataset& data) {
+    std::vector<std::string> out;
+    for (int64_t i = 0; i < data.size(); ++i) out.push_back(data.Make(i, 1).actions.at(0));
+    return out;
+  };
+  EXPECT_EQ(actions(temos::SincDataset(table, options)),
+            (std::vector<std::string>{"walk", "kick", "run"}));
+  options.limit = 2;
+  EXPECT_EQ(actions(temos::SincDataset(table, options)),
+            (std::vector<std::string>{"walk", "kick"}));
+  options.limit = 9;  // more than there are: all of them
+  EXPECT_EQ(temos::SincDataset(table, options).size(), 3);
+  plugin::DataContext context;
+  context.config = {{"spans", "made.npz"}, {"limit", -1}};
+  EXPECT_THROW(temos::SincDataOptions::FromContext(context), std::invalid_argument);
 }
 
 TEST(Temos, KlOfIdenticalGaussiansIsZeroAndMatchesTheClosedForm) {
