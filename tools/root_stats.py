@@ -122,7 +122,7 @@ def motions(files, only_ids=None):
         with np.load(path) as z:
             missing = [k for k in ("trans", "poses", "offsets", "fps") if k not in z.files]
             if missing:
-                sys.exit(f"{path}: not an edit output (no {', '.join(missing)})")
+                sys.exit(f"{path}: not a motion file (no {', '.join(missing)})")
             offsets, trans, poses, fps = z["offsets"], z["trans"], z["poses"], z["fps"]
             ids = [str(i) for i in z["ids"]] if "ids" in z.files else [None] * (len(offsets) - 1)
         for i in range(len(offsets) - 1):

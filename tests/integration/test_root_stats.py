@@ -128,7 +128,7 @@ class RootStatsTest(unittest.TestCase):
         write_edits(self.path("nofps"), [np.zeros((4, 3))], drop=("fps",))
         result = run(self.path("nofps"))
         self.assertNotEqual(result.returncode, 0)
-        self.assertIn(os.path.join(self.path("nofps"), "task-00000", "edited.npz") + ": not an edit output (no fps)",
+        self.assertIn(os.path.join(self.path("nofps"), "task-00000", "edited.npz") + ": not a motion file (no fps)",
                       result.stderr)
 
         write_edits(self.path("short"), [np.zeros((2, 3))])
