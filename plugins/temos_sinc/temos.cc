@@ -53,6 +53,11 @@ torch::Tensor NearDuplicates(const std::vector<std::vector<std::string>>& texts,
   return out;
 }
 
+// 1 on a batch's unpadded frames, 0 on its padding: [T, N, 1] from padding [N, T] (true = pad).
+torch::Tensor FrameMask(const torch::Tensor& padding, torch::ScalarType dtype) {
+  return padding.logical_not().transpose(0, 1).unsqueeze(2).to(dtype);
+}
+
 }  // namespace
 
 TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
@@ -233,8 +238,7 @@ std::map<std::string, torch::Tensor> TemosImpl::Losses(
 
 torch::Tensor MaskedSmoothL1(const torch::Tensor& prediction, const torch::Tensor& target,
                              const torch::Tensor& padding) {
-  const auto keep =
-      padding.logical_not().transpose(0, 1).unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
+  const auto keep = FrameMask(padding, prediction.scalar_type());  // [T, N, 1]
   const auto loss = torch::smooth_l1_loss(prediction, target, torch::Reduction::None) * keep;
   // Each motion's mean over its own frames and features, then the mean over motions: a batch's loss
   // is the mean of its examples' losses, so ranks that split a batch reproduce it exactly.
@@ -253,7 +257,7 @@ torch::Tensor MaskedVelocitySmoothL1(const torch::Tensor& prediction, const torc
   };
   // A pair is kept when both frames are (padding is a suffix, so when the later one is).
   const auto pair_padding = padding.narrow(1, 1, frames - 1);
-  const auto keep = pair_padding.logical_not().transpose(0, 1).unsqueeze(2).to(target.dtype());
+  const auto keep = FrameMask(pair_padding, target.scalar_type());
   const auto target_delta = delta(target);
   // One scale for the batch (the root mean square of its target differences, detached). Each
   // example's own, tried first, magnified the motions held still (differences near 0): the
