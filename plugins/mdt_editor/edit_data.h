@@ -44,12 +44,8 @@ struct AtNetworkRate {
   double step = 1;
 };
 AtNetworkRate ToNetworkRate(const Motion& motion, const float* joints, double fps);
-// The network frames that cover `frames` frames at `rate` once brought back to it: ceil((frames -
-// 1) fps / rate) + 1 (`frames` itself when fps <= 0 or equal to rate).
-int64_t NetworkFrames(int64_t frames, double rate, double fps);
-// A motion generated at the network's rate brought back to `rate` (interpolated) and cut to
-// exactly `frames` frames.
-Motion FromNetworkRate(const Motion& motion, double rate, int64_t frames);
+// The network's frames for a length, and the way back: FramesCovering and ResampleToFrames
+// (motionpipe/motion/motion.h).
 
 class EditDataset : public plugin::Dataset {
  public:

@@ -352,7 +352,7 @@ class EditorGenerator : public plugin::Generator {
       // MDM-BP's inpainting keeps the source's frames, at the network's rate too.
       lengths.push_back(body_parts_
                             ? sources.back().size(0)
-                            : NetworkFrames(frames, r.source ? r.source->fps : r.fps, o.fps));
+                            : FramesCovering(frames, r.source ? r.source->fps : r.fps, o.fps));
     }
     const int64_t tt = *std::max_element(lengths.begin(), lengths.end());
     auto target_padding = torch::zeros({n, tt}, torch::kBool);
@@ -456,7 +456,9 @@ class EditorGenerator : public plugin::Generator {
       const MotionAnchor anchor = r.source ? AnchorOf(*r.source) : MotionAnchor{};
       const double rate = r.source ? r.source->fps : r.fps;
       Motion m = DecodeMotionFix207(features, anchor, o.fps > 0 ? o.fps : rate);
-      if (o.fps > 0) m = FromNetworkRate(m, rate, requested[static_cast<size_t>(i)]);
+      if (o.fps > 0) {
+        MP_ASSIGN_OR_RETURN(m, ResampleToFrames(m, rate, requested[static_cast<size_t>(i)]));
+      }
       for (float v : m.poses) {
         if (!std::isfinite(v)) return Internal("edit: the model produced NaN");
       }

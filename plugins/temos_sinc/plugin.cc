@@ -17,6 +17,7 @@
 #include <torch/torch.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -52,6 +53,12 @@ class SincModel : public plugin::Model {
     if (variant_ == "ste") model["separate_texts"] = true;
     if (variant_ == "tmr" && !model.contains("contrastive")) model["contrastive"] = 0.1;
     net_ = Temos(TemosOptions::FromJson(model));
+    // The network's frame rate (0: the data's). Not in the papers (TEMOS and SINC run at 30 fps):
+    // issue 15, a step at 10 fps costs about a third of one at 30, so the same time gives each
+    // motion three times the views; generation comes back to the asked rate by interpolation.
+    fps_ = config.value("fps", 0.0);
+    if (!(fps_ >= 0 && fps_ <= kMaxFrameRate))
+      throw std::invalid_argument("fps must be in [0, 1000] (0: the data's own rate)");
     mean_ = net_->register_buffer("feature_mean", torch::zeros({kFeatureDim}));
     std_ = net_->register_buffer("feature_std", torch::ones({kFeatureDim}));
   }
@@ -67,6 +74,7 @@ class SincModel : public plugin::Model {
 
   std::unique_ptr<plugin::Dataset> MakeDataset(const plugin::DataContext& context) override {
     SincDataOptions options = SincDataOptions::FromContext(context);
+    options.fps = fps_;
     if (variant_ == "single" || variant_ == "compositing") {
       // The single-action baselines never see two actions at once.
       options.real_pairs = false;
@@ -111,6 +119,7 @@ class SincModel : public plugin::Model {
 
   Temos net() { return net_; }
   const std::string& variant() const { return variant_; }
+  double fps() const { return fps_; }
   torch::Tensor mean() const { return mean_; }
   torch::Tensor stddev() const { return std_; }
 
@@ -135,6 +144,7 @@ class SincModel : public plugin::Model {
 
   nlohmann::json config_;
   std::string variant_;
+  double fps_ = 0;
   Temos net_{nullptr};
   torch::Tensor mean_, std_;
   bool stats_ready_ = false;
@@ -226,8 +236,18 @@ class SincGenerator : public plugin::Generator {
   }
 
  private:
-  // The motion encoder's distribution of one motion.
-  Distribution EncodeOne(const Motion& m) const {
+  // The motion encoder's distribution of one motion (at the network's rate: every k-th frame for
+  // a whole-number ratio, as in training, else interpolated).
+  Distribution EncodeOne(const Motion& motion) const {
+    const double fps = model_->fps();
+    Motion resampled;
+    if (fps > 0 && !SameFrameRate(motion.fps, fps)) {
+      const double ratio = motion.fps / fps;
+      const bool whole = std::abs(ratio - std::round(ratio)) <= 1e-6 * ratio && ratio >= 1;
+      resampled =
+          Resample(motion, fps, whole ? ResampleMethod::kByIndex : ResampleMethod::kInterpolate);
+    }
+    const Motion& m = resampled.num_frames() > 0 ? resampled : motion;
     const int64_t frames = m.num_frames();
     std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
     EncodeTemos135Fast(m.poses.data(), m.trans.data(), frames, features.data());
@@ -247,18 +267,23 @@ class SincGenerator : public plugin::Generator {
     return DecodeLatent(model_->net()->EncodeText(texts, false).z, frames, fps);
   }
 
-  // A latent [1, latent] decoded to a motion of `frames` frames at `fps`.
+  // A latent [1, latent] decoded to a motion of `frames` frames at `fps` (made at the network's
+  // rate, then interpolated to `fps`).
   Result<Motion> DecodeLatent(const torch::Tensor& z, int64_t frames, double fps) {
+    const double rate = model_->fps() > 0 ? model_->fps() : fps;
+    const int64_t asked = frames;
+    frames = FramesCovering(asked, fps, rate);
     const auto padding = torch::zeros({1, frames}, torch::kBool);
     auto x = model_->net()->Decode(z, padding).select(1, 0);  // [T, 135]
     x = (x * (model_->stddev() + 1e-5) + model_->mean()).contiguous();
     FeatureMatrix features(frames, kFeatureDim);
     std::memcpy(features.data.data(), x.data_ptr<float>(),
                 sizeof(float) * static_cast<size_t>(frames * kFeatureDim));
-    Motion m = DecodeTemos135(features, CanonicalTemosAnchor(), fps);
+    Motion m = DecodeTemos135(features, CanonicalTemosAnchor(), rate);
     for (float v : m.poses) {
       if (!std::isfinite(v)) return Internal("generate: the model produced NaN");
     }
+    if (!SameFrameRate(rate, fps)) return ResampleToFrames(m, fps, asked);
     return m;
   }
 

@@ -1,5 +1,6 @@
 #include "sinc_data.h"
 
+#include <cmath>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
@@ -46,6 +47,18 @@ SincDataOptions SincDataOptions::FromContext(const plugin::DataContext& context)
   return o;
 }
 
+int64_t FramesPerNetworkFrame(double rate, double fps) {
+  if (fps <= 0 || SameFrameRate(rate, fps)) return 1;
+  const double ratio = rate / fps;
+  const double whole = std::round(ratio);
+  if (whole < 1 || std::abs(ratio - whole) > 1e-6 * whole) {
+    throw std::invalid_argument("fps " + std::to_string(fps) + ": the spans' rate (" +
+                                std::to_string(rate) +
+                                " fps) is not a whole multiple of the model's rate");
+  }
+  return static_cast<int64_t>(whole);
+}
+
 SincDataset::SincDataset(std::shared_ptr<const sinc::SpanTable> table,
                          const SincDataOptions& options)
     : table_(std::move(table)), options_(options) {
@@ -59,6 +72,13 @@ SincDataset::SincDataset(std::shared_ptr<const sinc::SpanTable> table,
   if (items_.empty())
     throw std::invalid_argument("no training examples in split '" + options_.split + "' of " +
                                 options_.spans);
+  for (const int32_t span : items_) {
+    try {
+      FramesPerNetworkFrame(table_->fps[static_cast<size_t>(span)], options_.fps);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(options_.spans + ": " + e.what());
+    }
+  }
   sinc::SynthOptions synth;
   synth.split = options_.split;
   synth.parts = options_.parts;
@@ -97,6 +117,9 @@ Example SincDataset::Make(int64_t index, uint64_t seed) const {
     ex.features.resize(static_cast<size_t>(frames * kTemosFeatureDim));
     EncodeTemos135Fast(poses, trans, frames, ex.features.data());
   }
+  const int64_t k = FramesPerNetworkFrame(
+      table_->fps[static_cast<size_t>(composed ? recipe.first : span)], options_.fps);
+  if (k > 1) frames = EveryKthTemos135(ex.features.data(), frames, k, ex.features.data());
   ex.frames = std::min<int64_t>(frames, options_.max_frames);
   ex.features.resize(static_cast<size_t>(ex.frames * kTemosFeatureDim));
   if (b.empty()) {
@@ -148,11 +171,14 @@ std::pair<torch::Tensor, torch::Tensor> SincDataset::ComputeStats() const {
   int64_t count = 0;
   std::vector<float> buffer;
   for (const int32_t span : items_) {
-    const int64_t frames = table_->frames(span);
+    int64_t frames = table_->frames(span);
     buffer.resize(static_cast<size_t>(frames * kTemosFeatureDim));
     EncodeTemos135Fast(table_->poses + table_->offsets[static_cast<size_t>(span)] * kNumJoints * 3,
                        table_->trans + table_->offsets[static_cast<size_t>(span)] * 3, frames,
                        buffer.data());
+    // At the network's rate: its velocities span k frames.
+    const int64_t k = FramesPerNetworkFrame(table_->fps[static_cast<size_t>(span)], options_.fps);
+    if (k > 1) frames = EveryKthTemos135(buffer.data(), frames, k, buffer.data());
     for (int64_t f = 0; f < frames; ++f) {
       for (int d = 0; d < kTemosFeatureDim; ++d) {
         const double v = buffer[static_cast<size_t>(f * kTemosFeatureDim + d)];

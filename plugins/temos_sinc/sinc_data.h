@@ -6,6 +6,7 @@
 // params.data: {spans: PATH (default: an input stage's spans.npz), split: train, singles: true,
 // real_pairs: true, synthetic_p: 0.5 (probability that a real single is composed with a partner),
 // parts: labels | random, crop: first | centre, max_frames: 200, augment_texts: true, limit: 0}
+// and the model's frame rate (the config's `fps`, set by the model, not a data key).
 #pragma once
 
 #include <torch/torch.h>
@@ -28,8 +29,11 @@ struct SincDataOptions {
   double synthetic_p = 0.5;
   sinc::PartSource parts = sinc::PartSource::kLabels;
   sinc::CropMode crop = sinc::CropMode::kFirst;
-  int64_t max_frames = 200;
+  int64_t max_frames = 200;  // in the network's frames
   bool augment_texts = true;
+  // The network's frame rate (the model config's `fps`; 0: the data's own). The spans' rate must be
+  // a whole multiple of it: every k-th frame is kept (EveryKthTemos135), as Resample by index.
+  double fps = 0;
   // The first `limit` examples of the split in the table's order (0: all): the spans a generate
   // stage with the same split, kind and limit reads, so that a model fitted to a few motions can be
   // asked to give them back (issue 15: can the decoder make a gait at all?).
@@ -37,9 +41,13 @@ struct SincDataOptions {
   static SincDataOptions FromContext(const plugin::DataContext& context);
 };
 
+// Data frames per network frame: 1 when `fps` is 0 or `rate` itself, else rate / fps, which must
+// be a whole number (std::invalid_argument naming both rates otherwise).
+int64_t FramesPerNetworkFrame(double rate, double fps);
+
 // One example before batching.
 struct Example {
-  std::vector<float> features;  // [frames, 135], not normalised
+  std::vector<float> features;  // [frames, 135] at the network's rate, not normalised
   int64_t frames = 0;
   std::vector<std::string> actions;  // the action texts (1 or 2)
   std::string text;                  // the augmented text of the whole example

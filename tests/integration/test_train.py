@@ -148,6 +148,33 @@ class TrainStageTest(EngineTest):
         missing = self.cli("generate", "--model", self.dir, "--text", "a", "--out", clip, check=False)
         self.assertIn("not a checkpoint", missing.stderr)
 
+    def test_a_model_at_10_fps_generates_at_the_asked_rate_and_length(self):
+        # Issue 15: `fps: 10` trains on every third frame; generating and reconstructing come back
+        # to the spans' 30 fps at their lengths, and `motionpipe generate` to the asked duration.
+        job = self.run_pipeline("tenth", 1, "stages.sinc.params.config.fps=10")
+        with open(glob.glob(os.path.join(job, "sinc", "task-*", "model", "model.json"))[0]) as f:
+            self.assertEqual(json.load(f)["config"]["fps"], 10)
+        lengths = {}
+        for stage in ("gen", "recon"):
+            lengths[stage] = {}
+            for path in glob.glob(os.path.join(job, stage, "task-*", "generated.npz")):
+                with np.load(path) as z:
+                    self.assertTrue(np.isfinite(z["poses"]).all())
+                    for i, sid in enumerate(z["ids"]):
+                        lengths[stage][str(sid)] = int(z["offsets"][i + 1] - z["offsets"][i])
+        self.assertEqual(len(lengths["gen"]), 4)
+        self.assertEqual(lengths["gen"], lengths["recon"])
+        with np.load(glob.glob(self.path("tenth", "train_test-*", "singles", "task-*", "spans.npz"))[0]) as z:
+            truth = {str(sid): int(z["offsets"][i + 1] - z["offsets"][i]) for i, sid in enumerate(z["ids"])}
+        self.assertEqual(lengths["gen"], {k: truth[k] for k in lengths["gen"]})
+        self.assertTrue(any(n % 3 != 1 for n in truth.values()))  # lengths a 10-fps grid does not hit
+        clip = self.path("tenth.npz")
+        self.cli("generate", "--model", os.path.join(job, "sinc"), "--text", "walk forward", "--seconds", "2.5",
+                 "--out", clip)
+        with np.load(clip) as z:
+            self.assertEqual(z["poses"].shape, (75, 22, 3))
+            self.assertEqual(float(z["fps"][0]), 30)
+
     def test_bad_model_configs_fail_the_task_with_the_reason(self):
         for overrides, reason in ((["stages.sinc.params.model=no_such_model"], "no model plugin 'no_such_model'"),
                                   (["stages.sinc.params.config.model.heads=3"], "must be divisible by heads"),

@@ -744,18 +744,19 @@ TEST(Editor, TheNetworkRateKeepsEveryKthFrameAndEditsComeBackAtTheAskedLength) {
   EXPECT_TRUE(twenty.joints.empty());
   EXPECT_NEAR(twenty.motion.trans[3], 0.045, 1e-6);  // halfway between frames 1 and 2
   // Network frames that cover a length, and the way back: exactly the frames asked for.
-  EXPECT_EQ(NetworkFrames(31, 30, 10), 11);
-  EXPECT_EQ(NetworkFrames(32, 30, 10), 12);
-  EXPECT_EQ(NetworkFrames(32, 30, 0), 32);
-  EXPECT_EQ(NetworkFrames(32, 30, 30), 32);
-  const Motion back = FromNetworkRate(at.motion, 30, 31);
+  EXPECT_EQ(FramesCovering(31, 30, 10), 11);
+  EXPECT_EQ(FramesCovering(32, 30, 10), 12);
+  EXPECT_EQ(FramesCovering(32, 30, 0), 32);
+  EXPECT_EQ(FramesCovering(32, 30, 30), 32);
+  const Motion back = ResampleToFrames(at.motion, 30, 31).value();
   ASSERT_EQ(back.num_frames(), 31);
   EXPECT_EQ(back.fps, 30);
   for (int64_t f = 0; f < 31; ++f)
     EXPECT_NEAR(back.trans[static_cast<size_t>(f * 3)], 0.03 * static_cast<double>(f), 1e-5) << f;
-  const Motion longer = FromNetworkRate(at.motion, 30, 33);  // repeats the last frame
+  const Motion longer = ResampleToFrames(at.motion, 30, 33).value();  // repeats the last frame
   ASSERT_EQ(longer.num_frames(), 33);
   EXPECT_FLOAT_EQ(longer.trans[32 * 3], longer.trans[30 * 3]);
+  EXPECT_FALSE(ResampleToFrames(Motion{}, 30, 3).ok());
 
   // The training data at the network's rate: 30-frame clips at 30 fps become 10 frames at 10 fps.
   const std::string dir = ::testing::TempDir() + "/network_rate";

@@ -4,6 +4,7 @@
 #include <torch/torch.h>
 
 #include <array>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -11,6 +12,7 @@
 #include "../../plugins/common/transformer.h"
 #include "../../plugins/temos_sinc/sinc_data.h"
 #include "../../plugins/temos_sinc/temos.h"
+#include "motionpipe/features/temos135.h"
 #include "motionpipe/formats/npz.h"
 
 namespace motionpipe {
@@ -244,6 +246,58 @@ TEST(SincData, LimitKeepsTheSplitsFirstExamplesInTheTablesOrder) {
   plugin::DataContext context;
   context.config = {{"spans", "made.npz"}, {"limit", -1}};
   EXPECT_THROW(temos::SincDataOptions::FromContext(context), std::invalid_argument);
+}
+
+// Issue 15: SINC at its own rate (the model's `fps`) trains on every k-th frame of its spans, with
+// the velocities over k frames in the examples and in the statistics; max_frames counts the
+// network's frames; a rate that does not divide the data's is refused, naming the spans file.
+TEST(SincData, FpsKeepsEveryKthFrameWithItsVelocitiesAndStatistics) {
+  auto table = std::make_shared<sinc::SpanTable>();
+  Motion walk = Motion::Rest(31, 30, 0.9);
+  for (int64_t f = 0; f < 31; ++f)
+    walk.SetTranslation(f, {0.03 * static_cast<double>(f), 0.01 * static_cast<double>(f), 0.9});
+  table->Add("s0", "train", "made", walk, "walk", "");
+  temos::SincDataOptions options;
+  options.spans = "made.npz";
+  options.synthetic_p = 0;
+  options.augment_texts = false;
+  temos::SincDataset full_rate(table, options);
+  const temos::Example full = full_rate.Make(0, 1);
+  ASSERT_EQ(full.frames, 31);
+  options.fps = 10;
+  temos::SincDataset tenth(table, options);
+  const temos::Example ex = tenth.Make(0, 1);
+  ASSERT_EQ(ex.frames, 11);
+  std::vector<float> expected = full.features;
+  ASSERT_EQ(EveryKthTemos135(expected.data(), 31, 3, expected.data()), 11);
+  expected.resize(static_cast<size_t>(11 * kTemosFeatureDim));
+  EXPECT_EQ(ex.features, expected);
+  // A network frame spans 3 of the data's: three times the displacement, in the examples and in
+  // the statistics (frame 0 has none: 30 of 31 frames move by v, 10 of 11 by 3 v).
+  const auto speed = [](const float* row) { return std::hypot(row[1], row[2]); };
+  const double v = speed(full.features.data() + kTemosFeatureDim);
+  EXPECT_NEAR(v, std::hypot(0.03, 0.01), 1e-6);
+  EXPECT_NEAR(speed(ex.features.data() + 5 * kTemosFeatureDim), 3 * v, 1e-6);
+  const auto mean_speed = [&](const temos::SincDataset& data) {
+    const torch::Tensor mean = data.ComputeStats().first;
+    return std::hypot(mean[1].item<double>(), mean[2].item<double>());
+  };
+  EXPECT_NEAR(mean_speed(full_rate), v * 30 / 31, 1e-6);
+  EXPECT_NEAR(mean_speed(tenth), 3 * v * 10 / 11, 1e-6);
+  options.max_frames = 5;
+  EXPECT_EQ(temos::SincDataset(table, options).Make(0, 1).frames, 5);
+  EXPECT_EQ(temos::FramesPerNetworkFrame(30, 0), 1);
+  EXPECT_EQ(temos::FramesPerNetworkFrame(30, 30), 1);
+  EXPECT_EQ(temos::FramesPerNetworkFrame(30, 15), 2);
+  EXPECT_THROW(temos::FramesPerNetworkFrame(30, 60), std::invalid_argument);
+  options.fps = 7;
+  try {
+    temos::SincDataset refused(table, options);
+    ADD_FAILURE() << "a rate that does not divide 30 fps was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("made.npz"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("not a whole multiple"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Temos, KlOfIdenticalGaussiansIsZeroAndMatchesTheClosedForm) {

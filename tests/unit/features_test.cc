@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "motionpipe/features/motionfix207.h"
@@ -106,6 +108,35 @@ TEST(Temos135, CanonicalisationIsInvariantToInitialHeading) {
   const Motion canonical = DecodeTemos135(a, CanonicalTemosAnchor(), 30);
   EXPECT_NEAR(HeadingZYX(canonical.LocalRotation(0, 0)), kTemosCanonicalHeading, 1e-6);
   EXPECT_NEAR(canonical.Translation(0).x, 0.0, 1e-9);
+}
+
+// Issue 15: a model at its own rate (SINC's `fps`) trains on every k-th frame's features, made from
+// the full-rate ones; they must be what encoding the resampled motion gives, velocities included.
+TEST(Temos135, EveryKthFrameIsTheEncodingOfTheMotionResampledByIndex) {
+  const Motion motion = testing::SmoothMotion(31, 5);
+  const FeatureMatrix all = EncodeTemos135(motion);
+  std::vector<float> thirds;
+  for (const int64_t k : {1, 3, 4, 40}) {
+    std::vector<float> out(all.data.size(), -7.f);
+    const int64_t rows = EveryKthTemos135(all.data.data(), all.rows, k, out.data());
+    const FeatureMatrix expected = EncodeTemos135(Resample(motion, 30.0 / static_cast<double>(k)));
+    ASSERT_EQ(rows, expected.rows) << k;
+    EXPECT_EQ(rows, (31 - 1) / k + 1) << k;
+    double worst = 0;
+    for (int64_t i = 0; i < rows * kTemosFeatureDim; ++i)
+      worst = std::max(worst, std::abs(static_cast<double>(out[static_cast<size_t>(i)]) -
+                                       expected.data[static_cast<size_t>(i)]));
+    EXPECT_LT(worst, 1e-5) << k;
+    if (k == 3) thirds.assign(out.begin(), out.begin() + rows * kTemosFeatureDim);
+  }
+  // The trajectory moves, so the velocities are not trivially 0.
+  EXPECT_GT(std::abs(thirds[kTemosFeatureDim + 1]) + std::abs(thirds[kTemosFeatureDim + 2]), 1e-4);
+  // In place: the same rows.
+  std::vector<float> in_place = all.data;
+  ASSERT_EQ(EveryKthTemos135(in_place.data(), all.rows, 3, in_place.data()), 11);
+  in_place.resize(thirds.size());
+  EXPECT_EQ(in_place, thirds);
+  EXPECT_EQ(EveryKthTemos135(nullptr, 0, 3, nullptr), 0);
 }
 
 TEST(Temos135, CanonicalHeadingMatchesTheReferenceMean) {

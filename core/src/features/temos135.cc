@@ -1,6 +1,7 @@
 #include "motionpipe/features/temos135.h"
 
 #include <cmath>
+#include <cstring>
 #include <vector>
 
 #include "../simd/simd.h"
@@ -92,6 +93,26 @@ void EncodeTemos135Fast(const float* poses, const float* trans, int64_t frames, 
   const float* joints[kNumJoints];
   for (auto& p : joints) p = poses;
   EncodeTemos135FastJoints(joints, trans, frames, out, canonical_heading);
+}
+
+int64_t EveryKthTemos135(const float* features, int64_t frames, int64_t k, float* out) {
+  if (frames <= 0) return 0;
+  const int64_t rows = (frames - 1) / k + 1;
+  for (int64_t g = 0; g < rows; ++g) {
+    // Rows (g - 1) k + 1 .. g k are read before row g is written; every earlier output row is
+    // below them, so `out` may be `features`.
+    double vx = 0, vy = 0;
+    for (int64_t f = (g - 1) * k + 1; g > 0 && f <= g * k; ++f) {
+      vx += features[f * kTemosFeatureDim + 1];
+      vy += features[f * kTemosFeatureDim + 2];
+    }
+    const float* from = features + g * k * kTemosFeatureDim;
+    float* row = out + g * kTemosFeatureDim;
+    if (row != from) std::memmove(row, from, sizeof(float) * kTemosFeatureDim);
+    row[1] = static_cast<float>(vx);
+    row[2] = static_cast<float>(vy);
+  }
+  return rows;
 }
 
 Motion DecodeTemos135(const FeatureMatrix& features, const MotionAnchor& anchor, double fps,

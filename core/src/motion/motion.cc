@@ -188,4 +188,28 @@ Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) 
   return out;
 }
 
+int64_t FramesCovering(int64_t frames, double rate, double fps) {
+  if (fps <= 0 || !(rate > 0) || SameFrameRate(rate, fps)) return frames;
+  return static_cast<int64_t>(std::ceil(static_cast<double>(frames - 1) * fps / rate - 1e-9)) + 1;
+}
+
+Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frames) {
+  if (motion.num_frames() == 0) return InvalidArgument("resampling a motion without frames");
+  // Resample keeps a motion already at `rate` (SameFrameRate) as it is.
+  Motion out = Resample(motion, rate, ResampleMethod::kInterpolate);
+  out.fps = rate;
+  // Resample covers the same duration, so it gives at least `frames` frames from FramesCovering's;
+  // a shorter motion (another length) repeats its last frame.
+  const int64_t have = out.num_frames();
+  out.poses.resize(static_cast<size_t>(frames) * kNumJoints * 3);
+  out.trans.resize(static_cast<size_t>(frames) * 3);
+  for (int64_t f = have; f < frames; ++f) {
+    std::copy_n(&out.poses[static_cast<size_t>(have - 1) * kNumJoints * 3], kNumJoints * 3,
+                &out.poses[static_cast<size_t>(f) * kNumJoints * 3]);
+    std::copy_n(&out.trans[static_cast<size_t>(have - 1) * 3], 3,
+                &out.trans[static_cast<size_t>(f) * 3]);
+  }
+  return out;
+}
+
 }  // namespace motionpipe

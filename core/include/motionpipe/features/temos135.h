@@ -32,6 +32,14 @@ void EncodeTemos135Fast(const float* poses, const float* trans, int64_t frames, 
 void EncodeTemos135FastJoints(const float* const* joint_poses, const float* trans, int64_t frames,
                               float* out, double canonical_heading = kTemosCanonicalHeading);
 
+// The features of every k-th frame (frames 0, k, 2k, ...: the motion Resample'd by index to
+// rate / k) from the features of every frame: those frames' heights and rotations, and each planar
+// velocity the sum of the k it spans (the trajectory is turned once, by the first frame's heading,
+// so the sum is the displacement). What the encoders give for the resampled motion; a model that
+// runs at its own rate trains on these (issue 15). Writes (frames - 1) / k + 1 rows (0 for no
+// frames) to `out`, which may be `features` itself, and returns that count. k >= 1.
+int64_t EveryKthTemos135(const float* features, int64_t frames, int64_t k, float* out);
+
 // Exact inverse given the original anchor (heading and xy of the first frame; z comes from the
 // features). With a default anchor the motion starts at the origin facing `canonical_heading`.
 Motion DecodeTemos135(const FeatureMatrix& features, const MotionAnchor& anchor, double fps,

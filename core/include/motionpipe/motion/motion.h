@@ -53,6 +53,15 @@ bool SameFrameRate(double a, double b);
 Motion Resample(const Motion& motion, double target_fps,
                 ResampleMethod method = ResampleMethod::kByIndex);
 
+// A model that runs at its own frame rate (the MDT's and SINC's `fps`, issue 15: a step at 10 fps
+// costs about a third of one at 30) makes the frames at `fps` that cover `frames` frames at `rate`
+// once resampled back to it: ceil((frames - 1) fps / rate) + 1 (`frames` itself when fps <= 0 or
+// the same rate).
+int64_t FramesCovering(int64_t frames, double rate, double fps);
+// A motion made at another rate brought to `rate` (interpolated) and cut to exactly `frames`
+// frames (a shorter one repeats its last frame); InvalidArgument for a motion without frames.
+Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frames);
+
 // Bounds on a resampling request, so that a mistyped rate (--fps 1e9) is an error, not an
 // allocation of gigabytes: at most 1,000 fps (mocap systems record up to a few hundred) and at most
 // a million output frames (9 hours at 30 fps).
