@@ -39,19 +39,13 @@ AtNetworkRate ToNetworkRate(const Motion& motion, const float* joints, double fp
     if (joints) out.joints.assign(joints, joints + motion.num_frames() * kNumJoints * 3);
     return out;
   }
-  out.step = motion.fps / fps;
-  const double whole = std::round(out.step);
-  if (whole >= 1 && std::abs(out.step - whole) <= 1e-6 * whole) {
-    out.step = whole;
-    out.motion = Resample(motion, fps, ResampleMethod::kByIndex);
-    if (joints) {
-      const int64_t k = static_cast<int64_t>(whole);
-      for (int64_t f = 0; f < out.motion.num_frames(); ++f)
-        out.joints.insert(out.joints.end(), joints + f * k * kNumJoints * 3,
-                          joints + (f * k + 1) * kNumJoints * 3);
-    }
-  } else {
-    out.motion = Resample(motion, fps, ResampleMethod::kInterpolate);
+  out.motion = ToModelRate(motion, fps);
+  const int64_t k = WholeFrameStep(motion.fps, fps);
+  out.step = k > 0 ? static_cast<double>(k) : motion.fps / fps;
+  if (joints && k > 0) {
+    for (int64_t f = 0; f < out.motion.num_frames(); ++f)
+      out.joints.insert(out.joints.end(), joints + f * k * kNumJoints * 3,
+                        joints + (f * k + 1) * kNumJoints * 3);
   }
   return out;
 }

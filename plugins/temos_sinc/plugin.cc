@@ -17,7 +17,6 @@
 #include <torch/torch.h>
 
 #include <chrono>
-#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -239,15 +238,7 @@ class SincGenerator : public plugin::Generator {
   // The motion encoder's distribution of one motion (at the network's rate: every k-th frame for
   // a whole-number ratio, as in training, else interpolated).
   Distribution EncodeOne(const Motion& motion) const {
-    const double fps = model_->fps();
-    Motion resampled;
-    if (fps > 0 && !SameFrameRate(motion.fps, fps)) {
-      const double ratio = motion.fps / fps;
-      const bool whole = std::abs(ratio - std::round(ratio)) <= 1e-6 * ratio && ratio >= 1;
-      resampled =
-          Resample(motion, fps, whole ? ResampleMethod::kByIndex : ResampleMethod::kInterpolate);
-    }
-    const Motion& m = resampled.num_frames() > 0 ? resampled : motion;
+    const Motion m = ToModelRate(motion, model_->fps());
     const int64_t frames = m.num_frames();
     std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
     EncodeTemos135Fast(m.poses.data(), m.trans.data(), frames, features.data());

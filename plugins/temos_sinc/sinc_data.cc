@@ -1,6 +1,6 @@
 #include "sinc_data.h"
 
-#include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
@@ -48,15 +48,15 @@ SincDataOptions SincDataOptions::FromContext(const plugin::DataContext& context)
 }
 
 int64_t FramesPerNetworkFrame(double rate, double fps) {
-  if (fps <= 0 || SameFrameRate(rate, fps)) return 1;
-  const double ratio = rate / fps;
-  const double whole = std::round(ratio);
-  if (whole < 1 || std::abs(ratio - whole) > 1e-6 * whole) {
-    throw std::invalid_argument("fps " + std::to_string(fps) + ": the spans' rate (" +
-                                std::to_string(rate) +
-                                " fps) is not a whole multiple of the model's rate");
+  const int64_t k = WholeFrameStep(rate, fps);
+  if (k == 0) {
+    char message[160];
+    std::snprintf(message, sizeof(message),
+                  "fps %g: the spans' rate (%g fps) is not a whole multiple of the model's rate",
+                  fps, rate);
+    throw std::invalid_argument(message);
   }
-  return static_cast<int64_t>(whole);
+  return k;
 }
 
 SincDataset::SincDataset(std::shared_ptr<const sinc::SpanTable> table,

@@ -159,6 +159,39 @@ TEST(Motion, AnAbsurdResamplingRateIsAnErrorNamingTheFile) {
   EXPECT_NE(s.message().find("slow.npz: resampling 2000 frames"), std::string::npos) << s.message();
 }
 
+// A model at its own rate (the MDT's and SINC's `fps`) cuts its inputs the way its training data
+// were cut: every k-th frame for a whole ratio, else interpolated; its outputs come back to exactly
+// the frames asked for.
+TEST(Motion, AModelsRateKeepsEveryKthFrameForWholeRatiosAndComesBackAtTheAskedLength) {
+  EXPECT_EQ(WholeFrameStep(30, 10), 3);
+  EXPECT_EQ(WholeFrameStep(120.0000012, 10), 12);
+  EXPECT_EQ(WholeFrameStep(30, 0), 1);
+  EXPECT_EQ(WholeFrameStep(30, 30), 1);
+  EXPECT_EQ(WholeFrameStep(25, 10), 0);
+  EXPECT_EQ(WholeFrameStep(30, 60), 0);
+  const Motion motion = testing::SmoothMotion(31, 4, 30);
+  const Motion tenth = ToModelRate(motion, 10);
+  ASSERT_EQ(tenth.num_frames(), 11);
+  EXPECT_EQ(tenth.fps, 10);
+  EXPECT_EQ(tenth.poses[static_cast<size_t>(5 * kNumJoints * 3 + 7)],
+            motion.poses[static_cast<size_t>(15 * kNumJoints * 3 + 7)]);  // a frame, not a blend
+  const Motion twenty = ToModelRate(motion, 20);                          // 1.5 frames: slerped
+  EXPECT_EQ(twenty.num_frames(), 21);
+  EXPECT_LT(Norm(twenty.Translation(1) - 0.5 * (motion.Translation(1) + motion.Translation(2))),
+            1e-6);
+  EXPECT_EQ(ToModelRate(motion, 0).poses, motion.poses);
+  EXPECT_EQ(FramesCovering(31, 30, 10), 11);
+  EXPECT_EQ(FramesCovering(32, 30, 10), 12);  // frame 31 lies past network frame 10
+  EXPECT_EQ(FramesCovering(32, 30, 0), 32);
+  const Result<Motion> back = ResampleToFrames(ToModelRate(motion, 10), 30, 32);
+  ASSERT_TRUE(back.ok());
+  ASSERT_EQ(back->num_frames(), 32);
+  EXPECT_EQ(back->fps, 30);
+  EXPECT_LT(Norm(back->Translation(15) - motion.Translation(15)), 1e-6);  // a kept frame
+  EXPECT_EQ(back->trans[31 * 3], back->trans[30 * 3]);                    // the last one repeated
+  EXPECT_FALSE(ResampleToFrames(Motion{}, 30, 3).ok());
+}
+
 TEST(Motion, ResampleInterpolateIsSmoothAndExactAtSamples) {
   const Motion motion = testing::SmoothMotion(61, 5, 30);
   const Motion up = Resample(motion, 60, ResampleMethod::kInterpolate);

@@ -188,6 +188,20 @@ Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) 
   return out;
 }
 
+int64_t WholeFrameStep(double rate, double fps) {
+  if (fps <= 0 || SameFrameRate(rate, fps)) return 1;
+  const double ratio = rate / fps;
+  const double whole = std::round(ratio);
+  return whole >= 1 && std::abs(ratio - whole) <= 1e-6 * whole ? static_cast<int64_t>(whole) : 0;
+}
+
+Motion ToModelRate(const Motion& motion, double fps) {
+  if (fps <= 0 || SameFrameRate(motion.fps, fps)) return motion;
+  return Resample(motion, fps,
+                  WholeFrameStep(motion.fps, fps) > 0 ? ResampleMethod::kByIndex
+                                                      : ResampleMethod::kInterpolate);
+}
+
 int64_t FramesCovering(int64_t frames, double rate, double fps) {
   if (fps <= 0 || !(rate > 0) || SameFrameRate(rate, fps)) return frames;
   return static_cast<int64_t>(std::ceil(static_cast<double>(frames - 1) * fps / rate - 1e-9)) + 1;

@@ -53,6 +53,13 @@ bool SameFrameRate(double a, double b);
 Motion Resample(const Motion& motion, double target_fps,
                 ResampleMethod method = ResampleMethod::kByIndex);
 
+// Frames at `rate` per frame at `fps` when that is a whole number k >= 1 (to 1 ppm), else 0; 1 when
+// fps <= 0 or the same rate.
+int64_t WholeFrameStep(double rate, double fps);
+// A motion brought to a model's own rate `fps`: every k-th frame when the motion's rate is k times
+// it (Resample by index, as the training data are cut), else interpolated; unchanged when fps <= 0
+// or the same rate.
+Motion ToModelRate(const Motion& motion, double fps);
 // A model that runs at its own frame rate (the MDT's and SINC's `fps`, issue 15: a step at 10 fps
 // costs about a third of one at 30) makes the frames at `fps` that cover `frames` frames at `rate`
 // once resampled back to it: ceil((frames - 1) fps / rate) + 1 (`frames` itself when fps <= 0 or
