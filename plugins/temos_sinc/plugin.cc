@@ -238,7 +238,10 @@ class SincGenerator : public plugin::Generator {
   // The motion encoder's distribution of one motion (at the network's rate: every k-th frame for
   // a whole-number ratio, as in training, else interpolated).
   Distribution EncodeOne(const Motion& motion) const {
-    const Motion m = ToModelRate(motion, model_->fps());
+    // Only a model at its own rate pays for the copy (the TMR scores every motion through here).
+    const bool own_rate = model_->fps() > 0 && !SameFrameRate(motion.fps, model_->fps());
+    const Motion resampled = own_rate ? ToModelRate(motion, model_->fps()) : Motion{};
+    const Motion& m = own_rate ? resampled : motion;
     const int64_t frames = m.num_frames();
     std::vector<float> features(static_cast<size_t>(frames * kFeatureDim));
     EncodeTemos135Fast(m.poses.data(), m.trans.data(), frames, features.data());
