@@ -1,6 +1,7 @@
 #include "report.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -194,6 +195,30 @@ std::vector<double> Values(const Method& m, const std::string& pointer) {
 
 Stat Collect(const Method& m, const std::string& pointer) { return Summarize(Values(m, pointer)); }
 
+// A run's replicate k of its stage's `seeds: N` (the stage is name-sk for k > 1, pipeline.cc).
+int Replicate(const Run& run) {
+  const size_t at = run.stage.rfind("-s");
+  if (at == std::string::npos || at + 2 >= run.stage.size()) return 1;
+  int k = 0;
+  for (size_t i = at + 2; i < run.stage.size(); ++i) {
+    if (!std::isdigit(static_cast<unsigned char>(run.stage[i]))) return 1;
+    k = k * 10 + (run.stage[i] - '0');
+    if (k > 1000) return 1;
+  }
+  return k;
+}
+
+// A metric by JSON pointer over the method's runs, by replicate.
+std::map<int, double> ValuesByReplicate(const Method& m, const std::string& pointer) {
+  std::map<int, double> values;
+  const json::json_pointer p(pointer);
+  for (const Run& r : m.runs) {
+    if (r.metrics.contains(p) && r.metrics[p].is_number())
+      values[Replicate(r)] = r.metrics[p].get<double>();
+  }
+  return values;
+}
+
 std::string Format(double value, int decimals) {
   char text[64];
   std::snprintf(text, sizeof text, "%.*f", decimals, value);
@@ -323,7 +348,8 @@ std::string StatText(const Stat& s, int decimals) {
 
 // A paper's claim "better beats worse" on `pointer` (issue 15's calibration): not decidable while a
 // compared model does not beat the untrained row, or with fewer than 3 seeds a side; it holds when
-// the difference of the means beats two standard errors, does not hold when the reverse does.
+// the difference of the means beats two standard errors, does not hold when the reverse does. The
+// runs pair by seed when both rows hold the same 3+ replicates (DecideClaim).
 ClaimCheck Compare(const std::string& paper, const std::string& claim, const Method* better,
                    const Method* worse, const Method* better_untrained,
                    const Method* worse_untrained, const std::string& pointer,
@@ -333,7 +359,20 @@ ClaimCheck Compare(const std::string& paper, const std::string& claim, const Met
     out.detail = "a method of the comparison is not in this job";
     return out;
   }
-  const std::vector<double> a_values = Values(*better, pointer), b_values = Values(*worse, pointer);
+  std::vector<double> a_values = Values(*better, pointer), b_values = Values(*worse, pointer);
+  // Paired by seed when both sides hold the same 3+ replicates (DecideClaim).
+  const std::map<int, double> a_seeds = ValuesByReplicate(*better, pointer),
+                              b_seeds = ValuesByReplicate(*worse, pointer);
+  bool paired = a_seeds.size() >= 3 && a_seeds.size() == a_values.size() &&
+                a_seeds.size() == b_seeds.size() && b_seeds.size() == b_values.size();
+  for (auto a = a_seeds.begin(), b = b_seeds.begin(); paired && a != a_seeds.end(); ++a, ++b)
+    paired = a->first == b->first;
+  if (paired) {
+    a_values.clear();
+    b_values.clear();
+    for (const auto& [k, v] : a_seeds) a_values.push_back(v);
+    for (const auto& [k, v] : b_seeds) b_values.push_back(v);
+  }
   const auto untrained_values = [&](const Method* u) {
     return u ? Values(*u, pointer) : std::vector<double>{};
   };
@@ -345,11 +384,18 @@ ClaimCheck Compare(const std::string& paper, const std::string& claim, const Met
   }
   const Stat a = Summarize(a_values), b = Summarize(b_values);
   const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
-  const double se =
-      std::sqrt((a.n > 1 ? a.sd * a.sd / a.n : 0) + (b.n > 1 ? b.sd * b.sd / b.n : 0));
   out.detail = metric_name + ": " + StatText(a, decimals) + " vs " + StatText(b, decimals) +
                "; difference " + Format(diff, decimals) + ", 2 standard errors " +
-               Format(2 * se, decimals);
+               Format(TwoStandardErrors(a_values, b_values, paired), decimals);
+  if (paired) {
+    out.detail += " of the " + std::to_string(a.n) + " per-seed differences (";
+    for (size_t k = 0; k < a_values.size(); ++k) {
+      const double d = higher_is_better ? a_values[k] - b_values[k] : b_values[k] - a_values[k];
+      out.detail += (k ? ", " : "") + Format(d, decimals);
+    }
+    out.detail +=
+        "; unpaired, " + Format(TwoStandardErrors(a_values, b_values, false), decimals) + ")";
+  }
   if (better_untrained == worse_untrained) {
     if (!u_values.empty()) out.detail += "; untrained " + StatText(Summarize(u_values), decimals);
   } else {
@@ -361,7 +407,7 @@ ClaimCheck Compare(const std::string& paper, const std::string& claim, const Met
     own(better, better_untrained, u_values);
     own(worse, worse_untrained, w_values);
   }
-  switch (DecideClaim(a_values, b_values, u_values, w_values, higher_is_better)) {
+  switch (DecideClaim(a_values, b_values, u_values, w_values, higher_is_better, paired)) {
     case ClaimVerdict::kHolds:
       out.verdict = "holds";
       break;
@@ -615,9 +661,22 @@ ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<do
   return DecideClaim(better, worse, untrained, untrained, higher_is_better);
 }
 
+double TwoStandardErrors(const std::vector<double>& better, const std::vector<double>& worse,
+                         bool paired) {
+  if (paired && better.size() == worse.size() && better.size() > 1) {
+    std::vector<double> differences(better.size());
+    for (size_t k = 0; k < better.size(); ++k) differences[k] = better[k] - worse[k];
+    const Stat d = Summarize(differences);
+    return 2 * d.sd / std::sqrt(static_cast<double>(d.n));
+  }
+  const Stat a = Summarize(better), b = Summarize(worse);
+  return 2 * std::sqrt((a.n > 1 ? a.sd * a.sd / a.n : 0) + (b.n > 1 ? b.sd * b.sd / b.n : 0));
+}
+
 ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
                          const std::vector<double>& better_untrained,
-                         const std::vector<double>& worse_untrained, bool higher_is_better) {
+                         const std::vector<double>& worse_untrained, bool higher_is_better,
+                         bool paired) {
   const Stat a = Summarize(better), b = Summarize(worse);
   if (!better_untrained.empty() &&
       !BeatsUntrained(a, Summarize(better_untrained), higher_is_better))
@@ -626,9 +685,9 @@ ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<do
     return ClaimVerdict::kWorseNotTrained;
   if (a.n < 3 || b.n < 3) return ClaimVerdict::kFewSeeds;
   const double diff = higher_is_better ? a.mean - b.mean : b.mean - a.mean;
-  const double se = std::sqrt(a.sd * a.sd / a.n + b.sd * b.sd / b.n);
-  if (diff > 2 * se) return ClaimVerdict::kHolds;
-  if (-diff > 2 * se) return ClaimVerdict::kDoesNotHold;
+  const double two_se = TwoStandardErrors(better, worse, paired && a.n == b.n);
+  if (diff > two_se) return ClaimVerdict::kHolds;
+  if (-diff > two_se) return ClaimVerdict::kDoesNotHold;
   return ClaimVerdict::kWithinErrors;
 }
 

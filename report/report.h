@@ -51,6 +51,12 @@ Result<ReportSummary> WriteReport(const ReportOptions& options);
 // row) by more than two standard errors, or with fewer than 3 seeds a side; otherwise it holds when
 // the difference of the means goes the claimed way by more than two standard errors of the
 // difference, does not hold when it goes the other way by as much, and is within them in between.
+// With `paired`, better[k] and worse[k] are the same seed's replicates (a pipeline's `seeds: N`
+// gives replicate k of every stage the seed base + k - 1: the same initial weights and batch order
+// for models of one architecture), and the standard error of the difference is that of the n
+// per-seed differences: the spread the seed gives both sides cancels. It is a valid standard
+// error for any pairing of independent runs too (their differences are then independent), so a
+// pairing of unrelated seeds costs power, not correctness.
 enum class ClaimVerdict {
   kHolds,
   kDoesNotHold,
@@ -65,7 +71,12 @@ ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<do
 // source-prior editor copies its source: each model must beat its own).
 ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<double>& worse,
                          const std::vector<double>& better_untrained,
-                         const std::vector<double>& worse_untrained, bool higher_is_better);
+                         const std::vector<double>& worse_untrained, bool higher_is_better,
+                         bool paired = false);
+// The two standard errors a claim's difference must beat: of the per-seed differences when
+// `paired` (same sizes), else of the difference of two independent means.
+double TwoStandardErrors(const std::vector<double>& better, const std::vector<double>& worse,
+                         bool paired);
 
 // Base64 (RFC 4648, with padding): the report's data: URIs.
 std::string Base64(std::string_view bytes);

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -52,6 +53,69 @@ TEST(Claims, HoldsOrFailsOnlyBeyondTwoStandardErrors) {
   EXPECT_EQ(DecideClaim({0.70, 0.71, 0.72}, {0.60, 0.61, 0.62}, {}, true), ClaimVerdict::kHolds);
   // Lower is better: 2.4 against 2.7 holds.
   EXPECT_EQ(DecideClaim({2.40, 2.41, 2.39}, {2.70, 2.71, 2.69}, {16}, false), ClaimVerdict::kHolds);
+}
+
+TEST(Claims, TheSameSeedsOnBothSidesArePaired) {
+  // Each seed moves both sides alike (the same initial weights and batch order): unpaired, the
+  // seeds' spread hides a difference of 0.01; paired, the per-seed differences (0.012, 0.009,
+  // 0.009) decide it.
+  const std::vector<double> better = {0.800, 0.840, 0.780}, worse = {0.788, 0.831, 0.771};
+  EXPECT_EQ(DecideClaim(better, worse, {}, {}, true), ClaimVerdict::kWithinErrors);
+  EXPECT_EQ(DecideClaim(better, worse, {}, {}, true, /*paired=*/true), ClaimVerdict::kHolds);
+  EXPECT_EQ(DecideClaim(worse, better, {}, {}, true, /*paired=*/true), ClaimVerdict::kDoesNotHold);
+  EXPECT_NEAR(TwoStandardErrors(better, worse, true), 2 * std::sqrt(3e-6 / 3), 1e-9);
+  // Differences of both signs (0.02, -0.01, 0.02) are not decided, paired or not.
+  EXPECT_EQ(DecideClaim({0.80, 0.84, 0.78}, {0.78, 0.85, 0.76}, {}, {}, true, true),
+            ClaimVerdict::kWithinErrors);
+  // Sides of different sizes cannot pair: the unpaired standard error.
+  EXPECT_DOUBLE_EQ(TwoStandardErrors({1, 2, 3, 4}, {1, 2, 3}, true),
+                   TwoStandardErrors({1, 2, 3, 4}, {1, 2, 3}, false));
+  EXPECT_EQ(DecideClaim(better, {0.788, 0.831}, {}, {}, true, true), ClaimVerdict::kFewSeeds);
+}
+
+// In a job the runs pair by replicate (stage name-sk) when both rows hold the same 3+ replicates.
+TEST(Claims, AJobsReplicatesPairBySeed) {
+  namespace fs = std::filesystem;
+  const std::string dir = ::testing::TempDir() + "/paired";
+  const auto report = [&](const std::vector<std::string>& mdm_replicates) {
+    fs::remove_all(dir);
+    const auto eval = [&](const std::string& stage, double r1, const nlohmann::json& extra) {
+      nlohmann::json m = {{"evaluation", "edit"},
+                          {"motions", 64},
+                          {"generated_to_target", {{"batches", {{"R@1", r1}, {"queries", 64}}}}}};
+      m.update(extra);
+      fs::create_directories(dir + "/job/" + stage + "/task-00000");
+      EXPECT_TRUE(
+          WriteFileAtomic(dir + "/job/" + stage + "/task-00000/metrics.json", m.dump()).ok());
+    };
+    // Seeds 1, 2, 3 (and 10, read before 2 by name) give both rows 70, 60, 80, 50 give or take.
+    const std::vector<std::string> replicates = {"", "-s2", "-s3", "-s10"};
+    const double mdt[] = {70, 60, 80, 50}, mdm[] = {68.5, 58, 78.8, 48.6};
+    for (int k = 0; k < 4; ++k)
+      eval("eval_mdt" + replicates[k], mdt[k], {{"method", "MDT"}, {"row", "SimMotionEdit (MDT)"}});
+    for (int k = 0; k < 4; ++k)
+      eval("eval_mdm" + mdm_replicates[k], mdm[k], {{"method", "MDM"}, {"row", "MDM"}});
+    ReportOptions options;
+    options.job_dir = dir + "/job";
+    options.previews = false;
+    auto summary = WriteReport(options);
+    EXPECT_TRUE(summary.ok()) << summary.status().ToString();
+    for (const ClaimCheck& c : summary->claims)
+      if (c.claim == "MDT beats MDM") return c;
+    return ClaimCheck{};
+  };
+  const ClaimCheck paired = report({"", "-s2", "-s3", "-s10"});
+  EXPECT_EQ(paired.verdict, "holds") << paired.detail;
+  EXPECT_NE(paired.detail.find("of the 4 per-seed differences (1.50, 2.00, 1.20, 1.40; unpaired"),
+            std::string::npos)
+      << paired.detail;
+  // The MDM's fourth run is another seed's (11): nothing pairs, and the seeds' spread decides
+  // nothing.
+  const ClaimCheck unpaired = report({"", "-s2", "-s3", "-s11"});
+  EXPECT_EQ(unpaired.verdict, "not decided: the difference is within two standard errors")
+      << unpaired.detail;
+  EXPECT_EQ(unpaired.detail.find("per-seed"), std::string::npos) << unpaired.detail;
+  fs::remove_all(dir);
 }
 
 TEST(Papers, TheBuiltInPapersAreBothPapersTables) {
