@@ -15,6 +15,17 @@
 namespace motionpipe::report {
 namespace {
 
+// An edit evaluation's metrics.json in a job directory: generated-to-target R@1 in batches.
+void WriteEditEval(const std::string& job, const std::string& stage, double r1,
+                   const nlohmann::json& extra) {
+  nlohmann::json m = {{"evaluation", "edit"},
+                      {"motions", 64},
+                      {"generated_to_target", {{"batches", {{"R@1", r1}, {"queries", 64}}}}}};
+  m.update(extra);
+  std::filesystem::create_directories(job + "/" + stage + "/task-00000");
+  ASSERT_TRUE(WriteFileAtomic(job + "/" + stage + "/task-00000/metrics.json", m.dump()).ok());
+}
+
 TEST(Claims, NotDecidableWhileAComparedModelDoesNotBeatItsUntrainedRow) {
   // Both near chance (the demo before issue 15): the untrained row is as good.
   EXPECT_EQ(DecideClaim({4.2, 3.1, 5.2}, {5.2, 5.2, 5.2}, {4.0}, true),
@@ -80,13 +91,7 @@ TEST(Claims, AJobsReplicatesPairBySeed) {
   const auto report = [&](const std::vector<std::string>& mdm_replicates) {
     fs::remove_all(dir);
     const auto eval = [&](const std::string& stage, double r1, const nlohmann::json& extra) {
-      nlohmann::json m = {{"evaluation", "edit"},
-                          {"motions", 64},
-                          {"generated_to_target", {{"batches", {{"R@1", r1}, {"queries", 64}}}}}};
-      m.update(extra);
-      fs::create_directories(dir + "/job/" + stage + "/task-00000");
-      EXPECT_TRUE(
-          WriteFileAtomic(dir + "/job/" + stage + "/task-00000/metrics.json", m.dump()).ok());
+      WriteEditEval(dir + "/job", stage, r1, extra);
     };
     // Seeds 1, 2, 3 (and 10, read before 2 by name) give both rows 70, 60, 80, 50 give or take.
     const std::vector<std::string> replicates = {"", "-s2", "-s3", "-s10"};
@@ -222,12 +227,7 @@ TEST(Claims, AnUntrainedRowOfItsOwnJudgesTheRowsItNames) {
   const std::string dir = ::testing::TempDir() + "/own_untrained";
   fs::remove_all(dir);
   const auto eval = [&](const std::string& stage, double r1, const nlohmann::json& extra) {
-    nlohmann::json m = {{"evaluation", "edit"},
-                        {"motions", 64},
-                        {"generated_to_target", {{"batches", {{"R@1", r1}, {"queries", 64}}}}}};
-    m.update(extra);
-    fs::create_directories(dir + "/job/" + stage + "/task-00000");
-    ASSERT_TRUE(WriteFileAtomic(dir + "/job/" + stage + "/task-00000/metrics.json", m.dump()).ok());
+    WriteEditEval(dir + "/job", stage, r1, extra);
   };
   eval("eval_untrained", 66, {{"method", "untrained MDT"}, {"yardstick", "untrained"}});
   eval("eval_mdm_untrained", 3,
