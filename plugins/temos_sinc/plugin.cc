@@ -53,8 +53,9 @@ class SincModel : public plugin::Model {
     if (variant_ == "tmr" && !model.contains("contrastive")) model["contrastive"] = 0.1;
     net_ = Temos(TemosOptions::FromJson(model));
     // The network's frame rate (0: the data's). Not in the papers (TEMOS and SINC run at 30 fps):
-    // issue 15, a step at 10 fps costs about a third of one at 30, so the same time gives each
-    // motion three times the views; generation comes back to the asked rate by interpolation.
+    // issue 15, a bf16 step at 10 fps is 2.3 times cheaper than one at 30 (README "SINC at 10
+    // fps"), so the same time gives each motion that many more views; generation comes back to
+    // the asked rate by interpolation.
     fps_ = config.value("fps", 0.0);
     if (!(fps_ >= 0 && fps_ <= kMaxFrameRate))
       throw std::invalid_argument("fps must be in [0, 1000] (0: the data's own rate)");
