@@ -1,0 +1,94 @@
+"""tools/pair_coverage.py (issue 15: which test action pairs the training's real pairs already hold)
+on a vocabulary and spans whose figures are known by hand, on this tree's own vocabulary, and its
+error messages for files that are not a vocabulary or a singles stage's spans."""
+import json
+import os
+import subprocess
+import tempfile
+import unittest
+
+import numpy as np
+
+TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "pair_coverage.py")
+
+# Two definitions shaped as core/src/corpus/vocabulary.cc's, the last one ending its function.
+VOCABULARY = """
+std::vector<ActionDef> Some() {
+  return {{A::kWalk, "walk", K::kLocomotion, true, false, G | LL | RL, 2, 4, 0, 0,
+           {"walk", "walk forwards {speed}"}, {"a person walks {speed}"}},
+          {A::kWave, "wave", K::kArm, false, true, RA, 1, 3, 0, 0,
+           {"wave with {hand}", "wave"}, {"someone waves"}}};
+}
+const char* Other() { return "not a text"; }
+"""
+
+
+def run(*args):
+    return subprocess.run(["/usr/bin/python3", TOOL, *args], capture_output=True, text=True, timeout=60)
+
+
+class PairCoverageTest(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.addCleanup(self.tmp.cleanup)
+        self.vocabulary = os.path.join(self.tmp.name, "vocabulary.cc")
+        with open(self.vocabulary, "w") as f:
+            f.write(VOCABULARY)
+
+    def spans(self, rows, drop=()):
+        path = os.path.join(self.tmp.name, "spans.npz")
+        arrays = {"splits": np.array([r[0] for r in rows]), "text_a": np.array([r[1] for r in rows]),
+                  "text_b": np.array([r[2] for r in rows])}
+        for key in drop:
+            del arrays[key]
+        np.savez(path, **arrays)
+        return path
+
+    def test_paraphrases_of_a_training_pair_count_as_held(self):
+        path = self.spans([
+            ("train", "walk", "wave"),                         # the pair walk + wave, twice
+            ("train", "a person walks slowly", "someone waves"),
+            ("train", "wave with left hand", ""),              # a single: no pair
+            ("test", "walk forwards", "wave with right hand"),  # walk + wave: held twice
+            ("test", "wave", "a person walks quickly"),        # the same pair in the other order
+            ("test", "walk", "jump"),                          # jump is no action of the vocabulary
+            ("test", "wave", ""),                              # a single
+        ])
+        result = run(path, "--vocabulary", self.vocabulary, "--json")
+        self.assertEqual(result.returncode, 0, result.stderr)
+        got = json.loads(result.stdout)
+        self.assertEqual(got["spans"], 3)
+        self.assertEqual(got["pair_in_training"], 2)
+        self.assertAlmostEqual(got["fraction_in_training"], 2 / 3)
+        self.assertEqual(got["median_times_in_training"], 2)
+        self.assertEqual((got["training_pairs"], got["training_distinct_action_pairs"]), (2, 1))
+        self.assertEqual(got["texts_without_action"], ["jump"])
+
+    def test_this_trees_vocabulary_names_every_template(self):
+        texts = ["walk forwards", "walking backwards", "put hands on hips", "drink with left hand"]
+        path = self.spans([("train", texts[0], texts[1]), ("test", texts[2], texts[3])])
+        result = run(path, "--json")
+        self.assertEqual(result.returncode, 0, result.stderr)
+        got = json.loads(result.stdout)
+        self.assertEqual(got["texts_without_action"], [])
+        self.assertEqual(got["pair_in_training"], 0)
+
+    def test_bad_inputs_name_the_file(self):
+        path = self.spans([("test", "walk", "wave")], drop=("text_b",))
+        result = run(path, "--vocabulary", self.vocabulary)
+        self.assertEqual(result.returncode, 2)
+        self.assertIn(path, result.stderr)
+        self.assertIn("text_b", result.stderr)
+        result = run(self.spans([("train", "walk", "wave")]), "--vocabulary", self.vocabulary)
+        self.assertIn("no two-action spans in split 'test'", result.stderr)
+        empty = os.path.join(self.tmp.name, "empty.cc")
+        open(empty, "w").close()
+        result = run(self.spans([("test", "walk", "wave")]), "--vocabulary", empty)
+        self.assertEqual(result.returncode, 2)
+        self.assertIn(empty, result.stderr)
+        result = run(os.path.join(self.tmp.name, "missing.npz"), "--vocabulary", self.vocabulary)
+        self.assertIn("missing.npz", result.stderr)
+
+
+if __name__ == "__main__":
+    unittest.main()
