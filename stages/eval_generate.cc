@@ -181,6 +181,13 @@ class EvalGenerateStage : public StageExecutor {
     auto scores = GenerationScores(generated, truth, *g_temos, *t_temos, gen, gt, txt, batch, seed);
     if (!scores.ok()) return TaskReport::Error("eval_generate: " + scores.status().message());
     json metrics = *std::move(scores);
+    // Each motion's TEMOS score by span id, so that a subset of the spans (e.g. the action pairs
+    // the training never held, tools/pair_coverage.py) can be scored and paired by span.
+    json per_motion = json::array();
+    for (size_t i = 0; i < generated.size(); ++i)
+      per_motion.push_back(
+          {{"id", ids[i]}, {"temos_score", (1 + Cosine((*g_temos)[i], (*t_temos)[i])) / 2}});
+    metrics["per_motion"] = std::move(per_motion);
     metrics.update({{"evaluation", "generate"},  // its layout: configs/evaluations/generate.yaml
                     {"method", method},
                     {"motions", generated.size()},

@@ -111,6 +111,9 @@ class TrainStageTest(EngineTest):
             metrics = json.load(f)
         self.assertEqual(metrics["motions"], 4)
         self.assertTrue(0 <= metrics["temos_score"] <= 1)
+        # Each span's own TEMOS score, by id; their mean is the TEMOS score.
+        self.assertEqual(sorted(m["id"] for m in metrics["per_motion"]), sorted(generated))
+        self.assertAlmostEqual(np.mean([m["temos_score"] for m in metrics["per_motion"]]), metrics["temos_score"], places=9)
         self.assertGreater(metrics["APE"]["mean_global"], 0)
         self.assertEqual(metrics["text_to_generated"]["batches"]["queries"], 4)
         self.assertEqual(metrics["generated_to_truth"]["all"]["queries"], 4)
