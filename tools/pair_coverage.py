@@ -9,6 +9,12 @@ so each text is mapped to its action through the corpus vocabulary's text templa
 words). Usage:
 
   /usr/bin/python3 tools/pair_coverage.py out/JOB/singles/task-00000/spans.npz [--split test] [--json]
+      [--scores EVAL_GENERATE_DIR ...] [--compare ROW_A ROW_B]
+
+--scores reads eval_generate stages' per-motion TEMOS scores (`per_motion`) and gives each row's
+mean on the spans whose action pair a training pair holds and on the others ("new"), per seed;
+--compare pairs two rows by seed on each subset (mean difference and two standard errors of the
+per-seed differences, as the report's claims).
 """
 import argparse
 import collections
@@ -62,16 +68,51 @@ def read_spans(path):
     except (OSError, ValueError) as e:
         raise InputError(f"{path}: cannot read the spans ({e})")
     with z:
-        missing = [k for k in ("splits", "text_a", "text_b") if k not in z.files]
+        missing = [k for k in ("ids", "splits", "text_a", "text_b") if k not in z.files]
         if missing:
             raise InputError(f"{path}: not a singles stage's spans.npz (no {', '.join(missing)})")
-        splits, a, b = z["splits"], z["text_a"], z["text_b"]
-    if not (len(splits) == len(a) == len(b)):
-        raise InputError(f"{path}: splits, text_a and text_b differ in length")
-    return [str(s) for s in splits], [str(t) for t in a], [str(t) for t in b]
+        ids, splits, a, b = z["ids"], z["splits"], z["text_a"], z["text_b"]
+    if not (len(ids) == len(splits) == len(a) == len(b)):
+        raise InputError(f"{path}: ids, splits, text_a and text_b differ in length")
+    return [str(i) for i in ids], [str(s) for s in splits], [str(t) for t in a], [str(t) for t in b]
 
 
-def coverage(patterns, splits, text_a, text_b, split):
+def read_scores(stage_dirs, held, new):
+    """{row: {seed: (mean TEMOS score on held spans, on new spans)}} from eval_generate stages."""
+    rows = collections.defaultdict(dict)
+    for stage in stage_dirs:
+        path = os.path.join(stage, "task-00000", "metrics.json")
+        try:
+            with open(path) as f:
+                metrics = json.load(f)
+        except (OSError, ValueError) as e:
+            raise InputError(f"{path}: cannot read an eval_generate stage's metrics ({e})")
+        if "per_motion" not in metrics:
+            raise InputError(f"{path}: no per-motion scores (`per_motion`): score it again with this tree's eval_generate")
+        score = {m["id"]: m["temos_score"] for m in metrics["per_motion"]}
+        subsets = []
+        for name, spans in (("held", held), ("new", new)):
+            values = [score[i] for i in spans if i in score]
+            if not values:
+                raise InputError(f"{path}: none of the split's {name} spans was scored")
+            subsets.append(statistics.mean(values))
+        row, seed = metrics.get("row") or metrics.get("method", stage), metrics.get("seed", 0)
+        if seed in rows[row]:
+            raise InputError(f"{path}: row '{row}' has seed {seed} twice")
+        rows[row][seed] = tuple(subsets)
+    return rows
+
+
+def paired(a, b):
+    """Mean of the per-seed differences a - b and two standard errors of it (the seeds both hold)."""
+    seeds = sorted(set(a) & set(b))
+    if len(seeds) < 2:
+        raise InputError("the compared rows share fewer than 2 seeds")
+    d = [a[s] - b[s] for s in seeds]
+    return statistics.mean(d), 2 * statistics.stdev(d) / len(d) ** 0.5, d
+
+
+def coverage(patterns, ids, splits, text_a, text_b, split):
     cache = {}
 
     def action(text):
@@ -89,6 +130,8 @@ def coverage(patterns, splits, text_a, text_b, split):
     if not asked:
         raise InputError(f"no two-action spans in split '{split}'")
     seen = [training[pair(i)] for i in asked]
+    held = {ids[i] for i, n in zip(asked, seen) if n > 0}
+    new = {ids[i] for i, n in zip(asked, seen) if n == 0}
     unmatched = sorted({t for i in two for t in (text_a[i], text_b[i]) if action(t) is None})
     return {
         "split": split,
@@ -99,7 +142,7 @@ def coverage(patterns, splits, text_a, text_b, split):
         "training_pairs": sum(training.values()),
         "training_distinct_action_pairs": len(training),
         "texts_without_action": unmatched,
-    }
+    }, held, new
 
 
 def main(argv):
@@ -108,9 +151,25 @@ def main(argv):
     p.add_argument("--split", default="test")
     p.add_argument("--vocabulary", default=VOCABULARY, help="the corpus vocabulary's source (default: this tree's)")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--scores", nargs="+", default=[], metavar="EVAL_GENERATE_DIR")
+    p.add_argument("--compare", nargs=2, metavar=("ROW_A", "ROW_B"))
     args = p.parse_args(argv)
     try:
-        result = coverage(read_vocabulary(args.vocabulary), *read_spans(args.spans), args.split)
+        result, held, new = coverage(read_vocabulary(args.vocabulary), *read_spans(args.spans), args.split)
+        if args.scores:
+            rows = read_scores(args.scores, held, new)
+            result["rows"] = {row: {"held": statistics.mean(v[0] for v in by_seed.values()),
+                                    "new": statistics.mean(v[1] for v in by_seed.values()),
+                                    "seeds": sorted(by_seed)} for row, by_seed in rows.items()}
+            if args.compare:
+                for row in args.compare:
+                    if row not in rows:
+                        raise InputError(f"no row '{row}' among the scored stages ({', '.join(sorted(rows))})")
+                a, b = (rows[r] for r in args.compare)
+                result["compare"] = {}
+                for k, name in enumerate(("held", "new")):
+                    mean, two_se, d = paired({s: v[k] for s, v in a.items()}, {s: v[k] for s, v in b.items()})
+                    result["compare"][name] = {"difference": mean, "two_standard_errors": two_se, "per_seed": d}
     except InputError as e:
         print(f"pair_coverage: {e}", file=sys.stderr)
         return 2
@@ -122,6 +181,11 @@ def main(argv):
               f"(median {result['median_times_in_training']:g} times); {result['training_pairs']} training pairs, "
               f"{result['training_distinct_action_pairs']} distinct action pairs; "
               f"{len(result['texts_without_action'])} texts without an action")
+        for row, r in result.get("rows", {}).items():
+            print(f"  {row}: TEMOS score {r['held']:.3f} on held pairs, {r['new']:.3f} on new ones ({len(r['seeds'])} seeds)")
+        for name, c in result.get("compare", {}).items():
+            print(f"  {args.compare[0]} - {args.compare[1]} on {name} pairs: {c['difference']:+.4f}, "
+                  f"2 SE {c['two_standard_errors']:.4f} (per seed {', '.join(f'{x:+.3f}' for x in c['per_seed'])})")
     return 0
 
 

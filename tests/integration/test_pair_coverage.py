@@ -37,8 +37,8 @@ class PairCoverageTest(unittest.TestCase):
 
     def spans(self, rows, drop=()):
         path = os.path.join(self.tmp.name, "spans.npz")
-        arrays = {"splits": np.array([r[0] for r in rows]), "text_a": np.array([r[1] for r in rows]),
-                  "text_b": np.array([r[2] for r in rows])}
+        arrays = {"ids": np.array([f"{i}/0" for i in range(len(rows))]), "splits": np.array([r[0] for r in rows]),
+                  "text_a": np.array([r[1] for r in rows]), "text_b": np.array([r[2] for r in rows])}
         for key in drop:
             del arrays[key]
         np.savez(path, **arrays)
@@ -63,6 +63,46 @@ class PairCoverageTest(unittest.TestCase):
         self.assertEqual(got["median_times_in_training"], 2)
         self.assertEqual((got["training_pairs"], got["training_distinct_action_pairs"]), (2, 1))
         self.assertEqual(got["texts_without_action"], ["jump"])
+
+    def scores(self, name, row, seed, by_id, per_motion=True):
+        """An eval_generate stage directory whose metrics hold `by_id`'s per-motion TEMOS scores."""
+        stage = os.path.join(self.tmp.name, name)
+        os.makedirs(os.path.join(stage, "task-00000"))
+        metrics = {"row": row, "seed": seed, "temos_score": float(np.mean(list(by_id.values())))}
+        if per_motion:
+            metrics["per_motion"] = [{"id": i, "temos_score": v} for i, v in by_id.items()]
+        with open(os.path.join(stage, "task-00000", "metrics.json"), "w") as f:
+            json.dump(metrics, f)
+        return stage
+
+    def test_rows_are_scored_and_paired_by_seed_on_held_and_new_pairs(self):
+        # Spans 1/0 and 2/0 (test) ask for walk + wave, held by span 0/0; span 3/0 for walk + sit (no
+        # action of the vocabulary), new.
+        path = self.spans([("train", "walk", "wave"), ("test", "walk", "wave"), ("test", "wave", "walk"), ("test", "walk", "sit")])
+        stages = [self.scores("a1", "A", 1, {"1/0": 0.8, "2/0": 0.6, "3/0": 0.5}),
+                  self.scores("a2", "A", 2, {"1/0": 0.9, "2/0": 0.9, "3/0": 0.6, "9/9": 0.0}),  # an id of no test span
+                  self.scores("b1", "B", 1, {"1/0": 0.6, "2/0": 0.6, "3/0": 0.5}),
+                  self.scores("b2", "B", 2, {"1/0": 0.7, "2/0": 0.7, "3/0": 0.3}),
+                  self.scores("b3", "B", 3, {"1/0": 0.0, "2/0": 0.0, "3/0": 0.0})]  # a seed A lacks: not paired
+        result = run(path, "--vocabulary", self.vocabulary, "--json", "--scores", *stages, "--compare", "A", "B")
+        self.assertEqual(result.returncode, 0, result.stderr)
+        got = json.loads(result.stdout)
+        self.assertAlmostEqual(got["rows"]["A"]["held"], (0.7 + 0.9) / 2)
+        self.assertAlmostEqual(got["rows"]["A"]["new"], (0.5 + 0.6) / 2)
+        self.assertEqual(got["rows"]["B"]["seeds"], [1, 2, 3])
+        held, new = got["compare"]["held"], got["compare"]["new"]
+        self.assertEqual([round(d, 9) for d in held["per_seed"]], [0.1, 0.2])
+        self.assertAlmostEqual(held["difference"], 0.15)
+        self.assertAlmostEqual(held["two_standard_errors"], 2 * np.std([0.1, 0.2], ddof=1) / np.sqrt(2))
+        self.assertEqual([round(d, 9) for d in new["per_seed"]], [0.0, 0.3])
+        # A stage scored before `per_motion` existed, and a row not scored, are errors naming them.
+        old = self.scores("old", "A", 3, {"1/0": 0.5}, per_motion=False)
+        result = run(path, "--vocabulary", self.vocabulary, "--scores", old)
+        self.assertEqual(result.returncode, 2)
+        self.assertIn(os.path.join(old, "task-00000", "metrics.json"), result.stderr)
+        self.assertIn("per_motion", result.stderr)
+        result = run(path, "--vocabulary", self.vocabulary, "--scores", *stages[:2], "--compare", "A", "C")
+        self.assertIn("no row 'C'", result.stderr)
 
     def test_this_trees_vocabulary_names_every_template(self):
         texts = ["walk forwards", "walking backwards", "put hands on hips", "drink with left hand"]
