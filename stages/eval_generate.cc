@@ -18,6 +18,12 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// One motion's TEMOS score: (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6); the TEMOS score is its
+// mean.
+double TemosScoreOf(const std::vector<float>& generated, const std::vector<float>& truth) {
+  return (1 + Cosine(generated, truth)) / 2;
+}
+
 // What eval_generate measures of motions against their ground truth (SINC Tables 2-3), from their
 // TEMOS-evaluator features and TMR embeddings: the TEMOS score, APE/AVE, and TMR retrieval
 // text-to-generated and generated-to-truth (batches and all).
@@ -27,10 +33,9 @@ Result<json> GenerationScores(const std::vector<Motion>& generated,
                               const std::vector<std::vector<float>>& t_temos,
                               const eval::Embeddings& gen, const eval::Embeddings& gt,
                               const eval::Embeddings& txt, int64_t batch, uint64_t seed) {
-  // TEMOS score: mean over the test motions of (1 + cos(f_gt, f_gen)) / 2 (REFERENCE 4.6).
+  // TEMOS score: mean over the test motions of each one's (REFERENCE 4.6).
   double temos_score = 0;
-  for (size_t i = 0; i < generated.size(); ++i)
-    temos_score += (1 + Cosine(g_temos[i], t_temos[i])) / 2;
+  for (size_t i = 0; i < generated.size(); ++i) temos_score += TemosScoreOf(g_temos[i], t_temos[i]);
   const double n = static_cast<double>(generated.size());
   // APE / AVE on joint positions, both motions in their first frame's body frame (REFERENCE 4.5).
   eval::PositionErrors ape, ave;
@@ -186,7 +191,7 @@ class EvalGenerateStage : public StageExecutor {
     json per_motion = json::array();
     for (size_t i = 0; i < generated.size(); ++i)
       per_motion.push_back(
-          {{"id", ids[i]}, {"temos_score", (1 + Cosine((*g_temos)[i], (*t_temos)[i])) / 2}});
+          {{"id", ids[i]}, {"temos_score", TemosScoreOf((*g_temos)[i], (*t_temos)[i])}});
     metrics["per_motion"] = std::move(per_motion);
     metrics.update({{"evaluation", "generate"},  // its layout: configs/evaluations/generate.yaml
                     {"method", method},

@@ -132,12 +132,13 @@ def coverage(patterns, ids, splits, text_a, text_b, split):
     seen = [training[pair(i)] for i in asked]
     held = {ids[i] for i, n in zip(asked, seen) if n > 0}
     new = {ids[i] for i, n in zip(asked, seen) if n == 0}
+    in_training = sum(n > 0 for n in seen)
     unmatched = sorted({t for i in two for t in (text_a[i], text_b[i]) if action(t) is None})
     return {
         "split": split,
         "spans": len(asked),
-        "pair_in_training": sum(n > 0 for n in seen),
-        "fraction_in_training": sum(n > 0 for n in seen) / len(asked),
+        "pair_in_training": in_training,
+        "fraction_in_training": in_training / len(asked),
         "median_times_in_training": statistics.median(seen),
         "training_pairs": sum(training.values()),
         "training_distinct_action_pairs": len(training),
