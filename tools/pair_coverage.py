@@ -155,6 +155,8 @@ def main(argv):
     p.add_argument("--scores", nargs="+", default=[], metavar="EVAL_GENERATE_DIR")
     p.add_argument("--compare", nargs=2, metavar=("ROW_A", "ROW_B"))
     args = p.parse_args(argv)
+    if args.compare and not args.scores:
+        p.error("--compare compares scored rows: give the eval_generate stages with --scores")
     try:
         result, held, new = coverage(read_vocabulary(args.vocabulary), *read_spans(args.spans), args.split)
         if args.scores:

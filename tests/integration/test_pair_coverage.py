@@ -128,6 +128,9 @@ class PairCoverageTest(unittest.TestCase):
         self.assertIn(empty, result.stderr)
         result = run(os.path.join(self.tmp.name, "missing.npz"), "--vocabulary", self.vocabulary)
         self.assertIn("missing.npz", result.stderr)
+        result = run(self.spans([("test", "walk", "wave")]), "--vocabulary", self.vocabulary, "--compare", "a", "b")
+        self.assertEqual(result.returncode, 2)
+        self.assertIn("--scores", result.stderr)
 
 
 if __name__ == "__main__":
