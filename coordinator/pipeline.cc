@@ -210,6 +210,15 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
       continue;
     }
     const int n = own->second;
+    // Replicate k's seed is computed from this one, so it must be a number: a quoted "6" would
+    // leave replicate 1 with the text and give the others the pipeline's seeds.
+    if (node.contains("params") && node["params"].is_object() && node["params"].contains("seed") &&
+        !(node["params"]["seed"].is_number_integer() &&
+          node["params"]["seed"].get<int64_t>() >= 0)) {
+      errors->push_back("stages." + name + ".params.seed: must be a non-negative integer (got " +
+                        node["params"]["seed"].dump() + "); replicate k trains with seed + k - 1");
+      continue;
+    }
     for (const std::string& input : inputs) {
       const auto s = seeds.find(input);
       if (s != seeds.end() && s->second != n) {
@@ -236,9 +245,8 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
         }
       }
       if (k > 1) {
-        const uint64_t base = params.contains("seed") && params["seed"].is_number_integer()
-                                  ? params["seed"].get<uint64_t>()
-                                  : pipeline_seed;
+        const uint64_t base =
+            params.contains("seed") ? params["seed"].get<uint64_t>() : pipeline_seed;
         params["seed"] = base + static_cast<uint64_t>(k - 1);
       }
       copy["replicate"] = k;

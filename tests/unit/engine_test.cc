@@ -211,6 +211,22 @@ stages:
   ASSERT_FALSE(zero.ok());
   EXPECT_NE(zero.status().message().find("stages.a.seeds: must be an integer from 1 to 100"),
             std::string::npos);
+  // A replicated stage's own seed must be a number (a quoted one used to be dropped silently for
+  // replicates 2..N); a seed from a var keeps the var's type.
+  auto quoted =
+      ParsePipeline("name: q\nstages:\n  a: {kind: noop, seeds: 2, params: {seed: \"6\"}}\n", {},
+                    "q.yaml", Kinds());
+  ASSERT_FALSE(quoted.ok());
+  EXPECT_NE(quoted.status().message().find("stages.a.params.seed: must be a non-negative integer"),
+            std::string::npos)
+      << quoted.status().ToString();
+  auto from_var = ParsePipeline(
+      "name: v\nseed: 1\nvars: {first: 6}\nstages:\n  a: {kind: noop, seeds: 3, params: {seed: "
+      "\"${vars.first}\"}}\n",
+      {"vars.first=11"}, "v.yaml", Kinds());
+  ASSERT_TRUE(from_var.ok()) << from_var.status().ToString();
+  EXPECT_EQ(from_var->stages[0].params["seed"], 11);
+  EXPECT_EQ(from_var->stages[2].params["seed"], 13);
 }
 
 TEST(Pipeline, ScalePicksVarsThatOverridesStillBeat) {

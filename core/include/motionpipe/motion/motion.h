@@ -60,10 +60,10 @@ int64_t WholeFrameStep(double rate, double fps);
 // it (Resample by index, as the training data are cut), else interpolated; unchanged when fps <= 0
 // or the same rate.
 Motion ToModelRate(const Motion& motion, double fps);
-// A model that runs at its own frame rate (the MDT's and SINC's `fps`, issue 15: a step at 10 fps
-// costs about a third of one at 30) makes the frames at `fps` that cover `frames` frames at `rate`
-// once resampled back to it: ceil((frames - 1) fps / rate) + 1 (`frames` itself when fps <= 0 or
-// the same rate).
+// A model that runs at its own frame rate (the MDT's and SINC's `fps`, issue 15: fewer frames make
+// a step cheaper, README "SINC at 10 fps") makes the frames at `fps` that cover `frames` frames at
+// `rate` once resampled back to it: ceil((frames - 1) fps / rate) + 1 (`frames` itself when fps <=
+// 0 or the same rate).
 int64_t FramesCovering(int64_t frames, double rate, double fps);
 // A motion made at another rate brought to `rate` (interpolated) and cut to exactly `frames`
 // frames (a shorter one repeats its last frame); InvalidArgument for a motion without frames.
