@@ -47,7 +47,7 @@ stages:
   evaluate:
     kind: eval_generate
     inputs: [sinc, gen, singles]
-    params: {evaluator: sinc, generated: gen, batch: 2}
+    params: {evaluator: sinc, generated: gen, batch: 2, synthetic_pairs: 6}
   recon:
     kind: generate
     inputs: [sinc, singles]
@@ -115,6 +115,16 @@ class TrainStageTest(EngineTest):
         self.assertEqual(sorted(m["id"] for m in metrics["per_motion"]), sorted(generated))
         self.assertAlmostEqual(np.mean([m["temos_score"] for m in metrics["per_motion"]]), metrics["temos_score"], places=9)
         self.assertGreater(metrics["APE"]["mean_global"], 0)
+        # synthetic_pairs: 6 pairs of each kind from the training singles, scored text against motion;
+        # the two kinds are different draws (labels' parts and random parts), real pairs beside them.
+        synthetic = metrics["synthetic_pairs"]
+        self.assertEqual(synthetic["split"], "train")
+        for kind in ("labels", "random"):
+            self.assertEqual(synthetic[kind]["motions"], 6)
+            self.assertEqual(synthetic[kind]["text_to_motion"]["queries"], 6)
+            self.assertTrue(-1 <= synthetic[kind]["text_motion_cosine"] <= 1)
+        self.assertNotEqual(synthetic["labels"]["text_motion_cosine"], synthetic["random"]["text_motion_cosine"])
+        self.assertLessEqual(synthetic.get("real_pairs", {"motions": 0})["motions"], 6)
         self.assertEqual(metrics["text_to_generated"]["batches"]["queries"], 4)
         self.assertEqual(metrics["generated_to_truth"]["all"]["queries"], 4)
         # reconstruct: each span's ground truth through the motion encoder and the decoder, at its
