@@ -87,34 +87,8 @@ std::vector<size_t> SameLengthClassPartner(const std::vector<Motion>& motions) {
   return partner;
 }
 
-// The TMR evaluator's own retrieval on the held-out test split (issue 15): text-to-motion and
-// motion-to-text R@1/R@3 in batches, on single actions and on two-action spans ("A while B").
-Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& table, int64_t batch,
-                              uint64_t seed) {
-  json out;
-  for (const char* kind : {"singles", "pairs"}) {
-    const auto spans = SelectSpans(table, {{"split", "test"}, {"spans", kind}});
-    if (spans.size() < 2) continue;
-    std::vector<Motion> motions;
-    std::vector<std::string> texts;
-    for (const int64_t i : spans)
-      motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
-    MP_ASSIGN_OR_RETURN(auto m_rows, tmr.EncodeMotions(motions));
-    MP_ASSIGN_OR_RETURN(auto t_rows, tmr.EncodeTexts(texts));
-    const auto m = ToEmbeddings(m_rows), t = ToEmbeddings(t_rows);
-    const int64_t b = std::min<int64_t>(batch, static_cast<int64_t>(spans.size()));
-    MP_ASSIGN_OR_RETURN(const auto text_to_motion, eval::Retrieval(t, m, b, seed));
-    MP_ASSIGN_OR_RETURN(const auto motion_to_text, eval::Retrieval(m, t, b, seed));
-    out[kind] = {{"motions", spans.size()},
-                 {"text_to_motion", ScoresJson(text_to_motion)},
-                 {"motion_to_text", ScoresJson(motion_to_text)}};
-  }
-  return out;
-}
-
 // How well the TMR evaluator finds a motion from its text (and back) among pairs of one kind, and
-// the mean cosine of each motion to its own text: the retrieval EvaluatorQuality reports, on
-// motions and texts given.
+// the mean cosine of each motion to its own text.
 Result<json> TextMotionAgreement(plugin::Generator& tmr, const std::vector<Motion>& motions,
                                  const std::vector<std::string>& texts, int64_t batch,
                                  uint64_t seed) {
@@ -130,6 +104,29 @@ Result<json> TextMotionAgreement(plugin::Generator& tmr, const std::vector<Motio
               {"text_motion_cosine", cosine / static_cast<double>(motions.size())},
               {"text_to_motion", ScoresJson(text_to_motion)},
               {"motion_to_text", ScoresJson(motion_to_text)}};
+}
+
+// TextMotionAgreement on real spans of the table, each with its text.
+Result<json> SpansAgreement(plugin::Generator& tmr, const sinc::SpanTable& table,
+                            const std::vector<int64_t>& spans, int64_t batch, uint64_t seed) {
+  std::vector<Motion> motions;
+  std::vector<std::string> texts;
+  for (const int64_t i : spans)
+    motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
+  return TextMotionAgreement(tmr, motions, texts, batch, seed);
+}
+
+// The TMR evaluator's own retrieval on the held-out test split (issue 15): text-to-motion and
+// motion-to-text R@1/R@3 in batches, on single actions and on two-action spans ("A while B").
+Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& table, int64_t batch,
+                              uint64_t seed) {
+  json out;
+  for (const char* kind : {"singles", "pairs"}) {
+    const auto spans = SelectSpans(table, {{"split", "test"}, {"spans", kind}});
+    if (spans.size() < 2) continue;
+    MP_ASSIGN_OR_RETURN(out[kind], SpansAgreement(tmr, table, spans, batch, seed));
+  }
+  return out;
 }
 
 // Do SINC's synthetic pairs show what their texts say (issue 15: label-guided compositions do not
@@ -167,11 +164,7 @@ Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTabl
     std::swap(real[k - 1], real[static_cast<size_t>(rng.Int(0, static_cast<int>(k) - 1))]);
   if (static_cast<int64_t>(real.size()) > count) real.resize(static_cast<size_t>(count));
   if (real.size() >= 2) {
-    std::vector<Motion> motions;
-    std::vector<std::string> texts;
-    for (const int64_t i : real)
-      motions.push_back(table.MotionOf(i)), texts.push_back(SpanText(table, i));
-    MP_ASSIGN_OR_RETURN(out["real_pairs"], TextMotionAgreement(tmr, motions, texts, batch, seed));
+    MP_ASSIGN_OR_RETURN(out["real_pairs"], SpansAgreement(tmr, table, real, batch, seed));
   }
   return out;
 }
