@@ -133,7 +133,8 @@ Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& tab
 // beat random ones here)? `count` pairs drawn from the split's singles as training draws them on
 // the fly (a single, a partner of disjoint parts: PairSampler::Draw, not checked), once with the
 // body parts of their labels and once with random parts, with the evaluation's text ("A while
-// B"), beside `count` of the split's real two-action spans; each scored by TextMotionAgreement.
+// B"), beside each pair's first single alone with the same text and `count` of the split's real
+// two-action spans; each scored by TextMotionAgreement.
 Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTable& table,
                                     int64_t count, const std::string& split, int64_t batch,
                                     uint64_t seed) {
@@ -145,18 +146,23 @@ Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTabl
     options.split = split;
     const sinc::PairSampler sampler(table, options);
     Rng rng(MixSeed(seed, parts == sinc::PartSource::kLabels ? 1 : 2));
-    std::vector<Motion> motions;
+    std::vector<Motion> motions, firsts;
     std::vector<std::string> texts;
     sinc::PairRecipe recipe;
     while (static_cast<int64_t>(motions.size()) < count && sampler.Draw(rng, &recipe)) {
       motions.push_back(sinc::MaterialiseMotion(table, recipe, options.crop));
+      firsts.push_back(table.MotionOf(recipe.first));
       texts.push_back(sinc::EvalPairText(table.text_a[static_cast<size_t>(recipe.first)],
                                          table.text_a[static_cast<size_t>(recipe.second)]));
     }
     if (static_cast<int64_t>(motions.size()) < 2)
       return InvalidArgument("synthetic_pairs: split '" + split + "' has no compatible singles");
-    MP_ASSIGN_OR_RETURN(out[parts == sinc::PartSource::kLabels ? "labels" : "random"],
-                        TextMotionAgreement(tmr, motions, texts, batch, seed));
+    const std::string kind = parts == sinc::PartSource::kLabels ? "labels" : "random";
+    MP_ASSIGN_OR_RETURN(out[kind], TextMotionAgreement(tmr, motions, texts, batch, seed));
+    // The yardstick: each pair's first single alone for the pair's text (what the TMR finds
+    // without the second action composed in).
+    MP_ASSIGN_OR_RETURN(out[kind + "_first_alone"],
+                        TextMotionAgreement(tmr, firsts, texts, batch, seed));
   }
   std::vector<int64_t> real = SelectSpans(table, {{"split", split}, {"spans", "pairs"}});
   Rng rng(MixSeed(seed, 3));
