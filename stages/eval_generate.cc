@@ -133,8 +133,9 @@ Result<json> EvaluatorQuality(plugin::Generator& tmr, const sinc::SpanTable& tab
 // beat random ones here)? `count` pairs drawn from the split's singles as training draws them on
 // the fly (a single, a partner of disjoint parts: PairSampler::Draw, not checked), once with the
 // body parts of their labels and once with random parts, with the evaluation's text ("A while
-// B"), beside each pair's first single alone with the same text and `count` of the split's real
-// two-action spans; each scored by TextMotionAgreement.
+// B"), beside each pair's first single alone with the same text, the label-guided pairs' singles
+// composed by random parts (labels_random_parts: the parts alone differ) and `count` of the
+// split's real two-action spans; each scored by TextMotionAgreement.
 Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTable& table,
                                     int64_t count, const std::string& split, int64_t batch,
                                     uint64_t seed) {
@@ -145,13 +146,18 @@ Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTabl
     options.parts = parts;
     options.split = split;
     const sinc::PairSampler sampler(table, options);
-    Rng rng(MixSeed(seed, parts == sinc::PartSource::kLabels ? 1 : 2));
-    std::vector<Motion> motions, firsts;
+    Rng rng(MixSeed(seed, parts == sinc::PartSource::kLabels ? 1 : 2)), repart(MixSeed(seed, 4));
+    std::vector<Motion> motions, firsts, reparted;
     std::vector<std::string> texts;
     sinc::PairRecipe recipe;
     while (static_cast<int64_t>(motions.size()) < count && sampler.Draw(rng, &recipe)) {
       motions.push_back(sinc::MaterialiseMotion(table, recipe, options.crop));
       firsts.push_back(table.MotionOf(recipe.first));
+      if (parts == sinc::PartSource::kLabels) {  // the same two singles, random parts
+        sinc::PairRecipe random = recipe;
+        sinc::DrawRandomParts(repart, &random);
+        reparted.push_back(sinc::MaterialiseMotion(table, random, options.crop));
+      }
       texts.push_back(sinc::EvalPairText(table.text_a[static_cast<size_t>(recipe.first)],
                                          table.text_a[static_cast<size_t>(recipe.second)]));
     }
@@ -163,6 +169,10 @@ Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTabl
     // without the second action composed in).
     MP_ASSIGN_OR_RETURN(out[kind + "_first_alone"],
                         TextMotionAgreement(tmr, firsts, texts, batch, seed));
+    if (!reparted.empty()) {  // the parts alone decide: label-guided singles, random parts
+      MP_ASSIGN_OR_RETURN(out["labels_random_parts"],
+                          TextMotionAgreement(tmr, reparted, texts, batch, seed));
+    }
   }
   std::vector<int64_t> real = SelectSpans(table, {{"split", split}, {"spans", "pairs"}});
   Rng rng(MixSeed(seed, 3));

@@ -119,7 +119,7 @@ class TrainStageTest(EngineTest):
         # the two kinds are different draws (labels' parts and random parts), real pairs beside them.
         synthetic = metrics["synthetic_pairs"]
         self.assertEqual(synthetic["split"], "train")
-        for kind in ("labels", "random", "labels_first_alone", "random_first_alone"):
+        for kind in ("labels", "random", "labels_first_alone", "random_first_alone", "labels_random_parts"):
             self.assertEqual(synthetic[kind]["motions"], 6)
             self.assertEqual(synthetic[kind]["text_to_motion"]["queries"], 6)
             self.assertTrue(-1 <= synthetic[kind]["text_motion_cosine"] <= 1)

@@ -161,11 +161,7 @@ bool PairSampler::DrawPartner(int32_t first, Rng& rng, PairRecipe* recipe) const
     while (second == first)
       second = singles_[static_cast<size_t>(rng.Int(0, static_cast<int>(singles_.size()) - 1))];
     recipe->second = second;
-    // A random non-empty part set for the first, then one from the remaining parts for the second.
-    PartSet a = RandomSubset(kAllParts, rng);
-    while (a == kAllParts) a = RandomSubset(kAllParts, rng);
-    recipe->first_parts = a;
-    recipe->second_parts = RandomSubset(static_cast<PartSet>(kAllParts & ~a), rng);
+    DrawRandomParts(rng, recipe);
   } else {
     const PartSet a = table_.parts_a[static_cast<size_t>(first)] & kAllParts;
     std::vector<double> weights(64, 0.0);
@@ -185,6 +181,14 @@ bool PairSampler::DrawPartner(int32_t first, Rng& rng, PairRecipe* recipe) const
   recipe->pattern = static_cast<uint8_t>(rng.Int(0, kNumPairPatterns - 1));
   recipe->text_swapped = rng.Bernoulli(0.5) ? 1 : 0;
   return true;
+}
+
+void DrawRandomParts(Rng& rng, PairRecipe* recipe) {
+  // A random non-empty part set for the first, then one from the remaining parts for the second.
+  PartSet a = RandomSubset(kAllParts, rng);
+  while (a == kAllParts) a = RandomSubset(kAllParts, rng);
+  recipe->first_parts = a;
+  recipe->second_parts = RandomSubset(static_cast<PartSet>(kAllParts & ~a), rng);
 }
 
 bool PairSampler::Draw(Rng& rng, PairRecipe* recipe) const {

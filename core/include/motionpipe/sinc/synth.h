@@ -83,6 +83,10 @@ class PairSampler {
   std::array<std::vector<int32_t>, 64> by_parts_;  // singles per labelled part set
 };
 
+// The random-composition ablation's parts for a recipe's two singles: a random part set for the
+// first (not every part), a random non-empty subset of the rest for the second.
+void DrawRandomParts(Rng& rng, PairRecipe* recipe);
+
 // The composed motion and text of a recipe.
 Motion MaterialiseMotion(const SpanTable& table, const PairRecipe& recipe, CropMode crop);
 std::string MaterialiseText(const SpanTable& table, const PairRecipe& recipe);
