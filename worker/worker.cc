@@ -388,6 +388,10 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
     std::signal(SIGTERM, OnSignal);
     std::signal(SIGINT, OnSignal);
   }
+  // A write to a socket whose peer died must be an error, not this process's death: Gloo's
+  // transport and c10d's TCPStore write without MSG_NOSIGNAL (Python ignores SIGPIPE for them), so
+  // a gang rank writing to a killed peer was killed by SIGPIPE and took the gang's restart with it.
+  std::signal(SIGPIPE, SIG_IGN);
   wake_rx_ = std::make_unique<zmq::socket_t>(context_, zmq::socket_type::pair);
   wake_rx_->set(zmq::sockopt::linger, 0);
   wake_rx_->bind("inproc://worker-wake");

@@ -8,6 +8,21 @@ from harness import MOTIONPIPE, EngineTest, free_port, http_get, metric, output_
 
 
 class Failures(EngineTest):
+    def test_a_worker_survives_writing_to_a_dead_peer(self):
+        # A gang rank whose peer is killed writes into a closed socket (Gloo and c10d's TCPStore do
+        # not ask for MSG_NOSIGNAL): the worker must ignore SIGPIPE, or it dies with the peer and
+        # the gang cannot restart (seen in train.stage: the surviving rank killed by signal 13).
+        self.coordinator()
+        worker = self.worker("w0")
+
+        def ignores_sigpipe():
+            with open(f"/proc/{worker.proc.pid}/status") as f:
+                ignored = next(int(line.split()[1], 16) for line in f if line.startswith("SigIgn:"))
+            return bool(ignored & (1 << (13 - 1)))
+
+        self.wait_until(ignores_sigpipe, 30, "the worker to ignore SIGPIPE")
+        self.assertTrue(worker.alive())
+
     def test_errors_are_retried_with_backoff_until_they_succeed(self):
         self.coordinator()
         self.worker("a")
