@@ -1,6 +1,7 @@
 """The failure classes end to end: task errors retried with backoff, bad input failing at once, a
 slow worker whose lease expires, and a poison task quarantined after killing workers."""
 import os
+import signal
 import subprocess
 import unittest
 
@@ -18,7 +19,7 @@ class Failures(EngineTest):
         def ignores_sigpipe():
             with open(f"/proc/{worker.proc.pid}/status") as f:
                 ignored = next(int(line.split()[1], 16) for line in f if line.startswith("SigIgn:"))
-            return bool(ignored & (1 << (13 - 1)))
+            return bool(ignored & (1 << (signal.SIGPIPE - 1)))  # SigIgn: bit n-1 is signal n
 
         self.wait_until(ignores_sigpipe, 30, "the worker to ignore SIGPIPE")
         self.assertTrue(worker.alive())
