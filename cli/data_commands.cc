@@ -249,6 +249,11 @@ void AddSynthCorpus(CLI::App* data, int* exit_code) {
       ->capture_default_str();
   cmd->add_option("--max-seconds", options.script.max_seconds, "Longest clip")
       ->capture_default_str();
+  cmd->add_option("--manner-words", options.manner_words,
+                  "Share of clip texts that state the action's manner when clearly off normal "
+                  "(tempo, repetitions, size); the motions stay the same")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_flag("--no-amass", a.no_amass, "Skip the per-clip AMASS-style npz files");
   cmd->add_flag("--no-triplet-joints", a.no_joints,
                 "Do not store FK joint positions with the triplets");

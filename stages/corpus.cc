@@ -7,6 +7,8 @@ namespace motionpipe::stages {
 
 namespace {
 
+// params.manner_words: the share of clip texts that state their action's manner (tempo,
+// repetitions, size; corpus::CorpusOptions::manner_words); 0 when absent.
 // params.edit_kinds: the kinds of edit the triplets make (a list of corpus::EditKindName names);
 // every kind when absent.
 Result<corpus::EditKindSet> EditKinds(const nlohmann::json& params) {
@@ -35,6 +37,12 @@ class CorpusStage : public StageExecutor {
     const int shard_size = IntParam(plan.params, "shard_size", 500, 1, path, errors);
     if (const auto kinds = EditKinds(plan.params); !kinds.ok())
       errors->push_back(path + ".params.edit_kinds: " + kinds.status().message());
+    if (const auto it = plan.params.find("manner_words");
+        it != plan.params.end() &&
+        !(it->is_number() && it->get<double>() >= 0 && it->get<double>() <= 1)) {
+      errors->push_back(path + ".params.manner_words: a share in [0, 1] of texts, got " +
+                        it->dump());
+    }
     plan.shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
     plan.reduce = true;
   }
@@ -56,6 +64,7 @@ class CorpusStage : public StageExecutor {
     auto kinds = EditKinds(p);
     if (!kinds.ok()) return TaskReport::FromStatus(kinds.status());
     options.edit_kinds = *kinds;
+    options.manner_words = p.value("manner_words", 0.0);
     options.threads = ctx.threads;
     options.out_dir = ctx.output_dir();
     if (ctx.spec.reduce()) {

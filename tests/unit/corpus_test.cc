@@ -97,6 +97,28 @@ TEST(Vocabulary, FortyPlusActionsOverAllSixParts) {
             "wave left hand quickly");
 }
 
+TEST(Vocabulary, MannerIsStatedOnlyWhenOffNormalAndNotTwice) {
+  const TextParams fast_big{Side::kRight, 1.5, 1.3, 3, false};
+  EXPECT_EQ(WithManner("wave right hand", ActionId::kWave, fast_big),
+            "wave right hand quickly three times with big movements");
+  EXPECT_EQ(WithManner("wave right hand", ActionId::kWave, {Side::kRight, 0.7, 0.7, 1, false}),
+            "wave right hand slowly once with small movements");
+  // Normal tempo and size, no repetitions: the text as it was.
+  EXPECT_EQ(WithManner("wave right hand", ActionId::kWave, {Side::kRight, 1.1, 1.0, 0, false}),
+            "wave right hand");
+  // What the text already says is not said again ("slowly" is not "low"; "sprint" is fast).
+  EXPECT_EQ(WithManner("wave right hand quickly twice", ActionId::kWave, fast_big),
+            "wave right hand quickly twice with big movements");
+  EXPECT_EQ(WithManner("sprint", ActionId::kRun, fast_big), "sprint");
+  EXPECT_EQ(WithManner("kick slowly", ActionId::kKick, {Side::kLeft, 0.7, 1.3, 0, false}),
+            "kick slowly with big movements");
+  EXPECT_EQ(WithManner("kick high", ActionId::kKick, {Side::kLeft, 1, 1.3, 0, false}), "kick high");
+  // Each only where it is a parameter of the motion: a walk has no size or count, standing no
+  // tempo.
+  EXPECT_EQ(WithManner("walk forward", ActionId::kWalk, fast_big), "walk forward quickly");
+  EXPECT_EQ(WithManner("stand", ActionId::kStand, fast_big), "stand");
+}
+
 TEST(Synthesizer, EveryActionAloneIsPhysicallyPlausible) {
   for (const ActionDef& def : Vocabulary()) {
     for (uint64_t seed : {1u, 2u, 3u}) {
@@ -328,6 +350,59 @@ TEST(Corpus, EditKindsRestrictTheTriplets) {
   EXPECT_EQ(manifest["edit_kinds_asked"], (nlohmann::json{"amplitude"}));
   EXPECT_FALSE(
       nlohmann::json::parse(*ReadFile(root + "/every/manifest.json")).contains("edit_kinds_asked"));
+  std::filesystem::remove_all(root);
+}
+
+TEST(Corpus, MannerWordsChangeOnlyTheTexts) {
+  const std::string root = testing::TempDir() + "/corpus_manner";
+  std::filesystem::remove_all(root);
+  CorpusOptions plain;
+  plain.clips = 24, plain.triplets = 12, plain.shard_size = 24;
+  plain.out_dir = root + "/plain";
+  ASSERT_TRUE(GenerateCorpus(plain).ok());
+  CorpusOptions manner = plain;
+  manner.manner_words = 1;
+  manner.out_dir = root + "/manner";
+  ASSERT_TRUE(GenerateCorpus(manner).ok());
+  const auto a = nlohmann::json::parse(*ReadFile(plain.out_dir + "/manifest.json"));
+  const auto b = nlohmann::json::parse(*ReadFile(manner.out_dir + "/manifest.json"));
+  EXPECT_FALSE(a.contains("manner_words"));
+  EXPECT_EQ(b["manner_words"], 1.0);
+  // The motions and the triplets are the same bytes; the clips' texts and annotations are not.
+  std::map<std::string, std::string> sha;
+  for (const auto& f : a["files"]) sha[f["path"]] = f["sha256"];
+  int same = 0, differ = 0;
+  for (const auto& f : b["files"]) {
+    const std::string path = f["path"];
+    const bool texts = path.rfind("clips/", 0) == 0 || path.rfind("babel/", 0) == 0 ||
+                       path.rfind("texts/", 0) == 0;
+    if (texts) {
+      differ += sha[path] != f["sha256"].get<std::string>() ? 1 : 0;
+    } else {
+      EXPECT_EQ(sha[path], f["sha256"].get<std::string>()) << path;
+      ++same;
+    }
+  }
+  EXPECT_GT(same, 24);   // the AMASS files and the triplets
+  EXPECT_GE(differ, 3);  // the clips, BABEL and the labels file
+  auto clips_a = ReadClips(plain.out_dir + "/clips/clips-00000.npz");
+  auto clips_b = ReadClips(manner.out_dir + "/clips/clips-00000.npz");
+  ASSERT_TRUE(clips_a.ok() && clips_b.ok());
+  ASSERT_EQ(clips_a->size(), clips_b->size());
+  int stated = 0;
+  for (size_t i = 0; i < clips_a->size(); ++i) {
+    const Clip &x = (*clips_a)[i], &y = (*clips_b)[i];
+    EXPECT_EQ(x.motion.poses, y.motion.poses);
+    ASSERT_EQ(x.texts.size(), y.texts.size());
+    for (size_t k = 1; k < x.texts.size(); ++k) {  // the segments' labels (0: the caption)
+      EXPECT_EQ(y.texts[k].rfind(x.texts[k], 0), 0u)
+          << "a manner is appended, never a different label: " << x.texts[k] << " / " << y.texts[k];
+      stated += x.texts[k] != y.texts[k] ? 1 : 0;
+    }
+  }
+  EXPECT_GT(stated, 5);
+  manner.manner_words = 1.5;
+  EXPECT_FALSE(GenerateCorpus(manner).ok());
   std::filesystem::remove_all(root);
 }
 

@@ -92,6 +92,22 @@ TEST(Pipeline, ParsesPlansAndOrdersStages) {
                                           "'mirror'"),
             std::string::npos)
       << kinds.status().message();
+  // So is a share of manner words outside [0, 1], or not a number.
+  for (const char* bad : {"1.5", "-0.1", "half"}) {
+    auto manner = ParsePipeline(std::string("name: c\nstages:\n  corpus: {kind: corpus, params: "
+                                            "{clips: 10, manner_words: ") +
+                                    bad + "}}\n",
+                                {}, "c.yaml", Kinds());
+    ASSERT_FALSE(manner.ok()) << bad;
+    EXPECT_NE(
+        manner.status().message().find("stages.corpus.params.manner_words: a share in [0, 1]"),
+        std::string::npos)
+        << manner.status().message();
+  }
+  EXPECT_TRUE(ParsePipeline("name: c\nstages:\n  corpus: {kind: corpus, params: {clips: 10, "
+                            "manner_words: 0.5}}\n",
+                            {}, "c.yaml", Kinds())
+                  .ok());
 }
 
 // Long-running kinds get a 6 h lease unless the YAML sets one, even one equal to the 1 h default

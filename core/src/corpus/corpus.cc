@@ -24,6 +24,7 @@ namespace motionpipe::corpus {
 namespace {
 
 constexpr uint64_t kClipStream = 0xC11B;
+constexpr uint64_t kMannerStream = 0x3A77E4;  // which texts state their manner
 constexpr uint64_t kTripletStream = 0x7121;
 
 bool PassesGate(const Synthesis& synthesis, const PlausibilityGate& gate,
@@ -125,6 +126,17 @@ GeneratedClip MakeClip(const CorpusOptions& options, int64_t index) {
   clip.source = "procedural:seed=" + std::to_string(options.seed);
   clip.motion = synthesis.motion;
   clip.joints = ComputeJoints(Skeleton::Smpl22(), clip.motion);
+  if (options.manner_words > 0) {  // texts only: the motion is synthesized above
+    Rng manner_rng(MixSeed(MixSeed(options.seed, kMannerStream), index));
+    for (auto* list : {&script.base, &script.overlays}) {
+      for (ActionInstance& a : *list) {
+        if (manner_rng.Bernoulli(options.manner_words))
+          a.label = WithManner(a.label, a.id, a.text_params());
+        if (manner_rng.Bernoulli(options.manner_words))
+          a.caption = WithManner(a.caption, a.id, a.text_params());
+      }
+    }
+  }
   const std::string caption = ClipCaption(script);
   clip.texts.push_back(caption);
   clip.segments = synthesis.segments;
@@ -264,6 +276,9 @@ Status ValidateOptions(const CorpusOptions& options) {
   if (options.triplets < -1) return InvalidArgument("synth-corpus: triplets must be >= 0");
   if (!(options.fps > 0)) return InvalidArgument("synth-corpus: fps must be positive");
   if (options.shard_size < 1) return InvalidArgument("synth-corpus: shard_size must be at least 1");
+  if (!(options.manner_words >= 0 && options.manner_words <= 1))
+    return InvalidArgument("synth-corpus: manner_words must be a share in [0, 1], got " +
+                           std::to_string(options.manner_words));
   return Status::Ok();
 }
 
@@ -470,6 +485,7 @@ Result<CorpusSummary> FinalizeCorpus(const CorpusOptions& options,
                              {"files", manifest_files}};
   if (options.edit_kinds != kEveryEditKind)
     manifest["edit_kinds_asked"] = EditKindNames(options.edit_kinds);
+  if (options.manner_words > 0) manifest["manner_words"] = options.manner_words;
   MP_RETURN_IF_ERROR(WriteFileAtomic(dir + "/manifest.json", manifest.dump(1) + "\n"));
   return summary;
 }

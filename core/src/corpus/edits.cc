@@ -76,40 +76,6 @@ double RepPeriod(const ActionInstance& a) {
   return NaturalDuration(two, unused) - NaturalDuration(one, unused);
 }
 
-bool SpeedMatters(ActionId id) {
-  return id != A::kStand && id != A::kHandsOnHips && id != A::kCrossArms && id != A::kTiptoe;
-}
-
-bool AmplitudeMatters(ActionId id) {
-  switch (id) {
-    case A::kWave:
-    case A::kRaiseArm:
-    case A::kPunch:
-    case A::kReachForward:
-    case A::kKick:
-    case A::kKneeLift:
-    case A::kStomp:
-    case A::kSquat:
-    case A::kCrouch:
-    case A::kBow:
-    case A::kBendForward:
-    case A::kLean:
-    case A::kTwist:
-    case A::kJump:
-    case A::kHop:
-    case A::kNod:
-    case A::kShakeHead:
-    case A::kLookAround:
-    case A::kLookUp:
-    case A::kSway:
-    case A::kStretchLeg:
-    case A::kShrug:
-      return true;
-    default:
-      return false;
-  }
-}
-
 std::string AmplitudeText(const ActionInstance& a, bool more, Rng& rng) {
   const ActionKind kind = Def(a.id).kind;
   const std::string side = a.side == Side::kLeft ? "left" : "right";

@@ -6,6 +6,10 @@ namespace motionpipe::corpus {
 
 namespace {
 
+// Repetition counts as words, [1, 6].
+const char* const kTimesWords[] = {"",           "once",       "twice",    "three times",
+                                   "four times", "five times", "six times"};
+
 constexpr PartSet G = PartBit(BodyPart::kGlobal);
 constexpr PartSet T = PartBit(BodyPart::kTorso);
 constexpr PartSet LA = PartBit(BodyPart::kLeftArm);
@@ -773,9 +777,7 @@ std::string FillTemplate(const std::string& text, const TextParams& p) {
   ReplaceAll(&out, "{side}", both ? "both" : side);
   ReplaceAll(&out, "{dir}", p.turn_left ? "left" : "right");
   ReplaceAll(&out, "{speed}", p.speed > 1.3 ? "quickly" : (p.speed < 0.75 ? "slowly" : ""));
-  static const char* kTimes[] = {"",           "once",       "twice",    "three times",
-                                 "four times", "five times", "six times"};
-  ReplaceAll(&out, "{reps}", p.reps >= 2 && p.reps <= 6 ? kTimes[p.reps] : "");
+  ReplaceAll(&out, "{reps}", p.reps >= 2 && p.reps <= 6 ? kTimesWords[p.reps] : "");
   // Tidy: collapse double spaces, trim.
   std::string tidy;
   for (char c : out) {
@@ -784,6 +786,71 @@ std::string FillTemplate(const std::string& text, const TextParams& p) {
   }
   while (!tidy.empty() && tidy.back() == ' ') tidy.pop_back();
   return tidy;
+}
+
+bool SpeedMatters(ActionId id) {
+  return id != ActionId::kStand && id != ActionId::kHandsOnHips && id != ActionId::kCrossArms &&
+         id != ActionId::kTiptoe;
+}
+
+bool AmplitudeMatters(ActionId id) {
+  switch (id) {
+    case ActionId::kWave:
+    case ActionId::kRaiseArm:
+    case ActionId::kPunch:
+    case ActionId::kReachForward:
+    case ActionId::kKick:
+    case ActionId::kKneeLift:
+    case ActionId::kStomp:
+    case ActionId::kSquat:
+    case ActionId::kCrouch:
+    case ActionId::kBow:
+    case ActionId::kBendForward:
+    case ActionId::kLean:
+    case ActionId::kTwist:
+    case ActionId::kJump:
+    case ActionId::kHop:
+    case ActionId::kNod:
+    case ActionId::kShakeHead:
+    case ActionId::kLookAround:
+    case ActionId::kLookUp:
+    case ActionId::kSway:
+    case ActionId::kStretchLeg:
+    case ActionId::kShrug:
+      return true;
+    default:
+      return false;
+  }
+}
+
+std::string WithManner(const std::string& text, ActionId id, const TextParams& p) {
+  // Whether a word of the text starts with one of the stems ("slow" finds "slowly", not "low").
+  std::vector<std::string> words;
+  for (size_t at = 0; at < text.size();) {
+    const size_t end = std::min(text.find(' ', at), text.size());
+    if (end > at) words.push_back(text.substr(at, end - at));
+    at = end + 1;
+  }
+  const auto says = [&](std::initializer_list<const char*> stems) {
+    for (const std::string& w : words) {
+      for (const char* stem : stems) {
+        if (w.rfind(stem, 0) == 0) return true;
+      }
+    }
+    return false;
+  };
+  std::string out = text;
+  if (SpeedMatters(id) && !says({"quick", "slow", "fast", "sprint"})) {
+    if (p.speed > 1.3) out += " quickly";
+    if (p.speed < 0.75) out += " slowly";
+  }
+  if (Def(id).max_reps > 0 && p.reps >= 1 && p.reps <= 6 && !says({"once", "twice", "times"}))
+    out += std::string(" ") + kTimesWords[p.reps];
+  if (AmplitudeMatters(id) && !says({"big", "small", "high", "low", "slight", "deep", "further"})) {
+    if (p.amplitude > 1.2) out += " with big movements";
+    if (p.amplitude < 0.8) out += " with small movements";
+  }
+  return out;
 }
 
 std::string SampleLabel(ActionId id, const TextParams& params, Rng& rng) {

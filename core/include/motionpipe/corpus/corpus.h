@@ -49,6 +49,12 @@ struct CorpusOptions {
   // again. Every kind, the default, gives the same triplets as before the option existed. Fewer
   // kinds are for experiments (issue 15: can an editor learn one kind of edit?), not a corpus.
   EditKindSet edit_kinds = kEveryEditKind;
+  // The share of clip texts (each action's label and caption, drawn apart) that state the action's
+  // manner when it is clearly off normal: tempo, repetitions, size (WithManner). 0, the default,
+  // gives the same bytes as before the option existed; any value leaves every motion and triplet
+  // as it is (the draws have a stream of their own), so only the texts differ. For an evaluator
+  // that has to see speed, repetition and amplitude edits (issue 15).
+  double manner_words = 0;
 };
 
 struct CorpusSummary {

@@ -110,6 +110,18 @@ struct TextParams {
 // template and tidies spaces. Adverbs appear only when the parameter is clearly off normal.
 std::string FillTemplate(const std::string& text, const TextParams& params);
 
+// Whether an action's tempo / size is a parameter of its motion (what a speed or amplitude edit
+// can change).
+bool SpeedMatters(ActionId id);
+bool AmplitudeMatters(ActionId id);
+
+// The text with the manner an annotator may add when it is clearly off normal (HumanML3D's captions
+// often say how: "quickly", "three times", "with big movements"): the tempo beyond the {speed}
+// thresholds, the repetitions of counted actions, and the size (amplitude above 1.2 or below 0.8)
+// of actions whose size is a parameter; a manner the text already states is not repeated. The
+// corpus adds it to a share of its texts (CorpusOptions::manner_words).
+std::string WithManner(const std::string& text, ActionId id, const TextParams& params);
+
 // A random BABEL-style label / HumanML3D-style caption for an action.
 std::string SampleLabel(ActionId id, const TextParams& params, Rng& rng);
 std::string SampleCaption(ActionId id, const TextParams& params, Rng& rng);
