@@ -37,11 +37,11 @@ class CorpusStage : public StageExecutor {
     const int shard_size = IntParam(plan.params, "shard_size", 500, 1, path, errors);
     if (const auto kinds = EditKinds(plan.params); !kinds.ok())
       errors->push_back(path + ".params.edit_kinds: " + kinds.status().message());
-    if (const auto it = plan.params.find("manner_words");
-        it != plan.params.end() &&
-        !(it->is_number() && it->get<double>() >= 0 && it->get<double>() <= 1)) {
-      errors->push_back(path + ".params.manner_words: a share in [0, 1] of texts, got " +
-                        it->dump());
+    if (const auto it = plan.params.find("manner_words"); it != plan.params.end()) {
+      const Status s = it->is_number()
+                           ? corpus::CheckMannerWords(it->get<double>())
+                           : InvalidArgument("a share in [0, 1] of texts, got " + it->dump());
+      if (!s.ok()) errors->push_back(path + ".params.manner_words: " + s.message());
     }
     plan.shards = std::max(1, (std::max(clips, triplets) + shard_size - 1) / shard_size);
     plan.reduce = true;

@@ -276,9 +276,8 @@ Status ValidateOptions(const CorpusOptions& options) {
   if (options.triplets < -1) return InvalidArgument("synth-corpus: triplets must be >= 0");
   if (!(options.fps > 0)) return InvalidArgument("synth-corpus: fps must be positive");
   if (options.shard_size < 1) return InvalidArgument("synth-corpus: shard_size must be at least 1");
-  if (!(options.manner_words >= 0 && options.manner_words <= 1))
-    return InvalidArgument("synth-corpus: manner_words must be a share in [0, 1], got " +
-                           std::to_string(options.manner_words));
+  if (const Status s = CheckMannerWords(options.manner_words); !s.ok())
+    return InvalidArgument("synth-corpus: manner_words: " + s.message());
   return Status::Ok();
 }
 
@@ -295,6 +294,11 @@ Status WriteRecorded(const std::string& dir, const std::string& relative, const 
 }
 
 }  // namespace
+
+Status CheckMannerWords(double share) {
+  if (share >= 0 && share <= 1) return Status::Ok();
+  return InvalidArgument("a share in [0, 1] of texts, got " + std::to_string(share));
+}
 
 int64_t ShardCount(const CorpusOptions& options) {
   const int64_t size = std::max(1, options.shard_size);

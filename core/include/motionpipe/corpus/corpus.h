@@ -57,6 +57,10 @@ struct CorpusOptions {
   double manner_words = 0;
 };
 
+// An error unless `share` (CorpusOptions::manner_words) lies in [0, 1]; the stage's planning and
+// the generator's option check share it.
+Status CheckMannerWords(double share);
+
 struct CorpusSummary {
   int64_t clips = 0, triplets = 0, frames = 0, triplet_frames = 0;
   int64_t rejected = 0;  // scripts resampled because a clip failed the gate
