@@ -1,14 +1,16 @@
 """deploy/slurm/motionpipe.sbatch on a real one-node Slurm cluster (Debian's slurmctld, slurmd and
 munge, installed by scripts/setup): brought up on loopback by the test in a temporary directory (its
 own slurm.conf, state, spool and munge socket and key), submitted to with sbatch, watched through
-scontrol, and stopped again, nothing left running. Three runs of the script:
+scontrol, and stopped again, nothing left running. Four runs of the script:
   - a pipeline runs to COMPLETED, its outputs byte for byte those of a local `motionpipe run`, and
     its worker step drains instead of being killed;
   - `scontrol requeue` in the middle: the requeued allocation resumes the same motionpipe job from
     the journal, no task committed before the requeue runs again, nothing is lost;
   - preemption, `scancel --batch --signal=TERM` (what `--signal=B:TERM@120` sends before the time
     limit): the workers drain and hand back their tasks, the Slurm job ends, and a resubmission of
-    the same command completes the same motionpipe job.
+    the same command completes the same motionpipe job;
+  - workers that cannot start (their /metrics port taken): the Slurm job ends FAILED with the
+    reason instead of waiting until its time limit.
 Where the cluster cannot run here the test skips with the exact reason; there is no fake scheduler."""
 import glob
 import hashlib
@@ -28,29 +30,45 @@ from harness import MOTIONPIPE
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 SBATCH = os.path.join(ROOT, "deploy", "slurm", "motionpipe.sbatch")
 DAEMONS = ("munged", "slurmctld", "slurmd")
+ENDED = {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT", "NODE_FAIL", "OUT_OF_MEMORY", "BOOT_FAIL", "DEADLINE"}
 
 
-def free_port():
-    # Below Linux's ephemeral range (32768-60999), where loopback clients take their ports.
+def port_is_free(port):
+    with socket.socket() as s:
+        try:
+            s.bind(("0.0.0.0", port))
+            return True
+        except OSError:
+            return False
+
+
+def free_port(taken=(), span=1):
+    """A port p with p .. p+span-1 all free and none in `taken`. Below Linux's ephemeral range
+    (32768-60999), where loopback clients take their ports. A port is released when this returns,
+    so the ports a test needs at once are drawn together (see `taken`), never twice."""
     for _ in range(200):
-        port = random.randint(20000, 32000)
-        with socket.socket() as s:
-            try:
-                s.bind(("0.0.0.0", port))
-                return port
-            except OSError:
-                continue
+        port = random.randint(20000, 32000 - span)
+        block = range(port, port + span)
+        if not any(p in taken for p in block) and all(port_is_free(p) for p in block):
+            return port
     raise RuntimeError("no free port in 20000-32000")
 
 
-def wait_for(predicate, timeout, what):
+def wait_for(predicate, timeout, what, explain=None):
+    """`explain`, when given, says on a timeout what the cluster and the job were doing."""
     deadline = time.time() + timeout
     while time.time() < deadline:
         value = predicate()
         if value:
             return value
         time.sleep(0.2)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+    detail = ""
+    if explain is not None:
+        try:
+            detail = "\n" + explain()
+        except Exception as e:  # the explanation must not hide the timeout
+            detail = f"\n(could not explain: {e})"
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}{detail}")
 
 
 class Cluster:
@@ -76,11 +94,14 @@ class Cluster:
                        check=True, capture_output=True, timeout=30)
         self.pids["munged"] = self.pid("munged")
         host = socket.gethostname().split(".")[0]
+        ports = [free_port()]
+        ports.append(free_port(taken=ports))
+        self.ports = ports
         with open(self.conf, "w") as f:
             f.write(f"""ClusterName=motionpipe-test
 SlurmctldHost={host}(127.0.0.1)
-SlurmctldPort={free_port()}
-SlurmdPort={free_port()}
+SlurmctldPort={ports[0]}
+SlurmdPort={ports[1]}
 AuthType=auth/munge
 AuthInfo=socket={self.socket}
 CredType=cred/munge
@@ -192,7 +213,13 @@ class SlurmScript(unittest.TestCase):
 
     def setUp(self):
         self.work = tempfile.mkdtemp(dir=self.dir)
-        self.ports = [free_port() for _ in range(4)]
+        # The coordinator's workers', control and metrics ports; the worker serves /metrics on the
+        # metrics port + 1 (motionpipe.sbatch), so that one is drawn free as well. None is Slurm's.
+        taken = list(self.cluster.ports)
+        workers_port = free_port(taken)
+        control_port = free_port(taken + [workers_port])
+        metrics_port = free_port(taken + [workers_port, control_port], span=2)
+        self.ports = [workers_port, control_port, metrics_port]
         self.state = os.path.join(self.work, "state")
         self.exec_log = os.path.join(self.work, "executions.log")
 
@@ -214,8 +241,31 @@ class SlurmScript(unittest.TestCase):
         return int(out.stdout.strip().split(";")[0])
 
     def wait_state(self, job_id, states, timeout=120):
-        return wait_for(lambda: (j := self.cluster.job(job_id)).get("JobState") in states and j, timeout,
-                        f"Slurm job {job_id} to reach {states}")
+        def reached():
+            info = self.cluster.job(job_id)
+            if info.get("JobState") in states:
+                return info
+            if info.get("JobState") in ENDED:  # it will not get there: say why now
+                raise AssertionError(f"Slurm job {job_id} ended before reaching {states}\n{self.explain(job_id)}")
+            return None
+
+        return wait_for(reached, timeout, f"Slurm job {job_id} to reach {states}", lambda: self.explain(job_id))
+
+    def explain(self, job_id):
+        """What Slurm says of the job, the job's own log and the tails of the daemons' logs."""
+        info = self.cluster.job(job_id)
+        parts = [f"Slurm: JobState={info.get('JobState')} Reason={info.get('Reason')} Restarts={info.get('Restarts')} "
+                 f"ports={self.ports} committed={len(self.committed())}"]
+        try:
+            parts.append(f"--- slurm-{job_id}.log ---\n{self.slurm_log(job_id)[-4000:]}")
+        except FileNotFoundError:
+            parts.append(f"--- slurm-{job_id}.log: not written ---")
+        for name in ("slurmd.log", "slurmctld.log"):
+            try:
+                parts.append(f"--- {name} (tail) ---\n{self.cluster.log(name)[-2000:]}")
+            except FileNotFoundError:
+                pass
+        return "\n".join(parts)
 
     def slurm_log(self, job_id):
         with open(os.path.join(self.work, f"slurm-{job_id}.log"), errors="replace") as f:
@@ -251,7 +301,7 @@ class SlurmScript(unittest.TestCase):
 
     def test_a_pipeline_runs_to_completed_as_a_local_run_does(self):
         job = self.sbatch(self.pipeline(tasks=20, ms=20))
-        info = self.wait_state(job, {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"})
+        info = self.wait_state(job, ENDED)
         log = self.slurm_log(job)
         self.assertEqual(info["JobState"], "COMPLETED", log)
         self.assertEqual(info["ExitCode"], "0:0", log)
@@ -272,7 +322,7 @@ class SlurmScript(unittest.TestCase):
 
     def test_plaintext_only_when_asked(self):
         job = self.sbatch(self.pipeline(tasks=3, ms=0), MOTIONPIPE_PLAINTEXT="1")
-        info = self.wait_state(job, {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"})
+        info = self.wait_state(job, ENDED)
         log = self.slurm_log(job)
         self.assertEqual(info["JobState"], "COMPLETED", log)
         self.assertIn("MOTIONPIPE_PLAINTEXT=1", log)
@@ -282,14 +332,14 @@ class SlurmScript(unittest.TestCase):
     def test_a_requeued_allocation_resumes_the_same_job(self):
         job = self.sbatch(self.pipeline(tasks=60, ms=250))
         self.wait_state(job, {"RUNNING"})
-        wait_for(lambda: len(self.committed()) >= 10, 60, "10 committed tasks")
+        wait_for(lambda: len(self.committed()) >= 10, 60, "10 committed tasks", lambda: self.explain(job))
         before = self.committed()
         self.cluster.run("scontrol", "requeue", str(job))
         wait_for(lambda: int(self.cluster.job(job).get("Restarts", 0)) == 1 and self.cluster.job(job)["JobState"] == "PENDING", 60,
-                 "the job to be requeued")
+                 "the job to be requeued", lambda: self.explain(job))
         # Slurm holds a requeued job for about 2 minutes (its BeginTime); release it now.
         self.cluster.run("scontrol", "update", f"JobId={job}", "StartTime=now")
-        info = self.wait_state(job, {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"}, timeout=180)
+        info = self.wait_state(job, ENDED, timeout=180)
         log = self.slurm_log(job)
         self.assertEqual(info["JobState"], "COMPLETED", log)
         self.assertIn("resuming job 1", log)
@@ -300,14 +350,29 @@ class SlurmScript(unittest.TestCase):
         self.assertEqual(sorted(runs), list(range(60)), "a task never ran")
         self.assertEqual(sorted(i for i in before if runs[i] != 1), [], "tasks committed before the requeue ran again")
 
+    def test_a_job_whose_workers_cannot_start_ends_instead_of_waiting(self):
+        # The worker serves /metrics on the metrics port + 1: held here, the worker exits at once.
+        with socket.socket() as held:
+            held.bind(("0.0.0.0", self.ports[2] + 1))
+            held.listen()
+            job = self.sbatch(self.pipeline(tasks=5, ms=0))
+            info = self.wait_state(job, ENDED, timeout=90)
+        log = self.slurm_log(job)
+        self.assertEqual(info["JobState"], "FAILED", log)
+        self.assertIn("every worker exited before job 1 finished", log)
+        self.assertIn("cannot serve /metrics", log)
+        self.assertEqual(self.committed(), set())
+        with open(os.path.join(self.state, "job_id")) as f:
+            self.assertEqual(f.read().strip(), "1")  # kept for a resubmission
+
     def test_preemption_drains_and_a_resubmission_completes(self):
         pipeline = self.pipeline(tasks=60, ms=250)
         job = self.sbatch(pipeline)
         self.wait_state(job, {"RUNNING"})
-        wait_for(lambda: len(self.committed()) >= 10, 60, "10 committed tasks")
+        wait_for(lambda: len(self.committed()) >= 10, 60, "10 committed tasks", lambda: self.explain(job))
         # What --signal=B:TERM@120 sends before the time limit, and a preempting scheduler sends.
         self.cluster.run("scancel", "--batch", "--signal=TERM", str(job))
-        info = self.wait_state(job, {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"})
+        info = self.wait_state(job, ENDED)
         log = self.slurm_log(job)
         self.assertIn("draining the workers", log)
         self.assertIn("draining (signal)", log)
@@ -318,7 +383,7 @@ class SlurmScript(unittest.TestCase):
         with open(os.path.join(self.state, "job_id")) as f:
             self.assertEqual(f.read().strip(), "1")  # kept for the resubmission
         again = self.sbatch(pipeline)
-        info = self.wait_state(again, {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"}, timeout=180)
+        info = self.wait_state(again, ENDED, timeout=180)
         log = self.slurm_log(again)
         self.assertEqual(info["JobState"], "COMPLETED", log)
         self.assertIn("resuming job 1", log)
