@@ -2,7 +2,9 @@
 // TEMOS score, APE/AVE, text-to-motion and motion-to-motion retrieval, diversity, plausibility.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
+#include <map>
 #include <numeric>
 
 #include "evaluation.h"
@@ -185,6 +187,108 @@ Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTabl
   return out;
 }
 
+// Can the TEMOS score tell a label-guided composition from a random one (issue 15: the generators
+// trained on each tie by it)? A yardstick made of data, no generator: each two-action span
+// (A while B) of `spans` is composed again from two real single actions whose texts are exactly A
+// and B (of the span's split where there is one, each the one nearest in length), once with the
+// labeler's body parts of each (what SINC's synthetic pairs and GPT-compositing do) and once with
+// random parts (the paper's random-composition ablation, DrawRandomParts), beside the single A
+// alone (what a single-action model could at best give). Each is scored against the span's ground
+// truth as a generation is, on the spans whose two singles exist with compatible labelled parts
+// (their ids are listed, to pair a generator's per_motion scores with them); the paired per-span
+// difference of the TEMOS score (labels - random, labels - A alone) with its standard error says
+// how far apart the metric puts the two kinds of composition before any model learns from them.
+Result<json> ComposedTruth(plugin::Generator& tmr, plugin::Generator& temos,
+                           const sinc::SpanTable& table, const std::vector<int64_t>& spans,
+                           int64_t batch, uint64_t seed) {
+  // Singles by text. The corpus words an action many ways, so few test spans find both texts
+  // among the test singles alone: a single of the span's split is preferred, else one of any split
+  // (a yardstick of data, no model trains on it), each time the one nearest in length.
+  std::map<std::string, std::vector<int64_t>> singles;
+  for (int64_t j = 0; j < table.size(); ++j)
+    if (table.single(j)) singles[table.text_a[static_cast<size_t>(j)]].push_back(j);
+  const auto nearest = [&](int64_t span, const std::string& text) -> int64_t {
+    const auto it = singles.find(text);
+    if (it == singles.end()) return -1;
+    const auto key = [&](int64_t j) {
+      return std::pair{
+          table.splits[static_cast<size_t>(j)] != table.splits[static_cast<size_t>(span)],
+          std::abs(table.frames(j) - table.frames(span))};
+    };
+    int64_t best = -1;
+    for (const int64_t j : it->second)
+      if (best < 0 || key(j) < key(best)) best = j;
+    return best;
+  };
+  Rng rng(MixSeed(seed, 6));
+  std::vector<Motion> labels, random, alone, truths;
+  std::vector<std::string> texts;
+  json ids = json::array();
+  int64_t pairs = 0, unmatched = 0, incompatible = 0;
+  for (const int64_t span : spans) {
+    if (table.single(span)) continue;
+    ++pairs;
+    const int64_t a = nearest(span, table.text_a[static_cast<size_t>(span)]),
+                  b = nearest(span, table.text_b[static_cast<size_t>(span)]);
+    if (a < 0 || b < 0) {
+      ++unmatched;
+      continue;
+    }
+    sinc::PairRecipe recipe;
+    recipe.first = static_cast<int32_t>(a), recipe.second = static_cast<int32_t>(b);
+    recipe.first_parts = table.parts_a[static_cast<size_t>(a)] & sinc::kAllParts;
+    recipe.second_parts = table.parts_a[static_cast<size_t>(b)] & sinc::kAllParts;
+    if (!sinc::Compatible(recipe.first_parts, recipe.second_parts)) {
+      ++incompatible;
+      continue;
+    }
+    labels.push_back(sinc::MaterialiseMotion(table, recipe, sinc::CropMode::kFirst));
+    sinc::DrawRandomParts(rng, &recipe);
+    random.push_back(sinc::MaterialiseMotion(table, recipe, sinc::CropMode::kFirst));
+    alone.push_back(table.MotionOf(a));
+    truths.push_back(table.MotionOf(span));
+    texts.push_back(SpanText(table, span));
+    ids.push_back(table.ids[static_cast<size_t>(span)]);
+  }
+  json out = {{"pairs", pairs},
+              {"unmatched", unmatched},
+              {"incompatible", incompatible},
+              {"spans", labels.size()}};
+  if (labels.size() < 2) return out;
+  out["ids"] = std::move(ids);
+  MP_ASSIGN_OR_RETURN(const auto t_temos, temos.EncodeMotions(truths));
+  MP_ASSIGN_OR_RETURN(const auto t_tmr, tmr.EncodeMotions(truths));
+  MP_ASSIGN_OR_RETURN(const auto text_tmr, tmr.EncodeTexts(texts));
+  const auto gt = ToEmbeddings(t_tmr), txt = ToEmbeddings(text_tmr);
+  const int64_t b = std::min<int64_t>(batch, static_cast<int64_t>(truths.size()));
+  std::map<std::string, std::vector<double>> per_span;
+  for (const auto& [key, motions] :
+       {std::pair<const char*, const std::vector<Motion>*>{"labels", &labels},
+        {"random", &random},
+        {"first_alone", &alone}}) {
+    MP_ASSIGN_OR_RETURN(const auto f_temos, temos.EncodeMotions(*motions));
+    MP_ASSIGN_OR_RETURN(const auto f_tmr, tmr.EncodeMotions(*motions));
+    MP_ASSIGN_OR_RETURN(out[key], GenerationScores(*motions, truths, f_temos, t_temos,
+                                                   ToEmbeddings(f_tmr), gt, txt, b, seed));
+    for (size_t k = 0; k < f_temos.size(); ++k)
+      per_span[key].push_back(TemosScoreOf(f_temos[k], t_temos[k]));
+  }
+  // Paired by span: mean difference, its sd and standard error.
+  const auto paired = [&](const std::string& x, const std::string& y) {
+    const auto& u = per_span[x];
+    const auto& v = per_span[y];
+    const double n = static_cast<double>(u.size());
+    double mean = 0, ss = 0;
+    for (size_t k = 0; k < u.size(); ++k) mean += (u[k] - v[k]) / n;
+    for (size_t k = 0; k < u.size(); ++k) ss += std::pow(u[k] - v[k] - mean, 2);
+    const double sd = std::sqrt(ss / (n - 1));
+    return json{{"mean", mean}, {"sd", sd}, {"se", sd / std::sqrt(n)}, {"n", u.size()}};
+  };
+  out["temos_score_difference"] = {{"labels_minus_random", paired("labels", "random")},
+                                   {"labels_minus_first_alone", paired("labels", "first_alone")}};
+  return out;
+}
+
 // params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
 // evaluator), generated (the generate stage), singles (the spans and ground truth; default the
 // input that has them; each of these an input's name or a path pattern such as
@@ -192,7 +296,9 @@ Result<json> SyntheticPairAgreement(plugin::Generator& tmr, const sinc::SpanTabl
 // yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the
 // TMR's own retrieval on the test singles and two-action spans), synthetic_pairs (N > 0: also the
 // TMR's agreement of text and motion on N synthetic pairs of each kind and N real pairs of
-// `synthetic_split`, default train: SyntheticPairAgreement).
+// `synthetic_split`, default train: SyntheticPairAgreement), composed_truth (true: also the
+// yardsticks of ComposedTruth: each generated two-action span, or with `composed_split` every
+// two-action span of that split, composed from two real singles by labelled and by random parts).
 class EvalGenerateStage : public StageExecutor {
  public:
   // One task.
@@ -233,6 +339,7 @@ class EvalGenerateStage : public StageExecutor {
     const std::string generated_stage = p.value("generated", std::string());
     std::vector<Motion> generated, truth;
     std::vector<std::string> texts, ids;
+    std::vector<int64_t> spans;  // each motion's span in the table
     std::string method = p.value("method", std::string()), generated_checkpoint;
     for (const std::string& dir : StageDirs(ctx, generated_stage)) {
       if (!fs::exists(dir + "/generated.npz")) continue;
@@ -242,6 +349,7 @@ class EvalGenerateStage : public StageExecutor {
         const auto it = span_of.find(clip.id);
         if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
         ids.push_back(clip.id);
+        spans.push_back(it->second);
         texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
         generated.push_back(std::move(clip.motion));
         truth.push_back(table->MotionOf(it->second));
@@ -312,6 +420,18 @@ class EvalGenerateStage : public StageExecutor {
       if (!agreement.ok())
         return TaskReport::BadInput("eval_generate: " + agreement.status().message());
       metrics["synthetic_pairs"] = *agreement;
+    }
+    if (p.value("composed_truth", false)) {  // the generated spans, or every pair of a split
+      const std::vector<int64_t> composed_spans =
+          p.contains("composed_split")
+              ? SelectSpans(*table, {{"split", p["composed_split"]}, {"spans", "pairs"}})
+              : spans;
+      if (p.contains("composed_split") && composed_spans.empty())
+        return TaskReport::BadInput("eval_generate: composed_split '" + p["composed_split"].dump() +
+                                    "' has no two-action spans");
+      auto composed = ComposedTruth(**tmr, temos_encoder, *table, composed_spans, batch, seed);
+      if (!composed.ok()) return TaskReport::Error("eval_generate: " + composed.status().message());
+      metrics["yardsticks"]["composed"] = *composed;
     }
     const double temos_score = metrics["temos_score"].get<double>();
     const int64_t pairs = p.value("diversity_pairs", int64_t{300});

@@ -4,11 +4,14 @@ writes the requested duration, and a gang that loses a rank resumes from its che
 on the same loss curve as an uninterrupted run."""
 import csv
 import glob
+import io
 import json
 import os
 import signal
+import struct
 import subprocess
 import unittest
+import zipfile
 
 import numpy as np
 
@@ -54,6 +57,55 @@ stages:
     shards: 1
     params: {model: sinc, split: "${vars.split}", spans: all, limit: 4, reconstruct: true}
 """
+
+COMPOSED = """
+name: composed_test
+output_root: OUT
+seed: 1
+stages:
+  model:
+    kind: train
+    params:
+      model: temos_sinc
+      config: {variant: sinc, model: {latent: 16, layers: 1, heads: 2, ff: 32, dropout: 0.0, text_encoder: {layers: 1, vocab: 100}}}
+      data: {spans: SPANS/spans.npz, synthetic_p: 0, max_frames: 30}
+      steps: 0
+  gen:
+    kind: generate
+    inputs: [model]
+    shards: 1
+    params: {model: model, singles: SPANS, split: test, spans: pairs}
+  composed:
+    kind: eval_generate
+    inputs: [model, gen]
+    params: {evaluator: model, generated: gen, singles: SPANS, batch: 4, composed_truth: true}
+"""
+
+
+def write_spans(path, spans):
+    """A `motionpipe.spans/1` file from (id, split, text_a, text_b, parts_a, parts_b, motion) rows, each
+    motion a (poses [F, 22, 3], trans [F, 3]) pair at 30 fps. Stored uncompressed with every array's
+    data 64-byte aligned in the file, as motionpipe writes it (its reader maps poses and trans in
+    place; np.savez does not align them)."""
+    column = lambda k: np.array([row[k] for row in spans])
+    arrays = {"format": np.array("motionpipe.spans/1"), "ids": column(0), "splits": column(1), "sources": column(0),
+              "fps": np.full(len(spans), 30.0),
+              "offsets": np.concatenate([[0], np.cumsum([len(m[0]) for *_, m in spans])]).astype(np.int64),
+              "poses": np.concatenate([m[0] for *_, m in spans]).astype(np.float32),
+              "trans": np.concatenate([m[1] for *_, m in spans]).astype(np.float32),
+              "text_a": column(2), "text_b": column(3), "parts_a": column(4).astype(np.uint8),
+              "parts_b": column(5).astype(np.uint8), "labeler": np.array("test")}
+    with open(path, "wb") as raw, zipfile.ZipFile(raw, "w", zipfile.ZIP_STORED) as z:
+        for name, array in arrays.items():
+            buffer = io.BytesIO()
+            np.lib.format.write_array(buffer, array, allow_pickle=False)
+            data = buffer.getvalue()
+            header = 10 + int.from_bytes(data[8:10], "little")  # npy version 1: magic, version, length
+            info = zipfile.ZipInfo(name + ".npy")
+            pad = -(raw.tell() + 30 + len(info.filename) + header) % 64
+            pad += 64 if 0 < pad < 4 else 0
+            info.extra = struct.pack("<HH", 0xCAFE, pad - 4) + bytes(pad - 4) if pad else b""
+            z.writestr(info, data)
 
 
 def torch_load(path):
@@ -187,6 +239,47 @@ class TrainStageTest(EngineTest):
         with np.load(clip) as z:
             self.assertEqual(z["poses"].shape, (75, 22, 3))
             self.assertEqual(float(z["fps"][0]), 30)
+
+    def test_composed_truth_composes_each_pair_from_the_singles_that_bear_its_texts(self):
+        # eval_generate's composed_truth on a spans file made here: two test pairs "walk forward while
+        # wave the right hand" whose two singles (training split: none in the pairs' own) share the
+        # pairs' very motion, so any composition of them is the truth itself (TEMOS score 1, APE 0),
+        # while singles with other motions are there to be matched wrongly; a pair whose second text
+        # no single bears (unmatched), and one whose singles' labelled parts overlap (incompatible).
+        rng = np.random.default_rng(3)
+        walk = (rng.normal(0, 0.2, (40, 22, 3)), np.cumsum(rng.normal(0, 0.01, (40, 3)), axis=0) + [0, 0, 0.9])
+        other = (rng.normal(0, 0.2, (40, 22, 3)), np.cumsum(rng.normal(0, 0.01, (40, 3)), axis=0) + [0, 0, 0.9])
+        longer = (rng.normal(0, 0.2, (60, 22, 3)), np.cumsum(rng.normal(0, 0.01, (60, 3)), axis=0) + [0, 0, 0.9])
+        spans = [("s_walk_long", "train", "walk forward", "", 0b000011, 0, longer),  # first, but farther in length
+                 ("s_walk", "train", "walk forward", "", 0b000011, 0, walk),
+                 ("s_wave", "train", "wave the right hand", "", 0b110000, 0, walk),
+                 ("s_kick", "train", "kick", "", 0b000011, 0, other),
+                 ("s_step", "train", "step", "", 0b000001, 0, other),
+                 ("p_1", "test", "walk forward", "wave the right hand", 0b000011, 0b110000, walk),
+                 ("p_2", "test", "walk forward", "wave the right hand", 0b000011, 0b110000, walk),
+                 ("p_unmatched", "test", "walk forward", "jump high", 0b000011, 0b000001, other),
+                 ("p_incompatible", "test", "kick", "step", 0b000011, 0b000001, other)]
+        os.makedirs(self.path("spans"))
+        write_spans(self.path("spans", "spans.npz"), spans)
+        pipeline = self.write_pipeline("composed.yaml", COMPOSED.replace("SPANS", self.path("spans")))
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "1", "--threads", "1", "-q"],
+                                capture_output=True, text=True, timeout=300)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        with open(glob.glob(self.path("out", "composed_test-*", "composed", "task-00000", "metrics.json"))[0]) as f:
+            composed = json.load(f)["yardsticks"]["composed"]
+        self.assertEqual((composed["pairs"], composed["spans"], composed["unmatched"], composed["incompatible"]), (4, 2, 1, 1))
+        self.assertEqual(sorted(composed["ids"]), ["p_1", "p_2"])
+        for kind in ("labels", "random", "first_alone"):
+            self.assertAlmostEqual(composed[kind]["temos_score"], 1.0, places=5, msg=kind)
+            self.assertLess(composed[kind]["APE"]["mean_global"], 1e-4, kind)
+        difference = composed["temos_score_difference"]["labels_minus_random"]
+        self.assertEqual(difference["n"], 2)
+        self.assertAlmostEqual(difference["mean"], 0.0, places=5)
+        # A split without two-action spans is refused with the reason.
+        refused = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "1", "--threads", "1", "-q", "name=refused",
+                                  "stages.composed.params.composed_split=val"], capture_output=True, text=True, timeout=300)
+        self.assertNotEqual(refused.returncode, 0)
+        self.assertIn("composed_split '\"val\"' has no two-action spans", refused.stdout + refused.stderr)
 
     def test_bad_model_configs_fail_the_task_with_the_reason(self):
         for overrides, reason in ((["stages.sinc.params.model=no_such_model"], "no model plugin 'no_such_model'"),
