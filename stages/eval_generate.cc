@@ -422,13 +422,18 @@ class EvalGenerateStage : public StageExecutor {
       metrics["synthetic_pairs"] = *agreement;
     }
     if (p.value("composed_truth", false)) {  // the generated spans, or every pair of a split
-      const std::vector<int64_t> composed_spans =
-          p.contains("composed_split")
-              ? SelectSpans(*table, {{"split", p["composed_split"]}, {"spans", "pairs"}})
-              : spans;
-      if (p.contains("composed_split") && composed_spans.empty())
-        return TaskReport::BadInput("eval_generate: composed_split '" + p["composed_split"].dump() +
-                                    "' has no two-action spans");
+      std::vector<int64_t> composed_spans = spans;
+      if (p.contains("composed_split")) {
+        const json& split = p["composed_split"];
+        composed_spans = split.is_string()
+                             ? SelectSpans(*table, {{"split", split}, {"spans", "pairs"}})
+                             : std::vector<int64_t>{};
+        if (composed_spans.empty())
+          return TaskReport::BadInput(
+              "eval_generate: composed_split " +
+              (split.is_string() ? "'" + split.get<std::string>() + "'" : split.dump()) +
+              " has no two-action spans (a split name: train, val or test)");
+      }
       auto composed = ComposedTruth(**tmr, temos_encoder, *table, composed_spans, batch, seed);
       if (!composed.ok()) return TaskReport::Error("eval_generate: " + composed.status().message());
       metrics["yardsticks"]["composed"] = *composed;

@@ -279,7 +279,7 @@ class TrainStageTest(EngineTest):
         refused = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "1", "--threads", "1", "-q", "name=refused",
                                   "stages.composed.params.composed_split=val"], capture_output=True, text=True, timeout=300)
         self.assertNotEqual(refused.returncode, 0)
-        self.assertIn("composed_split '\"val\"' has no two-action spans", refused.stdout + refused.stderr)
+        self.assertIn("composed_split 'val' has no two-action spans", refused.stdout + refused.stderr)
 
     def test_bad_model_configs_fail_the_task_with_the_reason(self):
         for overrides, reason in ((["stages.sinc.params.model=no_such_model"], "no model plugin 'no_such_model'"),
