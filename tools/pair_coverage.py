@@ -9,12 +9,18 @@ so each text is mapped to its action through the corpus vocabulary's text templa
 words). Usage:
 
   /usr/bin/python3 tools/pair_coverage.py out/JOB/singles/task-00000/spans.npz [--split test] [--json]
-      [--scores EVAL_GENERATE_DIR ...] [--compare ROW_A ROW_B]
+      [--scores EVAL_GENERATE_DIR ...] [--compare ROW_A ROW_B] [--by pair|texts]
 
 --scores reads eval_generate stages' per-motion TEMOS scores (`per_motion`) and gives each row's
 mean on the spans whose action pair a training pair holds and on the others ("new"), per seed;
 --compare pairs two rows by seed on each subset (mean difference and two standard errors of the
 per-seed differences, as the report's claims).
+
+--by texts groups the spans instead by how many of their two texts occur word for word among the
+training split's single actions' texts (the texts a generator trained without a pretrained language
+model has learned; a paraphrase it has never read is new to it): both; one, the other a paraphrase
+of an action some training single performs (one_paraphrased) or an action no training single
+performs (one_action_unseen: synthetic pairs, made of singles, cannot show it); neither.
 """
 import argparse
 import collections
@@ -77,8 +83,8 @@ def read_spans(path):
     return [str(i) for i in ids], [str(s) for s in splits], [str(t) for t in a], [str(t) for t in b]
 
 
-def read_scores(stage_dirs, held, new):
-    """{row: {seed: (mean TEMOS score on held spans, on new spans)}} from eval_generate stages."""
+def read_scores(stage_dirs, subsets):
+    """{row: {seed: (mean TEMOS score on each subset's spans, in order)}} from eval_generate stages."""
     rows = collections.defaultdict(dict)
     for stage in stage_dirs:
         path = os.path.join(stage, "task-00000", "metrics.json")
@@ -90,16 +96,16 @@ def read_scores(stage_dirs, held, new):
         if "per_motion" not in metrics:
             raise InputError(f"{path}: no per-motion scores (`per_motion`): score it again with this tree's eval_generate")
         score = {m["id"]: m["temos_score"] for m in metrics["per_motion"]}
-        subsets = []
-        for name, spans in (("held", held), ("new", new)):
+        means = []
+        for name, spans in subsets.items():
             values = [score[i] for i in spans if i in score]
             if not values:
-                raise InputError(f"{path}: none of the split's {name} spans was scored")
-            subsets.append(statistics.mean(values))
+                raise InputError(f"{path}: none of the split's {name.replace('_', ' ')} spans was scored")
+            means.append(statistics.mean(values))
         row, seed = metrics.get("row") or metrics.get("method", stage), metrics.get("seed", 0)
         if seed in rows[row]:
             raise InputError(f"{path}: row '{row}' has seed {seed} twice")
-        rows[row][seed] = tuple(subsets)
+        rows[row][seed] = tuple(means)
     return rows
 
 
@@ -112,7 +118,11 @@ def paired(a, b):
     return statistics.mean(d), 2 * statistics.stdev(d) / len(d) ** 0.5, d
 
 
-def coverage(patterns, ids, splits, text_a, text_b, split):
+def coverage(patterns, ids, splits, text_a, text_b, split, by="pair"):
+    """The split's two-action spans against the training split, and their subsets by `by`: pair
+    (held: the action pair occurs among the training pairs; new) or texts (how many of the two texts
+    occur word for word among the training singles' texts, and whether the other's action is a
+    training single's). Empty subsets are left out."""
     cache = {}
 
     def action(text):
@@ -130,8 +140,24 @@ def coverage(patterns, ids, splits, text_a, text_b, split):
     if not asked:
         raise InputError(f"no two-action spans in split '{split}'")
     seen = [training[pair(i)] for i in asked]
-    held = {ids[i] for i, n in zip(asked, seen) if n > 0}
-    new = {ids[i] for i, n in zip(asked, seen) if n == 0}
+    if by == "pair":
+        subsets = {"held": {ids[i] for i, n in zip(asked, seen) if n > 0},
+                   "new": {ids[i] for i, n in zip(asked, seen) if n == 0}}
+    else:
+        singles = [i for i in range(len(splits)) if not text_b[i] and splits[i] == "train"]
+        texts = {text_a[i] for i in singles}
+        actions = {action(text_a[i]) for i in singles} - {None}
+
+        def kind(i):
+            unseen = [t for t in (text_a[i], text_b[i]) if t not in texts]
+            if len(unseen) != 1:
+                return ("both_texts_seen", "", "no_text_seen")[len(unseen)]
+            return "one_paraphrased" if action(unseen[0]) in actions else "one_action_unseen"
+
+        subsets = {name: set() for name in ("both_texts_seen", "one_paraphrased", "one_action_unseen", "no_text_seen")}
+        for i in asked:
+            subsets[kind(i)].add(ids[i])
+    subsets = {name: spans for name, spans in subsets.items() if spans}
     in_training = sum(n > 0 for n in seen)
     unmatched = sorted({t for i in two for t in (text_a[i], text_b[i]) if action(t) is None})
     return {
@@ -143,7 +169,8 @@ def coverage(patterns, ids, splits, text_a, text_b, split):
         "training_pairs": sum(training.values()),
         "training_distinct_action_pairs": len(training),
         "texts_without_action": unmatched,
-    }, held, new
+        "subsets": {name: len(spans) for name, spans in subsets.items()},
+    }, subsets
 
 
 def main(argv):
@@ -154,15 +181,18 @@ def main(argv):
     p.add_argument("--json", action="store_true")
     p.add_argument("--scores", nargs="+", default=[], metavar="EVAL_GENERATE_DIR")
     p.add_argument("--compare", nargs=2, metavar=("ROW_A", "ROW_B"))
+    p.add_argument("--by", choices=("pair", "texts"), default="pair",
+                   help="subsets: the action pair held by a training pair or not (pair), or how many of "
+                        "the two texts occur word for word among the training singles' (texts)")
     args = p.parse_args(argv)
     if args.compare and not args.scores:
         p.error("--compare compares scored rows: give the eval_generate stages with --scores")
     try:
-        result, held, new = coverage(read_vocabulary(args.vocabulary), *read_spans(args.spans), args.split)
+        result, subsets = coverage(read_vocabulary(args.vocabulary), *read_spans(args.spans), args.split, args.by)
         if args.scores:
-            rows = read_scores(args.scores, held, new)
-            result["rows"] = {row: {"held": statistics.mean(v[0] for v in by_seed.values()),
-                                    "new": statistics.mean(v[1] for v in by_seed.values()),
+            rows = read_scores(args.scores, subsets)
+            result["rows"] = {row: {**{name: statistics.mean(v[k] for v in by_seed.values())
+                                       for k, name in enumerate(subsets)},
                                     "seeds": sorted(by_seed)} for row, by_seed in rows.items()}
             if args.compare:
                 for row in args.compare:
@@ -170,7 +200,7 @@ def main(argv):
                         raise InputError(f"no row '{row}' among the scored stages ({', '.join(sorted(rows))})")
                 a, b = (rows[r] for r in args.compare)
                 result["compare"] = {}
-                for k, name in enumerate(("held", "new")):
+                for k, name in enumerate(subsets):
                     mean, two_se, d = paired({s: v[k] for s, v in a.items()}, {s: v[k] for s, v in b.items()})
                     result["compare"][name] = {"difference": mean, "two_standard_errors": two_se, "per_seed": d}
     except InputError as e:
@@ -184,10 +214,13 @@ def main(argv):
               f"(median {result['median_times_in_training']:g} times); {result['training_pairs']} training pairs, "
               f"{result['training_distinct_action_pairs']} distinct action pairs; "
               f"{len(result['texts_without_action'])} texts without an action")
+        named = {name: name.replace("_", " ") + (" pairs" if args.by == "pair" else "") for name in subsets}
+        print("  subsets: " + ", ".join(f"{named[name]} {n}" for name, n in result["subsets"].items()))
         for row, r in result.get("rows", {}).items():
-            print(f"  {row}: TEMOS score {r['held']:.3f} on held pairs, {r['new']:.3f} on new ones ({len(r['seeds'])} seeds)")
+            print(f"  {row}: TEMOS score " + ", ".join(f"{r[name]:.3f} on {named[name]}" for name in subsets)
+                  + f" ({len(r['seeds'])} seeds)")
         for name, c in result.get("compare", {}).items():
-            print(f"  {args.compare[0]} - {args.compare[1]} on {name} pairs: {c['difference']:+.4f}, "
+            print(f"  {args.compare[0]} - {args.compare[1]} on {named[name]}: {c['difference']:+.4f}, "
                   f"2 SE {c['two_standard_errors']:.4f} (per seed {', '.join(f'{x:+.3f}' for x in c['per_seed'])})")
     return 0
 

@@ -104,6 +104,40 @@ class PairCoverageTest(unittest.TestCase):
         result = run(path, "--vocabulary", self.vocabulary, "--scores", *stages[:2], "--compare", "A", "C")
         self.assertIn("no row 'C'", result.stderr)
 
+    def test_by_texts_groups_spans_by_the_training_singles_texts_they_repeat_word_for_word(self):
+        # Training singles' texts: "walk", "wave". A paraphrase ("a person walks slowly") of the same
+        # action is not seen, nor is a training pair's text or another split's single; "jump" is no
+        # action of the vocabulary and "sit" only a test single's: actions no training single performs.
+        path = self.spans([
+            ("train", "walk", ""), ("train", "wave", ""), ("test", "sit", ""),
+            ("train", "a person walks slowly", "someone waves"),  # a pair: its texts do not count
+            ("test", "walk", "wave"),                             # 4/0: both seen
+            ("test", "wave", "a person walks slowly"),            # 5/0: one, the other paraphrased
+            ("test", "sit", "someone waves"),                     # 6/0: none
+            ("test", "wave", "walk"),                             # 7/0: both
+            ("test", "walk", "jump"),                             # 8/0: one, the other's action unseen
+        ])
+        stages = [self.scores("a1", "A", 1, {"4/0": 0.8, "5/0": 0.7, "6/0": 0.6, "7/0": 0.6, "8/0": 0.5}),
+                  self.scores("a2", "A", 2, {"4/0": 0.9, "5/0": 0.5, "6/0": 0.6, "7/0": 0.9, "8/0": 0.5}),
+                  self.scores("b1", "B", 1, {"4/0": 0.6, "5/0": 0.7, "6/0": 0.5, "7/0": 0.6, "8/0": 0.7}),
+                  self.scores("b2", "B", 2, {"4/0": 0.6, "5/0": 0.6, "6/0": 0.6, "7/0": 0.6, "8/0": 0.6})]
+        result = run(path, "--vocabulary", self.vocabulary, "--json", "--by", "texts", "--scores", *stages,
+                     "--compare", "A", "B")
+        self.assertEqual(result.returncode, 0, result.stderr)
+        got = json.loads(result.stdout)
+        self.assertEqual(got["subsets"], {"both_texts_seen": 2, "one_paraphrased": 1, "one_action_unseen": 1,
+                                          "no_text_seen": 1})
+        self.assertAlmostEqual(got["rows"]["A"]["both_texts_seen"], ((0.8 + 0.6) / 2 + (0.9 + 0.9) / 2) / 2)
+        self.assertEqual([round(d, 9) for d in got["compare"]["both_texts_seen"]["per_seed"]], [0.1, 0.3])
+        self.assertEqual([round(d, 9) for d in got["compare"]["one_paraphrased"]["per_seed"]], [0.0, -0.1])
+        self.assertEqual([round(d, 9) for d in got["compare"]["one_action_unseen"]["per_seed"]], [-0.2, -0.1])
+        self.assertEqual([round(d, 9) for d in got["compare"]["no_text_seen"]["per_seed"]], [0.1, 0.0])
+        # The default subsets are unchanged by it; the text report names the subsets.
+        self.assertEqual(set(json.loads(run(path, "--vocabulary", self.vocabulary, "--json").stdout)["subsets"]),
+                         {"held", "new"})
+        text = run(path, "--vocabulary", self.vocabulary, "--by", "texts", "--scores", *stages, "--compare", "A", "B")
+        self.assertIn("A - B on one paraphrased: -0.0500", text.stdout)
+
     def test_this_trees_vocabulary_names_every_template(self):
         texts = ["walk forwards", "walking backwards", "put hands on hips", "drink with left hand"]
         path = self.spans([("train", texts[0], texts[1]), ("test", texts[2], texts[3])])
