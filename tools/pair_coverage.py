@@ -150,8 +150,10 @@ def coverage(patterns, ids, splits, text_a, text_b, split, by="pair"):
 
         def kind(i):
             unseen = [t for t in (text_a[i], text_b[i]) if t not in texts]
-            if len(unseen) != 1:
-                return ("both_texts_seen", "", "no_text_seen")[len(unseen)]
+            if not unseen:
+                return "both_texts_seen"
+            if len(unseen) == 2:
+                return "no_text_seen"
             return "one_paraphrased" if action(unseen[0]) in actions else "one_action_unseen"
 
         subsets = {name: set() for name in ("both_texts_seen", "one_paraphrased", "one_action_unseen", "no_text_seen")}
