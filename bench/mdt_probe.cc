@@ -3,11 +3,17 @@
 // against target and source in the normalised feature space, with their roughness; and the foot
 // skate of the decoded estimates, with what columns of the t = 0 estimate it comes from.
 //   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
-//             [--guidance g_m,g_t] [--no-sample]
+//             [--guidance g_m,g_t] [--no-sample] [--write DIR]
+// --write DIR also writes, as edit stages eval_edit can score (DIR/NAME/task-00000/edited.npz, at
+// the targets' lengths and rates), the targets through the feature and the network's frame rate
+// (target_roundtrip) and the x0 estimates from each target noised to step t (estimate_tT): what
+// the judges make of the network's own reconstruction of the answer.
 #include <torch/torch.h>
 
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -18,7 +24,9 @@
 #include "../plugins/mdt_editor/editor.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
+#include "motionpipe/features/anchor.h"
 #include "motionpipe/features/motionfix207.h"
+#include "motionpipe/formats/clip.h"
 #include "motionpipe/motion/plausibility.h"
 
 using namespace motionpipe;
@@ -50,6 +58,7 @@ struct Args {
   int64_t n = 64, ddim = 20;
   bool sample = true;
   double g_m = -1, g_t = -1;
+  std::string write;  // a directory for the decoded estimates, or empty
 };
 
 std::optional<Args> ParseArgs(int argc, char** argv) {
@@ -66,6 +75,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       args.sample = false;
     else if (a == "--guidance" && i + 1 < argc)
       std::sscanf(argv[++i], "%lf,%lf", &args.g_m, &args.g_t);
+    else if (a == "--write" && i + 1 < argc)
+      args.write = argv[++i];
     else
       args.dirs.push_back(a);
   }
@@ -81,6 +92,8 @@ struct Probe {
   plugin::Batch batch;
   Condition c;  // the batch's condition, nothing dropped
   int64_t n = 0;
+  std::shared_ptr<EditDataset> dataset;
+  std::vector<int64_t> indices;  // the batch's items of the dataset
 };
 
 Result<Probe> LoadProbe(const Args& a) {
@@ -98,12 +111,15 @@ Result<Probe> LoadProbe(const Args& a) {
   probe.net->eval();
   EditDataOptions data;
   data.split = a.split;
-  data.max_frames = 120;
+  // Written estimates are whole motions; the probe's figures keep the first 120 network frames.
+  data.max_frames = a.write.empty() ? 120 : 100000;
   data.fps = probe.options.fps;  // the checkpoint's network rate
-  EditDataset dataset(data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
+  probe.dataset = std::make_shared<EditDataset>(
+      data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
+  EditDataset& dataset = *probe.dataset;
   dataset.SetStats(probe.mean, probe.stddev);
   probe.n = std::min<int64_t>(a.n, dataset.size());
-  std::vector<int64_t> indices;
+  std::vector<int64_t>& indices = probe.indices;
   for (int64_t i = 0; i < probe.n; ++i) indices.push_back(i * dataset.size() / probe.n);
   probe.batch = dataset.Get(indices, 0);
   probe.c.texts = probe.batch.texts;
@@ -304,6 +320,59 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
   }
 }
 
+// Normalised 207-d frames [T, N, 207] at the network's rate as the batch's motions: decoded from
+// each target's first frame (as the editor decodes from its source's) and resampled to the
+// target's own frame count and rate, written as an edit stage's output (dir/task-00000/edited.npz).
+Status WriteMotions(const Probe& p, const torch::Tensor& x, const std::string& dir,
+                    const std::string& what) {
+  const auto frames_of = p.batch.tensors.at("target_padding").logical_not().sum(1);
+  const auto raw = (x.to(torch::kFloat32) * (2.0 * (p.stddev + 1e-5)) + p.mean).contiguous();
+  std::vector<Clip> clips;
+  for (int64_t i = 0; i < p.n; ++i) {
+    const int64_t index = p.indices[static_cast<size_t>(i)];
+    const Motion target = p.dataset->SideMotionOf(index, false);
+    const int64_t frames = frames_of[i].item<int64_t>();
+    FeatureMatrix features(frames, kMotionFixFeatureDim);
+    const auto xi = raw.select(1, i).narrow(0, 0, frames).contiguous();
+    std::memcpy(features.data.data(), xi.data_ptr<float>(),
+                sizeof(float) * static_cast<size_t>(frames * kMotionFixFeatureDim));
+    const double rate = p.options.fps > 0 ? p.options.fps : target.fps;
+    Motion m = DecodeMotionFix207(features, AnchorOf(target), rate);
+    MP_ASSIGN_OR_RETURN(m, ResampleToFrames(m, target.fps, target.num_frames()));
+    Clip clip;
+    clip.id = p.dataset->Id(index);
+    clip.source = "mdt_probe:" + what;
+    clip.motion = std::move(m);
+    clips.push_back(std::move(clip));
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(dir + "/task-00000", ec);
+  if (ec) return Internal(dir + ": cannot create (" + ec.message() + ")");
+  return WriteClips(dir + "/task-00000/edited.npz", clips);
+}
+
+// The targets through the feature and the network's rate, and the x0 estimates from each target
+// noised to step t (t = 0: the clean target as x_t), for eval_edit.
+Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::string& dir) {
+  const auto& target = p.batch.tensors.at("target");
+  const auto& padding = p.batch.tensors.at("target_padding");
+  MP_RETURN_IF_ERROR(WriteMotions(p, target, dir + "/target_roundtrip", "target_roundtrip"));
+  const auto z0 = p.net->Encode(target);
+  for (int64_t t : {0L, 60L, 150L}) {
+    if (t >= p.options.diffusion_steps) continue;
+    const auto steps = torch::full({p.n}, t, torch::kInt64);
+    const auto xt = schedule.QSample(z0, steps, torch::randn(z0.sizes()));
+    const auto x0 = p.net->Decode(p.net->forward(xt, steps, padding, p.c).x0);
+    const std::string name = "estimate_t" + std::to_string(t);
+    MP_RETURN_IF_ERROR(WriteMotions(p, x0, dir + "/" + name, name));
+  }
+  std::printf(
+      "wrote %lld motions each to %s/{target_roundtrip,estimate_t0,estimate_t60,"
+      "estimate_t150}\n",
+      static_cast<long long>(p.n), dir.c_str());
+  return Status::Ok();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -311,7 +380,7 @@ int main(int argc, char** argv) {
   if (!args) {
     std::fprintf(stderr,
                  "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
-                 "[--guidance gm,gt] [--no-sample]\n");
+                 "[--guidance gm,gt] [--no-sample] [--write DIR]\n");
     return 2;
   }
   nn::SetTorchThreads(1);
@@ -330,5 +399,9 @@ int main(int argc, char** argv) {
   PrintYardsticks(*probe);
   PrintX0ByStep(*probe, schedule);
   if (args->sample) PrintSampledEdits(*probe, schedule, args->ddim, g_m, g_t);
+  if (!args->write.empty()) {
+    const Status written = WriteEstimates(*probe, schedule, args->write);
+    if (!written.ok()) return std::fprintf(stderr, "%s\n", written.message().c_str()), 1;
+  }
   return 0;
 }

@@ -66,6 +66,9 @@ class EditDataset : public plugin::Dataset {
   }
   std::vector<std::string> AllTexts() const;
   int64_t with_similarity() const;
+  // Item `index`'s triplet id, and its source or target motion at the data's own rate.
+  const std::string& Id(int64_t index) const;
+  Motion SideMotionOf(int64_t index, bool source) const;
 
  private:
   struct Item {
@@ -75,6 +78,7 @@ class EditDataset : public plugin::Dataset {
   };
   // At the network's rate; *step (optional) gets the data frames per network frame.
   FeatureMatrix Features(const Item& item, bool source, double* step = nullptr) const;
+  Motion MotionOf(const Item& item, bool source) const;
   EditDataOptions options_;
   std::vector<TripletColumns> files_;
   std::vector<Item> items_;

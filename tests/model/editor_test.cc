@@ -687,7 +687,9 @@ TEST(Editor, ConstantFeatureColumnsKeepUnitScale) {
       for (int64_t f = 0; f < 30; ++f) {
         m->poses[static_cast<size_t>(f * 66 + 16 * 3 + 2)] =
             0.02f * static_cast<float>(f + i);  // the left shoulder turns
-        m->trans[static_cast<size_t>(f * 3)] = 0.03f * static_cast<float>(f);  // and the body walks
+        // and the body walks, the target faster
+        m->trans[static_cast<size_t>(f * 3)] =
+            (m == &t.target ? 0.04f : 0.03f) * static_cast<float>(f);
       }
     }
     triplets.push_back(std::move(t));
@@ -708,6 +710,17 @@ TEST(Editor, ConstantFeatureColumnsKeepUnitScale) {
     if (sd > 1e-3 && sd < 0.5) ++moving;
   }
   EXPECT_EQ(moving, 4);
+  // Each item's id and motions at the data's rate (mdt_probe --write decodes to them).
+  ASSERT_EQ(data.size(), 4);
+  for (int64_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(data.Id(i), "t" + std::to_string(i));
+    const Motion target = data.SideMotionOf(i, false);
+    EXPECT_EQ(target.num_frames(), 30);
+    EXPECT_FLOAT_EQ(target.poses[static_cast<size_t>(29 * 66 + 16 * 3 + 2)],
+                    0.02f * static_cast<float>(29 + i));
+    EXPECT_FLOAT_EQ(target.trans[static_cast<size_t>(29 * 3)], 0.04f * 29);
+    EXPECT_FLOAT_EQ(data.SideMotionOf(i, true).trans[static_cast<size_t>(29 * 3)], 0.03f * 29);
+  }
 }
 
 // Issue 15: the network's frame rate (EditorOptions::fps). Training motions and edit sources come
