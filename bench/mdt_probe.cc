@@ -358,7 +358,7 @@ Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::strin
   const auto& padding = p.batch.tensors.at("target_padding");
   MP_RETURN_IF_ERROR(WriteMotions(p, target, dir + "/target_roundtrip", "target_roundtrip"));
   const auto z0 = p.net->Encode(target);
-  for (int64_t t : {0L, 60L, 150L}) {
+  for (int64_t t : {0L, 60L, 150L, 200L, 250L, 299L}) {
     if (t >= p.options.diffusion_steps) continue;
     const auto steps = torch::full({p.n}, t, torch::kInt64);
     const auto xt = schedule.QSample(z0, steps, torch::randn(z0.sizes()));
@@ -367,8 +367,8 @@ Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::strin
     MP_RETURN_IF_ERROR(WriteMotions(p, x0, dir + "/" + name, name));
   }
   std::printf(
-      "wrote %lld motions each to %s/{target_roundtrip,estimate_t0,estimate_t60,"
-      "estimate_t150}\n",
+      "wrote %lld motions each to %s/{target_roundtrip,estimate_tT} (T = 0, 60, 150, 200, 250, "
+      "299)\n",
       static_cast<long long>(p.n), dir.c_str());
   return Status::Ok();
 }
