@@ -83,17 +83,6 @@ std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string&
   return files;
 }
 
-Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
-  const auto& side = source ? c.source : c.target;
-  const int64_t begin = side.offsets[static_cast<size_t>(row)],
-                end = side.offsets[static_cast<size_t>(row) + 1];
-  Motion m;
-  m.fps = c.fps[static_cast<size_t>(row)];
-  m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
-  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
-  return m;
-}
-
 std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
   if (stage.find('/') != std::string::npos) {
     glob_t matches{};

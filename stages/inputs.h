@@ -26,8 +26,6 @@ std::vector<std::string> StageDirs(const TaskContext& ctx, const std::string& st
 // same triplets as shards.
 std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string& stage = "");
 
-Motion SideMotion(const TripletColumns& c, int64_t row, bool source);
-
 // A checkpoint named by a stage parameter: an input stage's name, or a path pattern (anything with
 // a '/', e.g. "out/train_mdt-*/mdt") whose newest checkpoint is taken: a scheduled evaluation of
 // the latest training job.

@@ -118,32 +118,21 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
                                 "' of the inputs");
 }
 
-Motion EditDataset::MotionOf(const Item& item, bool source) const {
-  const TripletColumns& c = files_[item.file];
-  const TripletColumns::Side& side = source ? c.source : c.target;
-  const int64_t begin = side.offsets[static_cast<size_t>(item.row)],
-                end = side.offsets[static_cast<size_t>(item.row) + 1];
-  Motion m;
-  m.fps = c.fps[static_cast<size_t>(item.row)];
-  m.poses.assign(side.poses + begin * kNumJoints * 3, side.poses + end * kNumJoints * 3);
-  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
-  return m;
-}
-
 const std::string& EditDataset::Id(int64_t index) const {
   const Item& item = items_.at(static_cast<size_t>(index));
   return files_[item.file].ids[static_cast<size_t>(item.row)];
 }
 
 Motion EditDataset::SideMotionOf(int64_t index, bool source) const {
-  return MotionOf(items_.at(static_cast<size_t>(index)), source);
+  const Item& item = items_.at(static_cast<size_t>(index));
+  return SideMotion(files_[item.file], item.row, source);
 }
 
 FeatureMatrix EditDataset::Features(const Item& item, bool source, double* step) const {
   const TripletColumns& c = files_[item.file];
   const TripletColumns::Side& side = source ? c.source : c.target;
   const int64_t begin = side.offsets[static_cast<size_t>(item.row)];
-  const Motion m = MotionOf(item, source);
+  const Motion m = SideMotion(c, item.row, source);
   const float* joints = side.positions && side.position_joints == kNumJoints
                             ? side.positions + begin * kNumJoints * 3
                             : nullptr;

@@ -78,7 +78,6 @@ class EditDataset : public plugin::Dataset {
   };
   // At the network's rate; *step (optional) gets the data frames per network frame.
   FeatureMatrix Features(const Item& item, bool source, double* step = nullptr) const;
-  Motion MotionOf(const Item& item, bool source) const;
   EditDataOptions options_;
   std::vector<TripletColumns> files_;
   std::vector<Item> items_;

@@ -189,4 +189,15 @@ std::vector<std::string> TripletFilesIn(const std::string& dir) {
   return files;
 }
 
+Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
+  const auto& side = source ? c.source : c.target;
+  const int64_t begin = side.offsets[static_cast<size_t>(row)],
+                end = side.offsets[static_cast<size_t>(row) + 1];
+  Motion m;
+  m.fps = c.fps[static_cast<size_t>(row)];
+  m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
+  m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
+  return m;
+}
+
 }  // namespace motionpipe

@@ -97,4 +97,8 @@ Result<TripletColumns> ReadTripletColumns(const std::string& path,
 // The number of triplets in a file (reads only its ids).
 Result<int64_t> CountTriplets(const std::string& path);
 
+// Row `row`'s source or target motion (poses and trans at the file's rate) of columns read with
+// motions.
+Motion SideMotion(const TripletColumns& c, int64_t row, bool source);
+
 }  // namespace motionpipe
