@@ -886,20 +886,23 @@ std::string PlausibilitySection(const std::vector<KindMethods>& kinds, int* tabl
   });
   if (!any) return "";
   std::ostringstream body;
-  body << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; "
-          "these are the measurable "
-       << "proxies, for the generated motions and for their ground truth alike: the fraction of "
-          "contact frames whose foot slides, "
-       << "the mean floor penetration, the fraction of frames floating above the floor, and the "
-          "mean jerk.</p>\n<table>\n"
-       << "<caption>Plausibility (lower is better; mean over the methods' "
-          "seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
-       << "<th>foot skate</th><th>penetration "
-          "(m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
+  body
+      << "<h2>Physical plausibility</h2>\n<p>No pretrained MotionCritic is available offline; "
+         "these are the measurable "
+      << "proxies, for the generated motions and for their ground truth alike: the fraction of "
+         "contact frames whose foot slides faster than 0.15 m/s, the field's skating ratio (GMD's: "
+         "frames at 20 fps in which a toe below 5 cm slides faster than 0.5 m/s), "
+      << "the mean floor penetration, the fraction of frames floating above the floor, and the "
+         "mean jerk.</p>\n<table>\n"
+      << "<caption>Plausibility (lower is better; mean over the methods' "
+         "seeds)</caption>\n<thead><tr><th>Method</th><th>motions</th>"
+      << "<th>foot skate</th><th>skating ratio (GMD)</th><th>penetration "
+         "(m)</th><th>floating</th><th>jerk</th></tr></thead>\n<tbody>\n";
   const auto row = [&](const std::string& name, const Method& m, const std::string& side) {
     body << "<tr><td>" << Escape(name) << "</td><td>" << Format(Collect(m, "/motions").mean, 0)
          << "</td>";
-    for (const char* k : {"foot_skate_ratio", "penetration_mean_m", "float_ratio", "jerk_mean"}) {
+    for (const char* k : {"foot_skate_ratio", "skating_ratio_gmd", "penetration_mean_m",
+                          "float_ratio", "jerk_mean"}) {
       const Stat s = Collect(m, "/plausibility/" + side + "/" + k);
       body << "<td>" << (s.n ? Format(s.mean, 3) : "&ndash;") << "</td>";
     }

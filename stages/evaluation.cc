@@ -75,14 +75,15 @@ json ScoresJson(const eval::RetrievalScores& s) {
 }
 
 json MeanPlausibility(const std::vector<Motion>& motions) {
-  double skate = 0, penetration = 0, floating = 0, jerk = 0;
+  double skate = 0, skate_gmd = 0, penetration = 0, floating = 0, jerk = 0;
   for (const Motion& m : motions) {
     const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), m);
-    skate += r.foot_skate_ratio, penetration += r.penetration_mean, floating += r.float_ratio,
-        jerk += r.jerk_mean;
+    skate += r.foot_skate_ratio, skate_gmd += r.skating_ratio_gmd,
+        penetration += r.penetration_mean, floating += r.float_ratio, jerk += r.jerk_mean;
   }
   const double n = static_cast<double>(std::max<size_t>(1, motions.size()));
   return json{{"foot_skate_ratio", skate / n},
+              {"skating_ratio_gmd", skate_gmd / n},
               {"penetration_mean_m", penetration / n},
               {"float_ratio", floating / n},
               {"jerk_mean", jerk / n}};

@@ -182,8 +182,8 @@ class ShowcaseStage : public StageExecutor {
            "evaluator's cosine similarity to " +
                first},
           {"columns",
-           {"motion", "frames", "foot skate", "penetration (m)", "floating", "jerk",
-            "cos to " + cmu.front().id}},
+           {"motion", "frames", "foot skate", "skating ratio (GMD)", "penetration (m)", "floating",
+            "jerk", "cos to " + cmu.front().id}},
           {"rows", *table_rows}}}};
     if (Status st = WriteFileAtomic(layout::ShowcaseFile(out), showcase.dump(1) + "\n"); !st.ok())
       return TaskReport::Error(st.message());
@@ -216,7 +216,7 @@ class ShowcaseStage : public StageExecutor {
     for (size_t i = 0; i < rows.size(); ++i) {
       const auto r = EvaluateMotionPlausibility(Skeleton::Smpl22(), *rows[i].second);
       table.push_back({rows[i].first, rows[i].second->num_frames(), r.foot_skate_ratio,
-                       r.penetration_mean, r.float_ratio, r.jerk_mean,
+                       r.skating_ratio_gmd, r.penetration_mean, r.float_ratio, r.jerk_mean,
                        Cosine(embeddings[i], embeddings[0])});
     }
     return table;

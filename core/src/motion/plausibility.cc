@@ -51,6 +51,53 @@ double MaxRotationDegrees(int joint) {
   }
 }
 
+// GMD's skating ratio (Karunratanakul et al. 2023, "Guided Motion Diffusion"; OmniControl reports
+// the same): toe joints at 20 fps, heights above the floor, contact below 5 cm in both frames of a
+// pair, skating when the pair's horizontal speed and its mean over a centred window of 5 pairs
+// (zeros beyond the ends) both exceed 0.5 m/s; the ratio counts pairs in which either foot skates.
+double GmdSkatingRatio(const Skeleton& skeleton, const float* joints, int64_t frames, double fps,
+                       double floor) {
+  constexpr double kRate = 20, kHeight = 0.05, kSpeed = 0.5;
+  constexpr int64_t kWindow = 5;
+  if (frames < 2 || fps <= 0) return 0;
+  const int64_t samples = static_cast<int64_t>(std::floor((frames - 1) * kRate / fps + 1e-9)) + 1;
+  const int64_t pairs = samples - 1;
+  if (pairs < 1) return 0;
+  const int toes[2] = {skeleton.left_foot_joints()[1], skeleton.right_foot_joints()[1]};
+  // Linear resampling of one toe to 20 fps.
+  const auto toe_at = [&](int64_t sample, int joint) {
+    const double x = static_cast<double>(sample) * fps / kRate;
+    const int64_t i0 = std::min<int64_t>(static_cast<int64_t>(x), frames - 1);
+    const int64_t i1 = std::min<int64_t>(i0 + 1, frames - 1);
+    const double w = x - static_cast<double>(i0);
+    const float* a = joints + (i0 * kNumJoints + joint) * 3;
+    const float* b = joints + (i1 * kNumJoints + joint) * 3;
+    return Vec3{(1 - w) * a[0] + w * b[0], (1 - w) * a[1] + w * b[1], (1 - w) * a[2] + w * b[2]};
+  };
+  std::vector<char> skating(static_cast<size_t>(pairs), 0);
+  std::vector<double> speed(static_cast<size_t>(pairs));
+  std::vector<char> contact(static_cast<size_t>(pairs));
+  for (int joint : toes) {
+    Vec3 previous = toe_at(0, joint);
+    for (int64_t i = 0; i < pairs; ++i) {
+      const Vec3 next = toe_at(i + 1, joint);
+      speed[static_cast<size_t>(i)] = std::hypot(next.x - previous.x, next.y - previous.y) * kRate;
+      contact[static_cast<size_t>(i)] = previous.z - floor < kHeight && next.z - floor < kHeight;
+      previous = next;
+    }
+    for (int64_t i = 0; i < pairs; ++i) {
+      double window = 0;
+      for (int64_t j = i - kWindow / 2; j <= i + kWindow / 2; ++j)
+        if (j >= 0 && j < pairs) window += speed[static_cast<size_t>(j)];
+      const size_t k = static_cast<size_t>(i);
+      if (contact[k] && speed[k] > kSpeed && window / kWindow > kSpeed) skating[k] = 1;
+    }
+  }
+  int64_t count = 0;
+  for (char s : skating) count += s;
+  return static_cast<double>(count) / static_cast<double>(pairs);
+}
+
 }  // namespace
 
 std::string CheckJointLimit(const Skeleton& skeleton, int joint, const Mat3& local) {
@@ -130,6 +177,7 @@ PlausibilityReport EvaluatePlausibility(const Skeleton& skeleton, const float* j
     report.foot_skate_mean = skate_sum / static_cast<double>(contact);
     report.foot_skate_ratio = static_cast<double>(skating) / static_cast<double>(contact);
   }
+  report.skating_ratio_gmd = GmdSkatingRatio(skeleton, joints, frames, fps, options.floor);
   if (frames >= 4) {
     double jerk_sum = 0;
     int64_t count = 0;

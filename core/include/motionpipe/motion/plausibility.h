@@ -23,7 +23,12 @@ struct PlausibilityOptions {
 struct PlausibilityReport {
   int64_t frames = 0;
   double foot_skate_mean = 0;  // m/s: mean horizontal speed of foot joints in contact (both frames)
-  double foot_skate_ratio = 0;   // fraction of contact foot-frames faster than skate_speed
+  double foot_skate_ratio = 0;  // fraction of contact foot-frames faster than skate_speed
+  // The field's skating ratio (GMD, Karunratanakul et al. 2023, as OmniControl and later text-to-
+  // motion papers report it): the motion resampled to 20 fps, the fraction of frame pairs in which
+  // either toe joint is below 5 cm in both frames and moves faster than 0.5 m/s both in that pair
+  // and averaged over a centred window of 5 pairs. Far laxer than foot_skate_ratio (0.15 m/s).
+  double skating_ratio_gmd = 0;
   double penetration_max = 0;    // m: deepest any joint goes below the floor (>= 0)
   double penetration_mean = 0;   // m: mean over frames of the deepest penetration
   double float_ratio = 0;        // fraction of frames with every joint above floor + float_height
