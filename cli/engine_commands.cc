@@ -445,6 +445,9 @@ void AddWorker(CLI::App& app, int* exit_code) {
   cmd->add_option("--server-key", o.server_key,
                   "The coordinator's public key (40-char Z85) or key file");
   cmd->callback([exit_code] {
+    // Before the worker's first thread: a model's task thread must not get a heap of its own.
+    if (!worker::UseMainHeapOnly())
+      MP_LOG(kWarn, "worker") << "glibc refused M_ARENA_MAX 1: training steps may page-fault";
     std::atomic<bool> stop{false};
     worker::WorkerOptions options = o;
     if (options.threads == 0)

@@ -1,5 +1,6 @@
 #include "worker.h"
 
+#include <malloc.h>
 #include <prometheus/counter.h>
 #include <prometheus/exposer.h>
 #include <prometheus/gauge.h>
@@ -508,6 +509,8 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
 }
 
 }  // namespace
+
+bool UseMainHeapOnly() { return mallopt(M_ARENA_MAX, 1) == 1; }
 
 Status RunWorker(const WorkerOptions& options, std::atomic<bool>* stop, bool handle_signals) {
   PluginHost plugins;

@@ -32,6 +32,16 @@ struct WorkerOptions {
   std::string server_key;                // the coordinator's public key (Z85 or key file)
 };
 
+// Makes every thread of this process allocate from glibc's main heap (M_ARENA_MAX 1); call it
+// first in a worker process, before any thread starts (an arena, once a thread has one, stays its
+// own). Otherwise the executor thread gets an arena of its own, made of 64 MiB heaps that glibc
+// unmaps as soon as they are free again whatever the trim threshold, and maps anew at the next
+// step: a model's activations then fault in fresh zeroed pages at every step (a TMR judge spent a
+// sixth of its time in the kernel). With one heap, the plugins' trim threshold keeps freed memory
+// for the next step (plugins/common/threads.h). README "Training in one heap" has the measurement.
+// False when glibc refuses the setting.
+bool UseMainHeapOnly();
+
 // Runs until `*stop` (returns when the work is handed back or done), or until SIGTERM/SIGINT when
 // `handle_signals`. Returns a non-ok Status only for setup errors (bad keys, metrics port taken).
 Status RunWorker(const WorkerOptions& options, std::atomic<bool>* stop, bool handle_signals);
