@@ -14,7 +14,8 @@ namespace motionpipe::nn {
 // glibc serves every block over 32 MiB with a fresh mmap and unmaps it on free, so a model whose
 // activations are that large (attention scores of long sequences) pays page faults that zero the
 // memory again on every step: half of the CPU time in system mode. Heap-only allocation with a
-// high trim threshold lets the freed blocks be reused. Done once per process.
+// high trim threshold lets the freed blocks be reused. Done once per process. The threshold holds
+// for glibc's main heap only: a worker keeps every thread there (worker::UseMainHeapOnly).
 inline void KeepLargeAllocations() {
   static const bool done = [] {
     mallopt(M_MMAP_MAX, 0);
