@@ -11,6 +11,8 @@
 #include <chrono>
 #include <condition_variable>
 #include <csignal>
+#include <cstdlib>
+#include <cstring>
 #include <deque>
 #include <filesystem>
 #include <map>
@@ -510,7 +512,14 @@ Status WorkerProcess::Run(std::atomic<bool>* stop, bool handle_signals) {
 
 }  // namespace
 
-bool UseMainHeapOnly() { return mallopt(M_ARENA_MAX, 1) == 1; }
+bool UseMainHeapOnly() {
+  // glibc's own settings win: MALLOC_ARENA_MAX, or glibc.malloc.arena_max in GLIBC_TUNABLES.
+  const char* tunables = std::getenv("GLIBC_TUNABLES");
+  if (std::getenv("MALLOC_ARENA_MAX") != nullptr ||
+      (tunables != nullptr && std::strstr(tunables, "glibc.malloc.arena_max") != nullptr))
+    return false;
+  return mallopt(M_ARENA_MAX, 1) == 1;
+}
 
 Status RunWorker(const WorkerOptions& options, std::atomic<bool>* stop, bool handle_signals) {
   PluginHost plugins;

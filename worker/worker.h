@@ -39,7 +39,10 @@ struct WorkerOptions {
 // step: a model's activations then fault in fresh zeroed pages at every step (a TMR judge spent a
 // sixth of its time in the kernel). With one heap, the plugins' trim threshold keeps freed memory
 // for the next step (plugins/common/threads.h). README "Training in one heap" has the measurement.
-// False when glibc refuses the setting.
+// The price: threads that allocate at once share the heap's lock (a corpus task on 2 threads in a
+// worker ran 1.4x slower). The environment overrides it: with MALLOC_ARENA_MAX or
+// glibc.malloc.arena_max in GLIBC_TUNABLES set, glibc's setting stays and this returns false, as it
+// does when glibc refuses.
 bool UseMainHeapOnly();
 
 // Runs until `*stop` (returns when the work is handed back or done), or until SIGTERM/SIGINT when

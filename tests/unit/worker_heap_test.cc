@@ -74,14 +74,20 @@ TEST(WorkerHeap, ThreadsStartedAfterUseMainHeapOnlyAllocateFromTheMainHeap) {
                                           "the main heap (the child prints its arenas)";
     EXPECT_EQ(RunChild("default"), 0) << "without it, glibc must give the thread its own arena "
                                          "(else this test could not tell the two apart)";
+    EXPECT_EQ(RunChild("environment"), 0) << "MALLOC_ARENA_MAX in the environment must win";
     return;
   }
-  if (std::string(role) == "one_heap") {
+  const std::string which = role;
+  if (which == "one_heap") {
     ASSERT_TRUE(UseMainHeapOnly());
+  }
+  if (which == "environment") {
+    ASSERT_EQ(setenv("MALLOC_ARENA_MAX", "8", 1), 0);
+    ASSERT_FALSE(UseMainHeapOnly());
   }
   const int arenas = ArenasAfterANewThreadAllocated();
   std::printf("%s: %d arena(s)\n", role, arenas);
-  EXPECT_EQ(arenas, std::string(role) == "one_heap" ? 1 : 2);
+  EXPECT_EQ(arenas, which == "one_heap" ? 1 : 2);
 }
 
 }  // namespace
