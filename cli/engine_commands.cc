@@ -447,8 +447,8 @@ void AddWorker(CLI::App& app, int* exit_code) {
   cmd->callback([exit_code] {
     // Before the worker's first thread: a model's task thread must not get a heap of its own.
     if (!worker::UseMainHeapOnly())
-      MP_LOG(kInfo, "worker") << "glibc's arenas as the environment sets them (MALLOC_ARENA_MAX or "
-                                 "GLIBC_TUNABLES), not one heap: training steps may page-fault";
+      MP_LOG(kInfo, "worker") << "glibc's arenas kept (MALLOC_ARENA_MAX or GLIBC_TUNABLES set, or "
+                                 "glibc refused one heap): training steps may page-fault";
     std::atomic<bool> stop{false};
     worker::WorkerOptions options = o;
     if (options.threads == 0)
