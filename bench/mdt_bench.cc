@@ -5,10 +5,11 @@
 // also given in GFLOP/s (the step's matrix products counted, TrainingStepFlops) beside the sgemm
 // rate of LibTorch on the same threads, measured in the same run (issue 15: goal 60% of it at
 // paper size), and the same step under bf16 autocast (plugins/common/precision.h) as the ratio
-// bf16/f32 of samples/s.
+// bf16/f32 of samples/s. The step clips and steps AdamW with the fused kernel, as the train stage
+// does; the fused kernels (plugins/common/fused.h) are then timed against LibTorch's operators on
+// the same inputs at the training shape, with the share of a bf16 step each saves.
 //   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
-//   [--no-reference]
-//             [--no-latency]
+//             [--no-reference] [--no-latency] [--no-fused]
 #include <torch/torch.h>
 
 #include <cstdio>
@@ -21,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "../plugins/common/fused.h"
 #include "../plugins/common/precision.h"
 #include "../plugins/common/threads.h"
 #include "../plugins/mdt_editor/editor.h"
@@ -124,7 +126,7 @@ EditorNet Build(const Size& size) {
 struct Args {
   std::string sizes = "demo,paper";
   int64_t steps = 4, threads = 1, batch = 32, frames = 150;
-  bool reference = true, latency = true;
+  bool reference = true, latency = true, fused = true;
 };
 
 std::optional<Args> ParseArgs(int argc, char** argv) {
@@ -144,6 +146,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.reference = false;
     else if (!std::strcmp(argv[k], "--no-latency"))
       a.latency = false;
+    else if (!std::strcmp(argv[k], "--no-fused"))
+      a.fused = false;
     else
       return std::nullopt;
   }
@@ -210,8 +214,8 @@ double PythonReference(const Args& a, const Size& size, EditorNet& net, const Tr
 }
 
 // One size: our training step's samples/s, the reference's, and our GFLOP/s against the sgemm
-// rate measured here.
-void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
+// rate measured here. Returns the bf16 step's milliseconds.
+double BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
   torch::manual_seed(1);
   EditorNet net = Build(size);
   const CosineSchedule schedule(300);
@@ -238,8 +242,7 @@ void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
     }
     optimizer.zero_grad();
     loss.backward();
-    torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
-    optimizer.step();
+    nn::AdamWStep(optimizer, 1.0);
     return loss.item<double>();
   };
   const auto rate = [&](nn::Precision precision) {
@@ -257,6 +260,77 @@ void BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
               size.name.c_str(), static_cast<long long>(parameters), cpp, python,
               python > 0 ? cpp / python : 0.0, achieved, peak, 100 * achieved / peak, bf16,
               bf16 / cpp);
+  std::fflush(stdout);
+  return 1e3 * static_cast<double>(batch) / bf16;
+}
+
+// Milliseconds per call of `f`: the best of five rounds of `reps` calls after one warm-up call.
+template <typename F>
+double MsPerCall(F&& f, int reps) {
+  f();
+  double best = 1e30;
+  for (int round = 0; round < 5; ++round) {
+    const auto started = Clock::now();
+    for (int k = 0; k < reps; ++k) f();
+    best = std::min(best, 1e3 * Since(started) / reps);
+  }
+  return best;
+}
+
+// The fused kernels against LibTorch's operators on the same inputs at one size's training shape:
+// DiT's tanh-GELU forward and backward over one block's MLP activation in bf16 (batch x (2 frames
+// + 1) tokens x ff; LibTorch's route is the float32 kernel between two conversions, what the MDT
+// ran before; `layers` calls a step), and clipping + AdamW over the net's parameters (one call).
+// "of a step": what each saves, as a share of the bf16 step without it (the step above runs both).
+void BenchFused(const Args& a, const Size& size, double bf16_step_ms) {
+  torch::manual_seed(3);
+  const int64_t rows = a.batch * (2 * a.frames + 1);
+  const auto x = torch::randn({rows, size.ff}).to(torch::kBFloat16);
+  const auto dy = torch::randn({rows, size.ff}).to(torch::kBFloat16);
+  const auto gelu = [&](bool fused) {
+    const auto xi = x.detach().requires_grad_();
+    const auto y = fused ? nn::GeluTanhBf16(xi)
+                         : torch::gelu(xi.to(torch::kFloat), "tanh").to(torch::kBFloat16);
+    y.backward(dy);
+  };
+  const double gelu_torch = MsPerCall([&] { gelu(false); }, 20);
+  const double gelu_fused = MsPerCall([&] { gelu(true); }, 20);
+
+  EditorNet net = Build(size);
+  std::vector<torch::Tensor> params = net->parameters();
+  for (auto& p : params) p.mutable_grad() = 1e-3 * torch::randn_like(p);
+  const auto options = torch::optim::AdamWOptions(1e-4).weight_decay(0.01);
+  torch::optim::AdamW theirs(params, options), ours(params, options);
+  const double adam_torch = MsPerCall(
+      [&] {
+        torch::nn::utils::clip_grad_norm_(params, 1.0);
+        theirs.step();
+      },
+      10);
+  const double adam_fused = MsPerCall([&] { (void)nn::AdamWStep(ours, 1.0); }, 10);
+  int64_t parameters = 0;
+  for (const auto& p : params) parameters += p.numel();
+
+  const double saved_gelu = static_cast<double>(size.layers) * (gelu_torch - gelu_fused),
+               saved_adam = adam_torch - adam_fused;
+  const double unfused = bf16_step_ms + saved_gelu + saved_adam;
+  std::printf(
+      "\nfused kernels (plugins/common/fused.h), %s size, batch %lld, %lld frames, %lld "
+      "thread(s): ms per call, best of 5\n",
+      size.name.c_str(), static_cast<long long>(a.batch), static_cast<long long>(a.frames),
+      static_cast<long long>(a.threads));
+  std::printf("%-44s %9s %9s %7s %6s %11s\n", "kernel", "LibTorch", "fused", "ratio", "calls",
+              "of a step");
+  const std::string gelu_name =
+      "tanh-GELU fwd+bwd, bf16 [" + std::to_string(rows) + " x " + std::to_string(size.ff) + "]";
+  const std::string adam_name = "clip + AdamW, " + std::to_string(parameters) + " params";
+  std::printf("%-44s %9.3f %9.3f %6.2fx %6lld %10.1f%%\n", gelu_name.c_str(), gelu_torch,
+              gelu_fused, gelu_torch / gelu_fused, static_cast<long long>(size.layers),
+              100 * saved_gelu / unfused);
+  std::printf("%-44s %9.3f %9.3f %6.2fx %6d %10.1f%%\n", adam_name.c_str(), adam_torch, adam_fused,
+              adam_torch / adam_fused, 1, 100 * saved_adam / unfused);
+  std::printf("bf16 step %.1f ms with both; %.1f ms without (estimated): %.1f%% saved\n",
+              bf16_step_ms, unfused, 100 * (saved_gelu + saved_adam) / unfused);
   std::fflush(stdout);
 }
 
@@ -318,7 +392,7 @@ int main(int argc, char** argv) {
   if (!args) {
     std::fprintf(stderr,
                  "usage: mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
-                 "[--frames F] [--no-reference] [--no-latency]\n");
+                 "[--frames F] [--no-reference] [--no-latency] [--no-fused]\n");
     return 2;
   }
   nn::SetTorchThreads(static_cast<int>(args->threads));
@@ -332,8 +406,13 @@ int main(int argc, char** argv) {
               "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
               "bf16/f32");
   const TrainBatch batch = MakeTrainBatch(*args);
+  std::vector<std::pair<Size, double>> bf16_step_ms;
   for (const Size& size : all) {
-    if (args->sizes.find(size.name) != std::string::npos) BenchTraining(*args, size, batch);
+    if (args->sizes.find(size.name) != std::string::npos)
+      bf16_step_ms.emplace_back(size, BenchTraining(*args, size, batch));
+  }
+  if (args->fused) {
+    for (const auto& [size, ms] : bf16_step_ms) BenchFused(*args, size, ms);
   }
   if (args->latency) BenchLatency(*args, all[0], batch.texts);
   return 0;

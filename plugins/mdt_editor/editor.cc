@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "../common/fused.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -183,7 +184,7 @@ nlohmann::json EditorOptions::ToJson() const {
 
 torch::Tensor GeluTanh(const torch::Tensor& x) {
   if (x.scalar_type() != torch::kBFloat16) return torch::gelu(x, "tanh");
-  return torch::gelu(x.to(torch::kFloat), "tanh").to(torch::kBFloat16);
+  return nn::GeluTanhBf16(x);
 }
 
 DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {

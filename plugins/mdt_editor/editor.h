@@ -125,11 +125,11 @@ struct Condition {
 torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& source_padding,
                           const torch::Tensor& target_padding);
 
-// DiT's MLP activation, GELU's tanh approximation (REFERENCE: "tanh-GELU MLP"). A bf16 input is
-// widened to float32 for it and the result rounded back: the same function, nearer the exact
-// values than LibTorch 1.13's bf16 kernel (which rounds its intermediates) and 2.4 times cheaper
-// with both conversions, forward and backward (10.2 against 4.2 ms for 2,600 x 256 values on one
-// thread); the bf16 kernel took a sixth of a bf16 training step of the demo's MDT.
+// DiT's MLP activation, GELU's tanh approximation (REFERENCE: "tanh-GELU MLP"). A bf16 input takes
+// the fused kernel (nn::GeluTanhBf16): the float32 function rounded once, nearer the exact values
+// than LibTorch 1.13's bf16 kernel (which rounds its intermediates and took a sixth of a bf16
+// training step of the demo's MDT) and cheaper than LibTorch's float32 kernel with both
+// conversions (bench/mdt_bench prints both).
 torch::Tensor GeluTanh(const torch::Tensor& x);
 
 struct Prediction {

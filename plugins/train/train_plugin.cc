@@ -39,6 +39,7 @@
 
 #include "../api/model.hpp"
 #include "../api/plugin.hpp"
+#include "../common/fused.h"
 #include "../common/precision.h"
 #include "../common/threads.h"
 #include "motionpipe/base/file.h"
@@ -474,6 +475,7 @@ class Trainer {
   // Averages the gradients and the logged losses over the ranks in one all-reduce; returns the
   // averaged losses (in the order of `values`).
   torch::Tensor AllReduce(const std::vector<float>& values) {
+    if (!group_) return torch::tensor(values);  // a gang of one: nothing to average
     std::vector<torch::Tensor> flat;
     for (auto& p : params_)
       flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
@@ -516,11 +518,12 @@ class Trainer {
       values.push_back(value.detach().item<float>());
     }
     const torch::Tensor averaged = AllReduce(values);
-    if (options_.clip_grad > 0) torch::nn::utils::clip_grad_norm_(params_, options_.clip_grad);
     const double lr = LearningRate(options_, step);
     for (auto& group_options : optimizer_->param_groups())
       static_cast<torch::optim::AdamWOptions&>(group_options.options()).lr(lr);
-    optimizer_->step();
+    // Clipping and AdamW in one pass per parameter (LibTorch's clip_grad_norm_ and AdamW::step
+    // make about ten; plugins/common/fused.h).
+    nn::AdamWStep(*optimizer_, options_.clip_grad);
     last_loss_ = averaged[static_cast<int64_t>(std::find(names.begin(), names.end(), "loss") -
                                                names.begin())]
                      .item<double>();

@@ -1,0 +1,214 @@
+#include "fused.h"
+
+#include <ATen/Parallel.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+// The loops are plain C++ vectorised by the compiler (omp simd; the file is built with
+// -fno-math-errno -fno-trapping-math, without which sqrt and floor stay calls and nothing
+// vectorises); each is built for AVX-512, AVX2 and the baseline and the CPU picks at load time
+// (the build targets the baseline x86-64).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define MOTIONPIPE_CLONES \
+  __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#else
+#define MOTIONPIPE_CLONES
+#endif
+
+namespace motionpipe::nn {
+
+namespace {
+
+constexpr float kSqrt2OverPi = 0.7978845608028654f;
+constexpr float kCubic = 0.044715f;  // GELU's tanh approximation (Hendrycks and Gimpel 2016)
+
+inline float Bf16ToFloat(uint16_t h) {
+  return std::bit_cast<float>(static_cast<uint32_t>(h) << 16);
+}
+
+// Round to nearest even, as c10::BFloat16 rounds; a NaN stays a (quiet) NaN.
+inline uint16_t FloatToBf16(float f) {
+  const uint32_t u = std::bit_cast<uint32_t>(f);
+  const uint32_t rounded = (u + 0x7FFFu + ((u >> 16) & 1u)) >> 16;
+  return static_cast<uint16_t>(std::isnan(f) ? 0x7FC0u : rounded);
+}
+
+// e^v in float32 without a call, so that a loop over it vectorises: v clamped to [-87, 88] (the
+// results stay normal), e^v = 2^n e^r with n = round(v / ln 2) and r = v - n ln 2 (ln 2 in two
+// parts, so r is exact to float rounding), |r| <= ln(2) / 2, e^r by its Taylor series to r^7
+// (truncation below 1e-8 relative); 2^n written into the exponent bits.
+inline float Exp(float v) {
+  v = v > -87.0f ? v : -87.0f;  // a NaN becomes -87: the caller's product carries the NaN on
+  v = v < 88.0f ? v : 88.0f;
+  const float n = std::floor(v * 1.44269504f + 0.5f);
+  const float r = (v - n * 0.693145752f) - n * 1.42860677e-6f;
+  float p = 1.0f / 5040;
+  p = p * r + 1.0f / 720;
+  p = p * r + 1.0f / 120;
+  p = p * r + 1.0f / 24;
+  p = p * r + 1.0f / 6;
+  p = p * r + 0.5f;
+  p = p * r + 1.0f;
+  p = p * r + 1.0f;
+  const int32_t exponent = (static_cast<int32_t>(n) + 127) << 23;
+  return p * std::bit_cast<float>(exponent);
+}
+
+// 0.5 (1 + tanh u) = 1 / (1 + e^(-2u)), u = sqrt(2/pi) (x + 0.044715 x^3): GELU's gate written
+// as a sigmoid, which has no cancellation near u = 0 or for large |u|.
+inline float GeluGate(float x) {
+  const float u = kSqrt2OverPi * (x + kCubic * x * x * x);
+  return 1.0f / (1.0f + Exp(-2.0f * u));
+}
+
+MOTIONPIPE_CLONES void GeluForward(const uint16_t* x, uint16_t* y, int64_t n) {
+#pragma omp simd
+  for (int64_t k = 0; k < n; ++k) {
+    const float v = Bf16ToFloat(x[k]);
+    y[k] = FloatToBf16(v * GeluGate(v));
+  }
+}
+
+// d/dx [x s(x)] with s = sigmoid(2u): s + 2 x s (1 - s) du/dx, du/dx = sqrt(2/pi) (1 + 3 c x^2).
+MOTIONPIPE_CLONES void GeluBackward(const uint16_t* x, const uint16_t* dy, uint16_t* dx,
+                                    int64_t n) {
+#pragma omp simd
+  for (int64_t k = 0; k < n; ++k) {
+    const float v = Bf16ToFloat(x[k]);
+    const float s = GeluGate(v);
+    const float du = kSqrt2OverPi * (1.0f + 3.0f * kCubic * v * v);
+    dx[k] = FloatToBf16(Bf16ToFloat(dy[k]) * (s + 2.0f * v * s * (1.0f - s) * du));
+  }
+}
+
+constexpr int64_t kGrain = 1 << 15;  // elements per task of torch's intra-op pool
+
+struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x) {
+    const auto input = x.contiguous();
+    auto y = torch::empty_like(input);
+    const auto* in = reinterpret_cast<const uint16_t*>(input.data_ptr<at::BFloat16>());
+    auto* out = reinterpret_cast<uint16_t*>(y.data_ptr<at::BFloat16>());
+    at::parallel_for(0, input.numel(), kGrain, [&](int64_t begin, int64_t end) {
+      GeluForward(in + begin, out + begin, end - begin);
+    });
+    ctx->save_for_backward({input});
+    return y;
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto input = ctx->get_saved_variables()[0];
+    const auto dy = grads[0].to(torch::kBFloat16).contiguous();
+    auto dx = torch::empty_like(input);
+    const auto* in = reinterpret_cast<const uint16_t*>(input.data_ptr<at::BFloat16>());
+    const auto* g = reinterpret_cast<const uint16_t*>(dy.data_ptr<at::BFloat16>());
+    auto* out = reinterpret_cast<uint16_t*>(dx.data_ptr<at::BFloat16>());
+    at::parallel_for(0, input.numel(), kGrain, [&](int64_t begin, int64_t end) {
+      GeluBackward(in + begin, g + begin, out + begin, end - begin);
+    });
+    return {dx};
+  }
+};
+
+// Sum of squares in double (the per-parameter float norms of clip_grad_norm_, without rounding).
+MOTIONPIPE_CLONES double SquaredNorm(const float* g, int64_t n) {
+  double sum = 0;
+#pragma omp simd reduction(+ : sum)
+  for (int64_t k = 0; k < n; ++k) sum += static_cast<double>(g[k]) * g[k];
+  return sum;
+}
+
+struct AdamWScalars {
+  float decay;  // 1 - lr weight_decay (decoupled weight decay)
+  float clip;   // the gradient's scale
+  float beta1, beta2;
+  float inv_bias2;  // sqrt(1 - beta2^t), divided by
+  float step_size;  // lr / (1 - beta1^t)
+  float eps;
+};
+
+// AdamW::step's arithmetic for one parameter, in the order LibTorch applies it:
+// p *= 1 - lr wd; m = b1 m + (1 - b1) g; v = b2 v + (1 - b2) g^2;
+// p -= step_size m / (sqrt(v) / sqrt(1 - b2^t) + eps).
+MOTIONPIPE_CLONES void AdamWKernel(float* p, const float* grad, float* m, float* v, int64_t n,
+                                   AdamWScalars s) {
+  const float one_minus_beta1 = 1.0f - s.beta1, one_minus_beta2 = 1.0f - s.beta2;
+#pragma omp simd
+  for (int64_t k = 0; k < n; ++k) {
+    const float g = grad[k] * s.clip;
+    const float mk = m[k] * s.beta1 + g * one_minus_beta1;
+    const float vk = v[k] * s.beta2 + g * g * one_minus_beta2;
+    m[k] = mk;
+    v[k] = vk;
+    p[k] = p[k] * s.decay - s.step_size * (mk / (std::sqrt(vk) / s.inv_bias2 + s.eps));
+  }
+}
+
+}  // namespace
+
+torch::Tensor GeluTanhBf16(const torch::Tensor& x) {
+  if (x.scalar_type() != torch::kBFloat16)
+    throw std::invalid_argument("GeluTanhBf16 takes bf16, not " +
+                                std::string(c10::toString(x.scalar_type())));
+  return GeluTanhFunction::apply(x);
+}
+
+double AdamWStep(torch::optim::AdamW& optimizer, double max_norm) {
+  torch::NoGradGuard no_grad;
+  double squares = 0;
+  for (auto& group : optimizer.param_groups()) {
+    for (auto& p : group.params()) {
+      if (!p.grad().defined()) continue;
+      const auto& g = p.grad();
+      if (g.scalar_type() != torch::kFloat || !g.is_contiguous() || !p.is_contiguous())
+        throw std::invalid_argument("AdamWStep takes contiguous float32 parameters and gradients");
+      squares += SquaredNorm(g.data_ptr<float>(), g.numel());
+    }
+  }
+  const double norm = std::sqrt(squares);
+  const double clip = max_norm > 0 ? std::min(1.0, max_norm / (norm + 1e-6)) : 1.0;
+  auto& state = optimizer.state();
+  for (auto& group : optimizer.param_groups()) {
+    const auto& options = static_cast<const torch::optim::AdamWOptions&>(group.options());
+    if (options.amsgrad()) throw std::invalid_argument("AdamWStep has no amsgrad");
+    const double beta1 = std::get<0>(options.betas()), beta2 = std::get<1>(options.betas());
+    for (auto& p : group.params()) {
+      if (!p.grad().defined()) continue;
+      const std::string key = c10::guts::to_string(p.unsafeGetTensorImpl());
+      auto found = state.find(key);
+      if (found == state.end()) {
+        auto fresh = std::make_unique<torch::optim::AdamWParamState>();
+        fresh->step(0);
+        fresh->exp_avg(torch::zeros_like(p, torch::MemoryFormat::Preserve));
+        fresh->exp_avg_sq(torch::zeros_like(p, torch::MemoryFormat::Preserve));
+        found = state.emplace(key, std::move(fresh)).first;
+      }
+      auto& s = static_cast<torch::optim::AdamWParamState&>(*found->second);
+      s.step(s.step() + 1);
+      const auto t = static_cast<double>(s.step());
+      const AdamWScalars scalars{static_cast<float>(1 - options.lr() * options.weight_decay()),
+                                 static_cast<float>(clip),
+                                 static_cast<float>(beta1),
+                                 static_cast<float>(beta2),
+                                 static_cast<float>(std::sqrt(1 - std::pow(beta2, t))),
+                                 static_cast<float>(options.lr() / (1 - std::pow(beta1, t))),
+                                 static_cast<float>(options.eps())};
+      float* data = p.detach().data_ptr<float>();
+      const float* grad = p.grad().data_ptr<float>();
+      float* m = s.exp_avg().data_ptr<float>();
+      float* v = s.exp_avg_sq().data_ptr<float>();
+      at::parallel_for(0, p.numel(), kGrain, [&](int64_t begin, int64_t end) {
+        AdamWKernel(data + begin, grad + begin, m + begin, v + begin, end - begin, scalars);
+      });
+    }
+  }
+  return norm;
+}
+
+}  // namespace motionpipe::nn

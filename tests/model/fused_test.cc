@@ -1,0 +1,140 @@
+// The fused kernels of plugins/common/fused.h against LibTorch's own operators on the same inputs.
+#include "../../plugins/common/fused.h"
+
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+namespace motionpipe::nn {
+namespace {
+
+// One bf16 unit in the last place at v (8 significant bits).
+torch::Tensor Bf16Ulp(const torch::Tensor& v) {
+  return torch::pow(2.0, torch::floor(torch::log2(v.abs().clamp_min(1e-30))) - 7);
+}
+
+// tanh-GELU in float64 written as x sigmoid(2u) = 0.5 x (1 + tanh u), which keeps its relative
+// precision in the negative tail (where 1 + tanh u cancels), and its derivative
+// sigmoid(2u) + 2 x sigmoid(2u) (1 - sigmoid(2u)) du/dx.
+torch::Tensor ExactGelu(const torch::Tensor& x) {
+  const auto u = std::sqrt(2 / M_PI) * (x + 0.044715 * x.pow(3));
+  return x * torch::sigmoid(2 * u);
+}
+torch::Tensor ExactGeluDerivative(const torch::Tensor& x) {
+  const auto s = torch::sigmoid(2 * std::sqrt(2 / M_PI) * (x + 0.044715 * x.pow(3)));
+  return s + 2 * x * s * (1 - s) * std::sqrt(2 / M_PI) * (1 + 3 * 0.044715 * x.pow(2));
+}
+
+// tanh-GELU of a bf16 tensor: the float32 function rounded once. Against LibTorch's float32 kernel
+// rounded to bf16 (what mdt::GeluTanh computed before): equal but for a few roundings where
+// |x| < 4, within one bf16 rounding of the float64 values everywhere (LibTorch's is not in the far
+// negative tail: tanh rounds to -1 there and the result to 0), and no farther from them on
+// average; the gradient as near the float64 derivative as the float32 kernel's, rounded.
+TEST(Fused, GeluTanhBf16IsTheFloat32FunctionRoundedOnce) {
+  torch::manual_seed(11);
+  // Not a multiple of any vector width; more than one task of the intra-op pool.
+  const auto x = (3 * torch::randn({100003})).to(torch::kBFloat16).requires_grad_();
+  const auto y = GeluTanhBf16(x);
+  ASSERT_EQ(y.scalar_type(), torch::kBFloat16);
+  const auto reference = torch::gelu(x.detach().to(torch::kFloat), "tanh").to(torch::kBFloat16);
+  const auto x64 = x.detach().to(torch::kFloat64);
+  const auto exact = ExactGelu(x64);
+  const auto inner = x64.abs().lt(4);
+  const auto differ = y.ne(reference).logical_and(inner);
+  EXPECT_LT(differ.sum().item<double>(), 0.01 * inner.sum().item<double>());
+  const auto gap = (y.to(torch::kFloat64) - exact).abs();
+  EXPECT_TRUE(gap.le(Bf16Ulp(exact) * 1.01 + 1e-30).all().item<bool>());
+  const auto error = [&](const torch::Tensor& v) {
+    return (v.to(torch::kFloat64) - exact).abs().mean().item<double>();
+  };
+  EXPECT_LE(error(y.detach()), error(reference) * 1.01);
+
+  const auto dy = torch::randn({100003}).to(torch::kBFloat16);
+  const auto dx = torch::autograd::grad({y}, {x}, {dy})[0];
+  ASSERT_EQ(dx.scalar_type(), torch::kBFloat16);
+  const auto x32 = x.detach().to(torch::kFloat).requires_grad_();
+  const auto dx32 =
+      torch::autograd::grad({torch::gelu(x32, "tanh")}, {x32}, {dy.to(torch::kFloat)})[0].to(
+          torch::kBFloat16);
+  const auto dx64 = dy.to(torch::kFloat64) * ExactGeluDerivative(x64);
+  const auto grad_error = [&](const torch::Tensor& v) {
+    return (v.to(torch::kFloat64) - dx64).abs().mean().item<double>();
+  };
+  EXPECT_LE(grad_error(dx), grad_error(dx32) * 1.01);
+  // Where the derivative crosses 0 (x near -0.75) float32's absolute rounding shows: allow it.
+  const auto slack = 1e-6 * dy.to(torch::kFloat64).abs();
+  EXPECT_TRUE(
+      (dx.to(torch::kFloat64) - dx64).abs().le(Bf16Ulp(dx64) * 1.01 + slack).all().item<bool>());
+}
+
+TEST(Fused, GeluTanhBf16KeepsTheEdgesOfItsDomain) {
+  const float inf = std::numeric_limits<float>::infinity();
+  const auto x = torch::tensor({0.0f, 200.0f, -200.0f, inf, std::nanf("")}).to(torch::kBFloat16);
+  const auto y = GeluTanhBf16(x).to(torch::kFloat);
+  EXPECT_EQ(y[0].item<float>(), 0.0f);
+  EXPECT_EQ(y[1].item<float>(), 200.0f);
+  EXPECT_LE(std::abs(y[2].item<float>()), 1e-30f);
+  EXPECT_EQ(y[3].item<float>(), inf);
+  EXPECT_TRUE(std::isnan(y[4].item<float>()));
+  EXPECT_THROW(GeluTanhBf16(torch::ones({3})), std::invalid_argument);
+}
+
+// Clipping by the global norm and AdamW's step in one pass: the same parameters, moments and step
+// counts as torch::nn::utils::clip_grad_norm_ followed by torch::optim::AdamW::step, over steps
+// that clip and steps that do not, with decoupled weight decay; a parameter without a gradient is
+// left alone and gets no state.
+TEST(Fused, AdamWStepIsLibTorchsClipAndAdamW) {
+  torch::manual_seed(3);
+  const std::vector<std::vector<int64_t>> shapes = {{37, 19}, {19}, {5, 3, 7}, {1}};
+  std::vector<torch::Tensor> ours, theirs;
+  for (const auto& shape : shapes) {
+    const auto p = torch::randn(shape);
+    ours.push_back(p.clone().requires_grad_());
+    theirs.push_back(p.clone().requires_grad_());
+  }
+  const auto options = torch::optim::AdamWOptions(1e-2).betas({0.9, 0.99}).weight_decay(0.1);
+  torch::optim::AdamW fused(ours, options), reference(theirs, options);
+  const double max_norm = 1.0;
+  for (int step = 0; step < 6; ++step) {
+    const double scale = step % 2 == 0 ? 5.0 : 0.01;  // clipped, not clipped
+    for (size_t k = 0; k + 1 < shapes.size(); ++k) {
+      const auto g = scale * torch::randn(shapes[k]);
+      ours[k].mutable_grad() = g.clone();
+      theirs[k].mutable_grad() = g.clone();
+    }
+    const double norm = AdamWStep(fused, max_norm);
+    const double their_norm = torch::nn::utils::clip_grad_norm_(theirs, max_norm);
+    reference.step();
+    EXPECT_NEAR(norm, their_norm, 1e-5 * their_norm);
+    for (size_t k = 0; k < shapes.size(); ++k) {
+      EXPECT_TRUE(torch::allclose(ours[k], theirs[k], 1e-5, 1e-6)) << "parameter " << k;
+    }
+  }
+  const auto key = [](const torch::Tensor& p) {
+    return c10::guts::to_string(p.unsafeGetTensorImpl());
+  };
+  for (size_t k = 0; k + 1 < shapes.size(); ++k) {
+    const auto& a = static_cast<torch::optim::AdamWParamState&>(*fused.state().at(key(ours[k])));
+    const auto& b =
+        static_cast<torch::optim::AdamWParamState&>(*reference.state().at(key(theirs[k])));
+    EXPECT_EQ(a.step(), 6);
+    EXPECT_EQ(b.step(), 6);
+    EXPECT_TRUE(torch::allclose(a.exp_avg(), b.exp_avg(), 1e-5, 1e-7));
+    EXPECT_TRUE(torch::allclose(a.exp_avg_sq(), b.exp_avg_sq(), 1e-5, 1e-9));
+  }
+  EXPECT_EQ(fused.state().count(key(ours.back())), 0u);
+
+  // Its state is AdamW's: a checkpoint of it resumes in a plain torch::optim::AdamW.
+  std::stringstream saved;
+  torch::save(fused, saved);
+  torch::optim::AdamW resumed(ours, options);
+  torch::load(resumed, saved);
+  const auto& a = static_cast<torch::optim::AdamWParamState&>(*resumed.state().at(key(ours[0])));
+  EXPECT_EQ(a.step(), 6);
+}
+
+}  // namespace
+}  // namespace motionpipe::nn
