@@ -2,8 +2,8 @@
 // where LibTorch 1.13 makes several (issue 15: the claims runs must fit one sitting).
 //  - GeluTanhBf16: DiT's tanh-GELU for bf16 activations under autocast, computed in float32 per
 //    element and rounded to bf16 once, forward and backward, in one vectorised loop each.
-//    LibTorch's own path (widen, float32 Sleef tanh kernel, round; and again for the backward)
-//    makes five passes and three temporaries.
+//    LibTorch's own path (widen, float32 kernel, round) makes three passes and three temporaries
+//    each way.
 //  - AdamWStep: gradient clipping by the global norm and torch::optim::AdamW's step in one pass per
 //    parameter over (p, grad, exp_avg, exp_avg_sq), on the optimiser's own state, so checkpoints
 //    stay torch::optim::AdamW's.
@@ -14,15 +14,17 @@
 namespace motionpipe::nn {
 
 // tanh-GELU, 0.5 x (1 + tanh(sqrt(2/pi) (x + 0.044715 x^3))), of a bf16 tensor: the float32
-// function rounded to bf16 once (within one bf16 rounding of LibTorch's float32 kernel), with its
-// gradient. Other dtypes are an error (use torch::gelu).
+// function rounded to bf16 once (within one bf16 rounding of the exact values; LibTorch's float32
+// kernel gives the same bf16 values but where its tanh rounds to -1 in the far negative tail), with
+// its gradient. Other dtypes are an error (std::invalid_argument; use torch::gelu).
 torch::Tensor GeluTanhBf16(const torch::Tensor& x);
 
 // One optimiser step of `optimizer` (a torch::optim::AdamW without amsgrad) at its groups' current
 // options: when max_norm > 0 the gradients are first scaled as torch::nn::utils::clip_grad_norm_
 // scales them (by max_norm / (norm + 1e-6) when that is below 1; the gradients themselves are not
 // written). The same arithmetic as AdamW::step (LibTorch 1.13), state created as it creates it.
-// Returns the gradients' global 2-norm before clipping.
+// Returns the gradients' global 2-norm before clipping. Parameters and gradients must be
+// contiguous float32 (std::invalid_argument otherwise).
 double AdamWStep(torch::optim::AdamW& optimizer, double max_norm);
 
 }  // namespace motionpipe::nn

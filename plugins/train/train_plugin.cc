@@ -481,11 +481,9 @@ class Trainer {
       flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
     flat.push_back(torch::tensor(values));
     auto buffer = torch::cat(flat);
-    if (group_) {
-      std::vector<at::Tensor> t = {buffer};
-      group_->allreduce(t)->wait();
-      buffer.div_(static_cast<double>(world_));
-    }
+    std::vector<at::Tensor> t = {buffer};
+    group_->allreduce(t)->wait();
+    buffer.div_(static_cast<double>(world_));
     int64_t offset = 0;
     for (auto& p : params_) {
       if (p.grad().defined())
@@ -522,7 +520,7 @@ class Trainer {
     for (auto& group_options : optimizer_->param_groups())
       static_cast<torch::optim::AdamWOptions&>(group_options.options()).lr(lr);
     // Clipping and AdamW in one pass per parameter (LibTorch's clip_grad_norm_ and AdamW::step
-    // make about ten; plugins/common/fused.h).
+    // make about ten over each; plugins/common/fused.h).
     nn::AdamWStep(*optimizer_, options_.clip_grad);
     last_loss_ = averaged[static_cast<int64_t>(std::find(names.begin(), names.end(), "loss") -
                                                names.begin())]
