@@ -6,20 +6,29 @@
 // rate of LibTorch on the same threads, measured in the same run (issue 15: goal 60% of it at
 // paper size), and the same step under bf16 autocast (plugins/common/precision.h) as the ratio
 // bf16/f32 of samples/s. The step clips and steps AdamW with the fused kernel, as the train stage
-// does; the fused kernels (plugins/common/fused.h) are then timed against LibTorch's operators on
-// the same inputs at the training shape, with the share of a bf16 step each saves.
+// does; the fused kernels (plugins/common/fused.h: tanh-GELU, adaLN's modulated LayerNorm and
+// gated residual, clip + AdamW) and ATen's linear (nn::ApplyLinear, for a DiT block's four linears)
+// are then timed against the LibTorch route they replace on the same inputs at the training shape,
+// forward and backward, with the share of a bf16 step each saves.
+// With --profile N, N bf16 steps of the first size run under LibTorch's profiler and the operators
+// are listed by their own (self) time per step, to show where a step goes besides the matrix
+// products.
 //   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
-//             [--no-reference] [--no-latency] [--no-fused]
+//             [--no-reference] [--no-latency] [--no-fused] [--profile N]
+#include <torch/csrc/autograd/profiler_legacy.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "../plugins/common/fused.h"
@@ -126,6 +135,7 @@ EditorNet Build(const Size& size) {
 struct Args {
   std::string sizes = "demo,paper";
   int64_t steps = 4, threads = 1, batch = 32, frames = 150;
+  int64_t profile = 0;  // bf16 steps run under the profiler (0: none)
   bool reference = true, latency = true, fused = true;
 };
 
@@ -148,6 +158,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.latency = false;
     else if (!std::strcmp(argv[k], "--no-fused"))
       a.fused = false;
+    else if (!std::strcmp(argv[k], "--profile") && k + 1 < argc)
+      a.profile = std::atoll(argv[++k]);
     else
       return std::nullopt;
   }
@@ -183,6 +195,63 @@ TrainBatch MakeTrainBatch(const Args& a) {
   return b;
 }
 
+namespace profiler = torch::autograd::profiler;
+
+// Runs `step` `steps` times under LibTorch's (legacy) CPU profiler and prints the operators by
+// their self time per step (their time less that of the operators they call, e.g. autograd's
+// backward nodes less the kernels inside them), the largest first, down to 1% of the step.
+template <typename F>
+void Profile(int64_t steps, F&& step) {
+  step();  // warm-up outside the profile
+  profiler::thread_event_lists lists;
+  const auto started = Clock::now();
+  {
+    profiler::TLSLegacyProfilerGuard guard(
+        torch::profiler::impl::ProfilerConfig(torch::profiler::impl::ProfilerState::CPU),
+        [&](const profiler::thread_event_lists& recorded) { lists = recorded; });
+    for (int64_t k = 0; k < steps; ++k) step();
+  }
+  const double wall_ms = 1e3 * Since(started) / static_cast<double>(steps);
+  struct Row {
+    double self_us = 0;
+    int64_t calls = 0;
+  };
+  std::map<std::string, Row> rows;
+  double covered_us = 0;  // time inside outermost operators
+  for (const auto& list : lists) {
+    std::vector<std::pair<const profiler::LegacyEvent*, double>> open;  // push, children's time
+    for (const auto& e : list) {
+      if (e.kind() == profiler::EventKind::PushRange) {
+        open.emplace_back(&e, 0.0);
+      } else if (e.kind() == profiler::EventKind::PopRange && !open.empty()) {
+        const auto [push, children_us] = open.back();
+        open.pop_back();
+        const double us = push->cpuElapsedUs(e);
+        Row& row = rows[push->name()];
+        row.self_us += us - children_us;
+        ++row.calls;
+        (open.empty() ? covered_us : open.back().second) += us;
+      }
+    }
+  }
+  std::vector<std::pair<std::string, Row>> sorted(rows.begin(), rows.end());
+  std::sort(sorted.begin(), sorted.end(),
+            [](const auto& x, const auto& y) { return x.second.self_us > y.second.self_us; });
+  const double n = static_cast<double>(steps);
+  std::printf(
+      "\nwhere a bf16 step goes (%lld steps profiled, %.1f ms a step under the profiler, %.1f ms "
+      "inside operators): self ms per step\n%-44s %9s %7s %9s\n",
+      static_cast<long long>(steps), wall_ms, covered_us / 1e3 / n, "operator", "ms", "of step",
+      "calls");
+  for (const auto& [name, row] : sorted) {
+    const double ms = row.self_us / 1e3 / n;
+    if (ms < 0.01 * wall_ms) break;
+    std::printf("%-44s %9.2f %6.1f%% %9.0f\n", name.substr(0, 44).c_str(), ms, 100 * ms / wall_ms,
+                static_cast<double>(row.calls) / n);
+  }
+  std::fflush(stdout);
+}
+
 // The PyTorch-Python reference (bench/reference/mdt_ref.py) on the same batch: its samples per
 // second.
 double PythonReference(const Args& a, const Size& size, EditorNet& net, const TrainBatch& b) {
@@ -214,8 +283,9 @@ double PythonReference(const Args& a, const Size& size, EditorNet& net, const Tr
 }
 
 // One size: our training step's samples/s, the reference's, and our GFLOP/s against the sgemm
-// rate measured here. Returns the bf16 step's milliseconds.
-double BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
+// rate measured here; with `profile`, then where a bf16 step's time goes. Returns the bf16 step's
+// milliseconds.
+double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool profile) {
   torch::manual_seed(1);
   EditorNet net = Build(size);
   const CosineSchedule schedule(300);
@@ -249,6 +319,7 @@ double BenchTraining(const Args& a, const Size& size, const TrainBatch& b) {
     return ExamplesPerSecond([&] { step(precision); }, a.steps, batch);
   };
   const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
+  if (profile) Profile(a.profile, [&] { step(nn::Precision::kBf16); });
   const double python = a.reference ? PythonReference(a, size, net, b) : 0;
   const auto tokens = net->text_encoder()->TokenIds(b.texts);
   const double flops =
@@ -283,54 +354,115 @@ double MsPerCall(F&& f, int reps) {
 // ran before; `layers` calls a step), and clipping + AdamW over the net's parameters (one call).
 // "of a step": what each saves, as a share of the bf16 step without it (the step above runs both).
 void BenchFused(const Args& a, const Size& size, double bf16_step_ms) {
-  torch::manual_seed(3);
-  const int64_t rows = a.batch * (2 * a.frames + 1);
-  const auto x = torch::randn({rows, size.ff}).to(torch::kBFloat16);
-  const auto dy = torch::randn({rows, size.ff}).to(torch::kBFloat16);
-  const auto gelu = [&](bool fused) {
-    const auto xi = x.detach().requires_grad_();
-    const auto y = fused ? nn::GeluTanhBf16(xi)
-                         : torch::gelu(xi.to(torch::kFloat), "tanh").to(torch::kBFloat16);
-    y.backward(dy);
+  struct Row {
+    std::string name;
+    double torch_ms, fused_ms;
+    int64_t calls;  // per training step
   };
-  const double gelu_torch = MsPerCall([&] { gelu(false); }, 20);
-  const double gelu_fused = MsPerCall([&] { gelu(true); }, 20);
-
-  EditorNet net = Build(size);
-  std::vector<torch::Tensor> params = net->parameters();
-  for (auto& p : params) p.mutable_grad() = 1e-3 * torch::randn_like(p);
-  const auto options = torch::optim::AdamWOptions(1e-4).weight_decay(0.01);
-  torch::optim::AdamW theirs(params, options), ours(params, options);
-  const double adam_torch = MsPerCall(
-      [&] {
-        torch::nn::utils::clip_grad_norm_(params, 1.0);
-        theirs.step();
-      },
-      10);
-  const double adam_fused = MsPerCall([&] { (void)nn::AdamWStep(ours, 1.0); }, 10);
-  int64_t parameters = 0;
-  for (const auto& p : params) parameters += p.numel();
-
-  const double saved_gelu = static_cast<double>(size.layers) * (gelu_torch - gelu_fused),
-               saved_adam = adam_torch - adam_fused;
-  const double unfused = bf16_step_ms + saved_gelu + saved_adam;
+  std::vector<Row> table;
+  torch::manual_seed(3);
+  const int64_t tokens = 2 * a.frames + 1, rows = a.batch * tokens;
+  const std::string shape = std::to_string(tokens) + " x " + std::to_string(a.batch) + " x ";
+  {
+    const auto x = torch::randn({rows, size.ff}).to(torch::kBFloat16);
+    const auto dy = torch::randn({rows, size.ff}).to(torch::kBFloat16);
+    const auto gelu = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      const auto y = fused ? nn::GeluTanhBf16(xi)
+                           : torch::gelu(xi.to(torch::kFloat), "tanh").to(torch::kBFloat16);
+      y.backward(dy);
+    };
+    table.push_back(
+        {"tanh-GELU, bf16 [" + std::to_string(rows) + " x " + std::to_string(size.ff) + "]",
+         MsPerCall([&] { gelu(false); }, 20), MsPerCall([&] { gelu(true); }, 20), size.layers});
+  }
+  {
+    // adaLN around a sub-layer: float32 stream, bf16 modulation [1, N, d]; LibTorch's route ends
+    // in the cast to bf16 that the next linear makes under autocast.
+    const auto x = torch::randn({tokens, a.batch, size.dim});
+    const auto scale = torch::randn({1, a.batch, size.dim}).to(torch::kBFloat16);
+    const auto shift = torch::randn({1, a.batch, size.dim}).to(torch::kBFloat16);
+    const auto dy = torch::randn({tokens, a.batch, size.dim}).to(torch::kBFloat16);
+    const auto modulate = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      const auto si = scale.detach().requires_grad_(), bi = shift.detach().requires_grad_();
+      const auto y = fused ? nn::ModulatedLayerNormBf16(xi, si, bi, 1e-6)
+                           : (torch::layer_norm(xi, {size.dim}, {}, {}, 1e-6) * (1 + si) + bi)
+                                 .to(torch::kBFloat16);
+      y.backward(dy);
+    };
+    table.push_back({"adaLN LN(x)(1+scale)+shift [" + shape + std::to_string(size.dim) + "]",
+                     MsPerCall([&] { modulate(false); }, 20),
+                     MsPerCall([&] { modulate(true); }, 20), 2 * size.layers + 1});
+    const auto y = torch::randn({tokens, a.batch, size.dim}).to(torch::kBFloat16);
+    const auto dh = torch::randn({tokens, a.batch, size.dim});
+    const auto gated = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      const auto gi = scale.detach().requires_grad_(), yi = y.detach().requires_grad_();
+      const auto h = fused ? nn::GatedResidualBf16(xi, gi, yi) : xi + gi * yi;
+      h.backward(dh);
+    };
+    table.push_back({"adaLN x + gate y [" + shape + std::to_string(size.dim) + "]",
+                     MsPerCall([&] { gated(false); }, 20), MsPerCall([&] { gated(true); }, 20),
+                     2 * size.layers});
+  }
+  // A DiT block's four linears under bf16 autocast: torch::nn::Linear::forward (matmul, then the
+  // bias in a second pass) against ATen's linear (nn::ApplyLinear: one addmm).
+  for (const auto& [in, out, what] :
+       {std::tuple{size.dim, 3 * size.dim, "in_proj"}, std::tuple{size.dim, size.dim, "out_proj"},
+        std::tuple{size.dim, size.ff, "fc1"}, std::tuple{size.ff, size.dim, "fc2"}}) {
+    torch::nn::Linear layer(in, out);
+    const auto x = torch::randn({tokens, a.batch, in}).to(torch::kBFloat16);
+    const auto dy = torch::randn({tokens, a.batch, out}).to(torch::kBFloat16);
+    const auto linear = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      torch::Tensor y;
+      {
+        const nn::MixedPrecision autocast(nn::Precision::kBf16);
+        y = fused ? nn::ApplyLinear(layer, xi) : layer->forward(xi);
+      }
+      y.backward(dy.to(y.scalar_type()));
+    };
+    table.push_back({std::string("linear ") + what + " " + std::to_string(in) + " -> " +
+                         std::to_string(out) + ", bf16 autocast",
+                     MsPerCall([&] { linear(false); }, 20), MsPerCall([&] { linear(true); }, 20),
+                     size.layers});
+  }
+  {
+    EditorNet net = Build(size);
+    std::vector<torch::Tensor> params = net->parameters();
+    for (auto& p : params) p.mutable_grad() = 1e-3 * torch::randn_like(p);
+    const auto options = torch::optim::AdamWOptions(1e-4).weight_decay(0.01);
+    torch::optim::AdamW theirs(params, options), ours(params, options);
+    int64_t parameters = 0;
+    for (const auto& p : params) parameters += p.numel();
+    table.push_back({"clip + AdamW, " + std::to_string(parameters) + " params",
+                     MsPerCall(
+                         [&] {
+                           torch::nn::utils::clip_grad_norm_(params, 1.0);
+                           theirs.step();
+                         },
+                         10),
+                     MsPerCall([&] { (void)nn::AdamWStep(ours, 1.0); }, 10), 1});
+  }
+  double saved = 0;
+  for (const Row& row : table)
+    saved += static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms);
+  const double unfused = bf16_step_ms + saved;
   std::printf(
-      "\nfused kernels (plugins/common/fused.h), %s size, batch %lld, %lld frames, %lld "
-      "thread(s): ms per call, best of 5\n",
+      "\nfused kernels (plugins/common/fused.h) and ATen's linear, %s size, batch %lld, %lld "
+      "frames, %lld thread(s): ms per call fwd+bwd, best of 5\n",
       size.name.c_str(), static_cast<long long>(a.batch), static_cast<long long>(a.frames),
       static_cast<long long>(a.threads));
-  std::printf("%-44s %9s %9s %7s %6s %11s\n", "kernel", "LibTorch", "fused", "ratio", "calls",
+  std::printf("%-52s %9s %9s %7s %6s %11s\n", "kernel", "LibTorch", "ours", "ratio", "calls",
               "of a step");
-  const std::string gelu_name =
-      "tanh-GELU fwd+bwd, bf16 [" + std::to_string(rows) + " x " + std::to_string(size.ff) + "]";
-  const std::string adam_name = "clip + AdamW, " + std::to_string(parameters) + " params";
-  std::printf("%-44s %9.3f %9.3f %6.2fx %6lld %10.1f%%\n", gelu_name.c_str(), gelu_torch,
-              gelu_fused, gelu_torch / gelu_fused, static_cast<long long>(size.layers),
-              100 * saved_gelu / unfused);
-  std::printf("%-44s %9.3f %9.3f %6.2fx %6d %10.1f%%\n", adam_name.c_str(), adam_torch, adam_fused,
-              adam_torch / adam_fused, 1, 100 * saved_adam / unfused);
-  std::printf("bf16 step %.1f ms with both; %.1f ms without (estimated): %.1f%% saved\n",
-              bf16_step_ms, unfused, 100 * (saved_gelu + saved_adam) / unfused);
+  for (const Row& row : table) {
+    std::printf("%-52s %9.3f %9.3f %6.2fx %6lld %10.1f%%\n", row.name.c_str(), row.torch_ms,
+                row.fused_ms, row.torch_ms / row.fused_ms, static_cast<long long>(row.calls),
+                100 * static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms) / unfused);
+  }
+  std::printf("bf16 step %.1f ms with these; %.1f ms without (estimated): %.1f%% saved\n",
+              bf16_step_ms, unfused, 100 * saved / unfused);
   std::fflush(stdout);
 }
 
@@ -392,7 +524,7 @@ int main(int argc, char** argv) {
   if (!args) {
     std::fprintf(stderr,
                  "usage: mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
-                 "[--frames F] [--no-reference] [--no-latency] [--no-fused]\n");
+                 "[--frames F] [--no-reference] [--no-latency] [--no-fused] [--profile N]\n");
     return 2;
   }
   nn::SetTorchThreads(static_cast<int>(args->threads));
@@ -408,8 +540,10 @@ int main(int argc, char** argv) {
   const TrainBatch batch = MakeTrainBatch(*args);
   std::vector<std::pair<Size, double>> bf16_step_ms;
   for (const Size& size : all) {
-    if (args->sizes.find(size.name) != std::string::npos)
-      bf16_step_ms.emplace_back(size, BenchTraining(*args, size, batch));
+    if (args->sizes.find(size.name) != std::string::npos) {
+      const bool profile = args->profile > 0 && bf16_step_ms.empty();
+      bf16_step_ms.emplace_back(size, BenchTraining(*args, size, batch, profile));
+    }
   }
   if (args->fused) {
     for (const auto& [size, ms] : bf16_step_ms) BenchFused(*args, size, ms);

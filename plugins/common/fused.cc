@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 // The loops are plain C++ vectorised by the compiler (omp simd; the file is built with
 // -fno-math-errno -fno-trapping-math, without which sqrt and floor stay calls and nothing
@@ -116,6 +117,223 @@ struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction> {
   }
 };
 
+// adaLN-Zero's modulated LayerNorm over rows of d: for rows [begin, end) of x ([T*N, d], row
+// r = t N + n), y = (x - mean) rstd (1 + scale[n]) + shift[n] rounded to bf16; keeps each row's
+// mean and 1/sqrt(var + eps) for the backward pass. Two passes over the row for the moments (the
+// variance from the centred values).
+MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const uint16_t* scale,
+                                            const uint16_t* shift, uint16_t* y, float* mean,
+                                            float* rstd, int64_t begin, int64_t end, int64_t n,
+                                            int64_t d, float eps) {
+  for (int64_t r = begin; r < end; ++r) {
+    const float* row = x + r * d;
+    const uint16_t* s = scale + (r % n) * d;
+    const uint16_t* b = shift + (r % n) * d;
+    uint16_t* out = y + r * d;
+    float sum = 0;
+#pragma omp simd reduction(+ : sum)
+    for (int64_t k = 0; k < d; ++k) sum += row[k];
+    const float mu = sum / static_cast<float>(d);
+    float squares = 0;
+#pragma omp simd reduction(+ : squares)
+    for (int64_t k = 0; k < d; ++k) squares += (row[k] - mu) * (row[k] - mu);
+    const float inv = 1.0f / std::sqrt(squares / static_cast<float>(d) + eps);
+#pragma omp simd
+    for (int64_t k = 0; k < d; ++k)
+      out[k] = FloatToBf16((row[k] - mu) * inv * (1.0f + Bf16ToFloat(s[k])) + Bf16ToFloat(b[k]));
+    mean[r] = mu;
+    rstd[r] = inv;
+  }
+}
+
+// Its gradient for the batch elements [n_begin, n_end) over every t (so that the sums over t of
+// each element's scale and shift gradients stay in one task): with xhat = (x - mean) rstd and
+// g = dy (1 + scale), dx = rstd (g - mean(g) - xhat mean(g xhat)); dscale = sum_t dy xhat,
+// dshift = sum_t dy (float32 sums, then rounded).
+MOTIONPIPE_CLONES void ModulatedNormBackward(const float* x, const uint16_t* scale,
+                                             const uint16_t* dy, const float* mean,
+                                             const float* rstd, float* dx, uint16_t* dscale,
+                                             uint16_t* dshift, float* sum_scale, float* sum_shift,
+                                             int64_t n_begin, int64_t n_end, int64_t t_count,
+                                             int64_t n, int64_t d) {
+  for (int64_t e = n_begin; e < n_end; ++e) {
+    const uint16_t* s = scale + e * d;
+#pragma omp simd
+    for (int64_t k = 0; k < d; ++k) sum_scale[k] = sum_shift[k] = 0;
+    for (int64_t t = 0; t < t_count; ++t) {
+      const int64_t r = t * n + e;
+      const float* row = x + r * d;
+      const uint16_t* g_row = dy + r * d;
+      float* out = dx + r * d;
+      const float mu = mean[r], inv = rstd[r];
+      float g_sum = 0, gx_sum = 0;
+#pragma omp simd reduction(+ : g_sum, gx_sum)
+      for (int64_t k = 0; k < d; ++k) {
+        const float g = Bf16ToFloat(g_row[k]);
+        const float xhat = (row[k] - mu) * inv;
+        const float gs = g * (1.0f + Bf16ToFloat(s[k]));
+        g_sum += gs;
+        gx_sum += gs * xhat;
+        sum_scale[k] += g * xhat;
+        sum_shift[k] += g;
+      }
+      const float a = g_sum / static_cast<float>(d), c = gx_sum / static_cast<float>(d);
+#pragma omp simd
+      for (int64_t k = 0; k < d; ++k) {
+        const float xhat = (row[k] - mu) * inv;
+        out[k] = inv * (Bf16ToFloat(g_row[k]) * (1.0f + Bf16ToFloat(s[k])) - a - xhat * c);
+      }
+    }
+#pragma omp simd
+    for (int64_t k = 0; k < d; ++k) {
+      dscale[e * d + k] = FloatToBf16(sum_scale[k]);
+      dshift[e * d + k] = FloatToBf16(sum_shift[k]);
+    }
+  }
+}
+
+// h = x + gate[n] y over rows [begin, end).
+MOTIONPIPE_CLONES void GatedResidualForward(const float* x, const uint16_t* gate, const uint16_t* y,
+                                            float* h, int64_t begin, int64_t end, int64_t n,
+                                            int64_t d) {
+  for (int64_t r = begin; r < end; ++r) {
+    const uint16_t* g = gate + (r % n) * d;
+#pragma omp simd
+    for (int64_t k = 0; k < d; ++k)
+      h[r * d + k] = x[r * d + k] + Bf16ToFloat(g[k]) * Bf16ToFloat(y[r * d + k]);
+  }
+}
+
+// Its gradient for the batch elements [n_begin, n_end) over every t: dy = dh gate (rounded),
+// dgate = sum_t dh y (a float32 sum, then rounded); dx is dh itself.
+MOTIONPIPE_CLONES void GatedResidualBackward(const float* dh, const uint16_t* gate,
+                                             const uint16_t* y, uint16_t* dy, uint16_t* dgate,
+                                             float* sum, int64_t n_begin, int64_t n_end,
+                                             int64_t t_count, int64_t n, int64_t d) {
+  for (int64_t e = n_begin; e < n_end; ++e) {
+    const uint16_t* g = gate + e * d;
+#pragma omp simd
+    for (int64_t k = 0; k < d; ++k) sum[k] = 0;
+    for (int64_t t = 0; t < t_count; ++t) {
+      const int64_t r = (t * n + e) * d;
+#pragma omp simd
+      for (int64_t k = 0; k < d; ++k) {
+        const float v = dh[r + k];
+        sum[k] += v * Bf16ToFloat(y[r + k]);
+        dy[r + k] = FloatToBf16(v * Bf16ToFloat(g[k]));
+      }
+    }
+#pragma omp simd
+    for (int64_t k = 0; k < d; ++k) dgate[e * d + k] = FloatToBf16(sum[k]);
+  }
+}
+
+const uint16_t* Bf16Data(const torch::Tensor& t) {
+  return reinterpret_cast<const uint16_t*>(t.data_ptr<at::BFloat16>());
+}
+uint16_t* Bf16Data(torch::Tensor& t) {
+  return reinterpret_cast<uint16_t*>(t.data_ptr<at::BFloat16>());
+}
+
+// Checks the shapes and dtypes of adaLN's operands: x [T, N, d] float32, every other [T, N, d] or
+// per-element ([N, d] or [1, N, d]) bf16. Returns the per-element ones as contiguous [N, d].
+void CheckStream(const char* what, const torch::Tensor& x) {
+  if (x.dim() != 3 || x.scalar_type() != torch::kFloat)
+    throw std::invalid_argument(std::string(what) + " takes x as [T, N, d] float32, not " +
+                                std::string(c10::toString(x.scalar_type())) + " of " +
+                                std::to_string(x.dim()) + " dimensions");
+}
+torch::Tensor PerElement(const char* what, const char* name, const torch::Tensor& v,
+                         const torch::Tensor& x) {
+  const int64_t n = x.size(1), d = x.size(2);
+  const bool shape_ok = (v.dim() == 2 && v.size(0) == n && v.size(1) == d) ||
+                        (v.dim() == 3 && v.size(0) == 1 && v.size(1) == n && v.size(2) == d);
+  if (!shape_ok || v.scalar_type() != torch::kBFloat16)
+    throw std::invalid_argument(std::string(what) + ": " + name +
+                                " must be bf16 of [N, d] or [1, N, d] = [" + std::to_string(n) +
+                                ", " + std::to_string(d) + "]");
+  return v.reshape({n, d}).contiguous();
+}
+
+struct ModulatedLayerNormFunction : torch::autograd::Function<ModulatedLayerNormFunction> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x_in,
+                               const torch::Tensor& scale_in, const torch::Tensor& shift_in,
+                               double eps) {
+    const auto x = x_in.contiguous();
+    const auto scale = PerElement("ModulatedLayerNormBf16", "scale", scale_in, x);
+    const auto shift = PerElement("ModulatedLayerNormBf16", "shift", shift_in, x);
+    const int64_t rows = x.size(0) * x.size(1), n = x.size(1), d = x.size(2);
+    auto y = torch::empty(x.sizes(), x.options().dtype(torch::kBFloat16));
+    auto mean = torch::empty({rows}, x.options());
+    auto rstd = torch::empty({rows}, x.options());
+    at::parallel_for(0, rows, std::max<int64_t>(1, kGrain / d), [&](int64_t begin, int64_t end) {
+      ModulatedNormForward(x.data_ptr<float>(), Bf16Data(scale), Bf16Data(shift), Bf16Data(y),
+                           mean.data_ptr<float>(), rstd.data_ptr<float>(), begin, end, n, d,
+                           static_cast<float>(eps));
+    });
+    ctx->save_for_backward({x, scale, mean, rstd});
+    ctx->saved_data["scale_sizes"] = scale_in.sizes().vec();
+    ctx->saved_data["shift_sizes"] = shift_in.sizes().vec();
+    return y;
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto saved = ctx->get_saved_variables();
+    const auto &x = saved[0], &scale = saved[1], &mean = saved[2], &rstd = saved[3];
+    const auto dy = grads[0].to(torch::kBFloat16).contiguous();
+    const int64_t t_count = x.size(0), n = x.size(1), d = x.size(2);
+    auto dx = torch::empty_like(x);
+    auto dscale = torch::empty({n, d}, x.options().dtype(torch::kBFloat16));
+    auto dshift = torch::empty({n, d}, x.options().dtype(torch::kBFloat16));
+    at::parallel_for(0, n, 1, [&](int64_t begin, int64_t end) {
+      std::vector<float> sums(static_cast<size_t>(2 * d));
+      ModulatedNormBackward(x.data_ptr<float>(), Bf16Data(scale), Bf16Data(dy),
+                            mean.data_ptr<float>(), rstd.data_ptr<float>(), dx.data_ptr<float>(),
+                            Bf16Data(dscale), Bf16Data(dshift), sums.data(), sums.data() + d, begin,
+                            end, t_count, n, d);
+    });
+    return {dx, dscale.view(ctx->saved_data["scale_sizes"].toIntVector()),
+            dshift.view(ctx->saved_data["shift_sizes"].toIntVector()), torch::Tensor()};
+  }
+};
+
+struct GatedResidualFunction : torch::autograd::Function<GatedResidualFunction> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x_in,
+                               const torch::Tensor& gate_in, const torch::Tensor& y_in) {
+    const auto x = x_in.contiguous();
+    const auto gate = PerElement("GatedResidualBf16", "gate", gate_in, x);
+    if (y_in.sizes() != x.sizes() || y_in.scalar_type() != torch::kBFloat16)
+      throw std::invalid_argument("GatedResidualBf16: y must be bf16 of x's shape");
+    const auto y = y_in.contiguous();
+    const int64_t rows = x.size(0) * x.size(1), n = x.size(1), d = x.size(2);
+    auto h = torch::empty_like(x);
+    at::parallel_for(0, rows, std::max<int64_t>(1, kGrain / d), [&](int64_t begin, int64_t end) {
+      GatedResidualForward(x.data_ptr<float>(), Bf16Data(gate), Bf16Data(y), h.data_ptr<float>(),
+                           begin, end, n, d);
+    });
+    ctx->save_for_backward({gate, y});
+    ctx->saved_data["gate_sizes"] = gate_in.sizes().vec();
+    return h;
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto saved = ctx->get_saved_variables();
+    const auto &gate = saved[0], &y = saved[1];
+    const auto dh = grads[0].to(torch::kFloat).contiguous();
+    const int64_t t_count = y.size(0), n = y.size(1), d = y.size(2);
+    auto dy = torch::empty_like(y);
+    auto dgate = torch::empty({n, d}, y.options());
+    at::parallel_for(0, n, 1, [&](int64_t begin, int64_t end) {
+      std::vector<float> sum(static_cast<size_t>(d));
+      GatedResidualBackward(dh.data_ptr<float>(), Bf16Data(gate), Bf16Data(y), Bf16Data(dy),
+                            Bf16Data(dgate), sum.data(), begin, end, t_count, n, d);
+    });
+    return {dh, dgate.view(ctx->saved_data["gate_sizes"].toIntVector()), dy};
+  }
+};
+
 // Sum of squares in double (the per-parameter float norms of clip_grad_norm_, without rounding).
 MOTIONPIPE_CLONES double SquaredNorm(const float* g, int64_t n) {
   double sum = 0;
@@ -157,6 +375,18 @@ torch::Tensor GeluTanhBf16(const torch::Tensor& x) {
     throw std::invalid_argument("GeluTanhBf16 takes bf16, not " +
                                 std::string(c10::toString(x.scalar_type())));
   return GeluTanhFunction::apply(x);
+}
+
+torch::Tensor ModulatedLayerNormBf16(const torch::Tensor& x, const torch::Tensor& scale,
+                                     const torch::Tensor& shift, double eps) {
+  CheckStream("ModulatedLayerNormBf16", x);
+  return ModulatedLayerNormFunction::apply(x, scale, shift, eps);
+}
+
+torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gate,
+                                const torch::Tensor& y) {
+  CheckStream("GatedResidualBf16", x);
+  return GatedResidualFunction::apply(x, gate, y);
 }
 
 double AdamWStep(torch::optim::AdamW& optimizer, double max_norm) {

@@ -4,6 +4,11 @@
 //    element and rounded to bf16 once, forward and backward, in one vectorised loop each.
 //    LibTorch's own path (widen, float32 kernel, round) makes three passes and three temporaries
 //    each way.
+//  - ModulatedLayerNormBf16 and GatedResidualBf16: DiT's adaLN-Zero around each sub-layer
+//    (LN(x) (1 + scale) + shift before it, x + gate y after it) for a float32 residual stream and
+//    bf16 modulation under autocast, forward and backward in one pass each. LibTorch's route makes
+//    a pass per operator (LayerNorm, add, mul, add, the cast to bf16 for the next linear), and in
+//    backward as many again plus the sums over frames for the modulation's gradients.
 //  - AdamWStep: gradient clipping by the global norm and torch::optim::AdamW's step in one pass per
 //    parameter over (p, grad, exp_avg, exp_avg_sq), on the optimiser's own state, so checkpoints
 //    stay torch::optim::AdamW's.
@@ -18,6 +23,23 @@ namespace motionpipe::nn {
 // kernel gives the same bf16 values but where its tanh rounds to -1 in the far negative tail), with
 // its gradient. Other dtypes are an error (std::invalid_argument; use torch::gelu).
 torch::Tensor GeluTanhBf16(const torch::Tensor& x);
+
+// adaLN's modulated LayerNorm (Peebles and Xie 2023, DiT eq. of adaLN-Zero): y = LN(x) (1 + scale)
+// + shift over the last dimension, LN without affine parameters, with variance eps added. x is
+// [T, N, d] float32; scale and shift are [N, d] or [1, N, d] bf16, the same for every t. y is bf16:
+// the float32 expression rounded once (the linear after it under bf16 autocast would round it so),
+// within one bf16 rounding of the exact values. Its gradient reaches x (float32), scale and shift
+// (bf16; summed over t in float32, then rounded). Other dtypes or shapes are an error
+// (std::invalid_argument).
+torch::Tensor ModulatedLayerNormBf16(const torch::Tensor& x, const torch::Tensor& scale,
+                                     const torch::Tensor& shift, double eps);
+
+// adaLN-Zero's gated residual: h = x + gate y, x [T, N, d] float32, gate [N, d] or [1, N, d] bf16
+// (the same for every t), y [T, N, d] bf16; h float32, the product not rounded to bf16 before the
+// sum. Its gradient reaches x (float32), gate (bf16; summed over t in float32) and y (bf16). Other
+// dtypes or shapes are an error (std::invalid_argument).
+torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gate,
+                                const torch::Tensor& y);
 
 // One optimiser step of `optimizer` (a torch::optim::AdamW without amsgrad) at its groups' current
 // options: when max_norm > 0 the gradients are first scaled as torch::nn::utils::clip_grad_norm_

@@ -272,8 +272,8 @@ TextFeatures TextEncoderImpl::forward(const std::vector<std::string>& texts) {
                                     options_.table);
       flat.insert(flat.end(), it->second.begin(), it->second.end());
     }
-    auto x =
-        project_->forward(torch::tensor(flat).view({n, table_dim_})).unsqueeze(0);  // [1, N, dim]
+    auto x = ApplyLinear(project_, torch::tensor(flat).view({n, table_dim_}))
+                 .unsqueeze(0);  // [1, N, dim]
     return {encoder_->forward(x, {}), torch::zeros({n, 1}, torch::kBool)};
   }
   const auto tokens = TokenIds(texts);

@@ -47,6 +47,16 @@ torch::Tensor Dropout(const torch::Tensor& x, double p, bool training) {
   return x * DropoutMask(x.sizes(), p);
 }
 
+torch::Tensor ApplySequential(torch::nn::Sequential layers, torch::Tensor x) {
+  for (auto& module : *layers) {
+    if (const auto* linear = dynamic_cast<const torch::nn::LinearImpl*>(module.ptr().get()))
+      x = torch::linear(x, linear->weight, linear->bias);
+    else
+      x = module.forward(x);
+  }
+  return x;
+}
+
 SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout)
     : dim_(dim), heads_(heads), dropout_(dropout) {
   if (dim % heads != 0)
@@ -64,13 +74,16 @@ SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout)
 torch::Tensor SelfAttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
   const int64_t length = x.size(0), n = x.size(1), head_dim = dim_ / heads_;
   // [L, N, 3, H, Dh] -> q, k, v as [N*H, L, Dh]
-  const auto split = in_proj_->forward(x)
+  const auto split = ApplyLinear(in_proj_, x)
                          .view({length, n, 3, heads_, head_dim})
                          .permute({2, 1, 3, 0, 4})
                          .reshape({3, n * heads_, length, head_dim});
-  const auto q = split[0] * (1.0 / std::sqrt(static_cast<double>(head_dim)));
-  const auto k = split[1];
-  const auto v = split[2];
+  // unbind, not split[0], split[1], split[2]: indexing's backward writes each gradient into a
+  // zero-filled copy of the whole [3, N*H, L, Dh] and sums the three; unbind's stacks them once.
+  const auto qkv = split.unbind(0);
+  const auto q = qkv[0] * (1.0 / std::sqrt(static_cast<double>(head_dim)));
+  const auto& k = qkv[1];
+  const auto& v = qkv[2];
   torch::Tensor scores;
   if (padding.defined()) {
     // A large negative bias on ignored keys (finite: a row with every key ignored stays finite),
@@ -88,7 +101,7 @@ torch::Tensor SelfAttentionImpl::forward(const torch::Tensor& x, const torch::Te
                        .view({n, heads_, length, head_dim})
                        .permute({2, 0, 1, 3})
                        .reshape({length, n, dim_});
-  return out_proj_->forward(out);
+  return ApplyLinear(out_proj_, out);
 }
 
 EncoderLayerImpl::EncoderLayerImpl(const TransformerOptions& o) : o_(o) {
@@ -102,7 +115,8 @@ EncoderLayerImpl::EncoderLayerImpl(const TransformerOptions& o) : o_(o) {
 torch::Tensor EncoderLayerImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
   const bool train = is_training();
   auto h = norm1_->forward(x + Dropout(attention_->forward(x, padding), o_.dropout, train));
-  const auto ff = linear2_->forward(Dropout(torch::gelu(linear1_->forward(h)), o_.dropout, train));
+  const auto ff =
+      ApplyLinear(linear2_, Dropout(torch::gelu(ApplyLinear(linear1_, h)), o_.dropout, train));
   return norm2_->forward(h + Dropout(ff, o_.dropout, train));
 }
 
@@ -139,7 +153,7 @@ torch::Tensor OneTokenDecoderLayerImpl::forward(const torch::Tensor& x, const to
   const int64_t length = x.size(0), n = x.size(1), heads = o_.heads, head_dim = o_.dim / o_.heads;
   auto h = norm1_->forward(x + Dropout(attention_->forward(x, padding), o_.dropout, train));
   // Cross-attention to one memory token: head h's output is w[t,n,h] * v[n,h] with w = dropout(1).
-  const auto v = value_->forward(memory);  // [N, dim]
+  const auto v = ApplyLinear(value_, memory);  // [N, dim]
   torch::Tensor cross;
   if (train && o_.dropout > 0) {
     // out_proj applied per head: u[n,h,:] = W_o[:, h] v[n,h]; then sum_h w[t,n,h] u[n,h,:] + b.
@@ -149,10 +163,11 @@ torch::Tensor OneTokenDecoderLayerImpl::forward(const torch::Tensor& x, const to
     const auto w = DropoutMask({n, length, heads}, o_.dropout);              // [N, T, H]
     cross = torch::bmm(w, u).transpose(0, 1) + out_proj_->bias;              // [T, N, dim]
   } else {
-    cross = out_proj_->forward(v).unsqueeze(0).expand({length, n, o_.dim});
+    cross = ApplyLinear(out_proj_, v).unsqueeze(0).expand({length, n, o_.dim});
   }
   h = norm2_->forward(h + Dropout(cross, o_.dropout, train));
-  const auto ff = linear2_->forward(Dropout(torch::gelu(linear1_->forward(h)), o_.dropout, train));
+  const auto ff =
+      ApplyLinear(linear2_, Dropout(torch::gelu(ApplyLinear(linear1_, h)), o_.dropout, train));
   return norm3_->forward(h + Dropout(ff, o_.dropout, train));
 }
 

@@ -187,7 +187,23 @@ torch::Tensor GeluTanh(const torch::Tensor& x) {
   return nn::GeluTanhBf16(x);
 }
 
-DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
+torch::Tensor Modulate(const torch::Tensor& x, const torch::Tensor& scale,
+                       const torch::Tensor& shift) {
+  if (x.scalar_type() == torch::kFloat && scale.scalar_type() == torch::kBFloat16 &&
+      shift.scalar_type() == torch::kBFloat16)
+    return nn::ModulatedLayerNormBf16(x, scale, shift, 1e-6);
+  return torch::layer_norm(x, {x.size(-1)}, {}, {}, 1e-6) * (1 + scale) + shift;
+}
+
+torch::Tensor GatedResidual(const torch::Tensor& x, const torch::Tensor& gate,
+                            const torch::Tensor& y) {
+  if (x.scalar_type() == torch::kFloat && gate.scalar_type() == torch::kBFloat16 &&
+      y.scalar_type() == torch::kBFloat16)
+    return nn::GatedResidualBf16(x, gate, y);
+  return x + gate * y;
+}
+
+DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) {
   attention_ = register_module("attn", nn::SelfAttention(dim, heads, 0.0));
   fc1_ = register_module("fc1", torch::nn::Linear(dim, ff));
   fc2_ = register_module("fc2", torch::nn::Linear(ff, dim));
@@ -197,15 +213,12 @@ DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) : dim_(dim) {
   modulation_->bias.zero_();
 }
 
-torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& c,
+torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& silu_c,
                                     const torch::Tensor& padding) {
-  const auto m = modulation_->forward(torch::silu(c)).unsqueeze(0).chunk(6, 2);  // each [1, N, d]
-  const auto norm = [&](const torch::Tensor& v) {
-    return torch::layer_norm(v, {dim_}, {}, {}, 1e-6);
-  };
-  auto h = x + m[2] * attention_->forward(norm(x) * (1 + m[1]) + m[0], padding);
-  const auto mlp = fc2_->forward(GeluTanh(fc1_->forward(norm(h) * (1 + m[4]) + m[3])));
-  return h + m[5] * mlp;
+  const auto m = nn::ApplyLinear(modulation_, silu_c).unsqueeze(0).chunk(6, 2);  // each [1, N, d]
+  auto h = GatedResidual(x, m[2], attention_->forward(Modulate(x, m[1], m[0]), padding));
+  const auto mlp = nn::ApplyLinear(fc2_, GeluTanh(nn::ApplyLinear(fc1_, Modulate(h, m[4], m[3]))));
+  return GatedResidual(h, m[5], mlp);
 }
 
 EditorNetImpl::EditorNetImpl(const EditorOptions& o)
@@ -268,7 +281,7 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
 
 std::pair<torch::Tensor, nn::TextFeatures> EditorNetImpl::EncodeText(const Condition& c) {
   nn::TextFeatures f = text_encoder_->forward(c.texts);
-  auto tokens = text_proj_->forward(f.tokens);                                    // [L, N, d]
+  auto tokens = nn::ApplyLinear(text_proj_, f.tokens);                            // [L, N, d]
   const auto keep = f.padding.logical_not().t().unsqueeze(2).to(tokens.dtype());  // [L, N, 1]
   auto pooled = (tokens * keep).sum(0) / keep.sum(0).clamp_min(1.0);              // [N, d]
   if (c.drop_text.defined()) {
@@ -280,13 +293,13 @@ std::pair<torch::Tensor, nn::TextFeatures> EditorNetImpl::EncodeText(const Condi
 }
 
 torch::Tensor EditorNetImpl::TimeEmbedding(const torch::Tensor& t) {
-  return time_mlp_->forward(TimestepEmbedding(t, 256));
+  return nn::ApplySequential(time_mlp_, TimestepEmbedding(t, 256));
 }
 
 torch::Tensor EditorNetImpl::TextCondition(const torch::Tensor& text) {
   if (!text_cond_)
     throw std::logic_error("TextCondition: only the mdt variant conditions adaLN on text");
-  return text_cond_->forward(text);
+  return nn::ApplyLinear(text_cond_, text);
 }
 
 torch::Tensor EditorNetImpl::Place(const torch::Tensor& x, Segment segment) const {
@@ -404,7 +417,7 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   auto [text, unused] = EncodeText(c);
   (void)unused;
   const auto source_padding = SourcePadding(c);
-  auto source = source_in_->forward(c.source);  // [Ts, N, d]
+  auto source = nn::ApplyLinear(source_in_, c.source);  // [Ts, N, d]
   if (c.drop_source.defined())
     source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
   // Condition transformer over [text token; source frames].
@@ -414,7 +427,7 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   const auto enhanced_source = h.narrow(0, 1, ts);
   Prediction p;
   if (o_.aux != "none") {
-    auto s = sim_head_->forward(enhanced_source).transpose(0, 1);  // [N, Ts, K]
+    auto s = nn::ApplySequential(sim_head_, enhanced_source).transpose(0, 1);  // [N, Ts, K]
     p.similarity = o_.aux == "regression" ? s.squeeze(2) : s;
   }
   // DiT over [source; separator; noisy target], conditioned on timestep (+ text).
@@ -423,13 +436,14 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   const auto src = o_.enhanced_motion ? enhanced_source : source;
   auto x = torch::cat(
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
-       Place(target_in_->forward(xt), kTarget)},
+       Place(nn::ApplyLinear(target_in_, xt), kTarget)},
       0);
   const auto padding = torch::cat({source_padding, AnyPadding(n, 1), target_padding}, 1);
-  for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, cond, padding);
-  const auto m = final_modulation_->forward(torch::silu(cond)).unsqueeze(0).chunk(2, 2);
-  x = torch::layer_norm(x.narrow(0, ts + 1, tt), {o_.dim}, {}, {}, 1e-6) * (1 + m[1]) + m[0];
-  p.x0 = out_->forward(x);
+  const auto silu_cond = torch::silu(cond);  // every block's adaLN input, computed once
+  for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, silu_cond, padding);
+  const auto m = nn::ApplyLinear(final_modulation_, silu_cond).unsqueeze(0).chunk(2, 2);
+  x = Modulate(x.narrow(0, ts + 1, tt), m[1], m[0]);
+  p.x0 = nn::ApplyLinear(out_, x);
   return p;
 }
 
@@ -443,7 +457,7 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
     parts = {Place(time + text.unsqueeze(0), kTime)};  // MDM: one condition token
     masks = {AnyPadding(n, 1)};
   } else {  // TMED: [timestep; text tokens; source; separator; noisy target]
-    auto source = source_in_->forward(c.source);
+    auto source = nn::ApplyLinear(source_in_, c.source);
     if (c.drop_source.defined())
       source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
     parts = {Place(time, kTime), Place(tokens.tokens, kText), Place(source, kSource),
@@ -452,11 +466,11 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
   }
   int64_t prefix = 0;
   for (const auto& part : parts) prefix += part.size(0);
-  parts.push_back(Place(target_in_->forward(xt), kTarget));
+  parts.push_back(Place(nn::ApplyLinear(target_in_, xt), kTarget));
   masks.push_back(target_padding);
   auto x = torch::cat(parts, 0);
   x = encoder_->forward(x, torch::cat(masks, 1));
-  return {out_->forward(x.narrow(0, prefix, tt)), {}};
+  return {nn::ApplyLinear(out_, x.narrow(0, prefix, tt)), {}};
 }
 
 torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,

@@ -132,6 +132,17 @@ torch::Tensor AlignSource(const torch::Tensor& source, const torch::Tensor& sour
 // conversions (bench/mdt_bench prints both).
 torch::Tensor GeluTanh(const torch::Tensor& x);
 
+// adaLN-Zero around a DiT sub-layer (REFERENCE: "LayerNorm without affine", shift/scale/gate):
+// Modulate is LN(x) (1 + scale) + shift (eps 1e-6), GatedResidual is x + gate y. For a float32
+// stream under bf16 autocast (bf16 modulation and sub-layer output) they take the fused kernels
+// (nn::ModulatedLayerNormBf16, nn::GatedResidualBf16: one pass each way, the float32 expression
+// rounded once, Modulate's output in the bf16 the next linear would cast it to); otherwise
+// LibTorch's operators.
+torch::Tensor Modulate(const torch::Tensor& x, const torch::Tensor& scale,
+                       const torch::Tensor& shift);
+torch::Tensor GatedResidual(const torch::Tensor& x, const torch::Tensor& gate,
+                            const torch::Tensor& y);
+
 struct Prediction {
   torch::Tensor x0;          // [Tt, N, diffusion_dim()]: 207 columns or `components` coordinates
   torch::Tensor similarity;  // mdt: [N, Ts, K] logits (or [N, Ts] regression); else undefined
@@ -143,11 +154,11 @@ struct Prediction {
 class DiTBlockImpl : public torch::nn::Module {
  public:
   DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff);
-  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& c,
+  // x [T, N, d]; silu_c = SiLU(condition) [N, d] (the caller computes it once for every block).
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& silu_c,
                         const torch::Tensor& padding);
 
  private:
-  int64_t dim_;
   nn::SelfAttention attention_{nullptr};
   torch::nn::Linear fc1_{nullptr}, fc2_{nullptr}, modulation_{nullptr};
 };

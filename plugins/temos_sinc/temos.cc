@@ -122,7 +122,7 @@ VaeEncoderImpl::VaeEncoderImpl(int64_t input_dim, const TemosOptions& o) : laten
 std::pair<torch::Tensor, torch::Tensor> VaeEncoderImpl::forward(const torch::Tensor& x,
                                                                 const torch::Tensor& padding) {
   const int64_t n = x.size(1), length = x.size(0);
-  auto h = project_->forward(x);
+  auto h = nn::ApplyLinear(project_, x);
   auto tokens = torch::stack({mu_token_, logvar_token_}).unsqueeze(1).expand({2, n, latent_});
   h = torch::cat({tokens, h}, 0) + nn::PositionalEncoding(length + 2, latent_);
   const auto mask = torch::cat({torch::zeros({n, 2}, torch::kBool), padding}, 1);
@@ -146,9 +146,9 @@ torch::Tensor DecoderImpl::forward(const torch::Tensor& z, const torch::Tensor& 
   const int64_t n = z.size(0), length = padding.size(1);
   const auto queries = nn::PositionalEncoding(length, latent_).expand({length, n, latent_});
   torch::Tensor modulation;
-  if (film_) modulation = film_->forward(z).view({n, layers_, 2 * latent_}).transpose(0, 1);
+  if (film_) modulation = nn::ApplyLinear(film_, z).view({n, layers_, 2 * latent_}).transpose(0, 1);
   const auto h = decoder_->forward(queries, z, padding, modulation);
-  auto y = out_->forward(h);
+  auto y = nn::ApplyLinear(out_, h);
   return y.masked_fill(padding.transpose(0, 1).unsqueeze(2), 0.0);
 }
 

@@ -277,6 +277,34 @@ TEST(Editor, Bf16TanhGeluIsTheFloat32FunctionRoundedOnce) {
   EXPECT_TRUE(torch::equal(GeluTanh(f), torch::gelu(f, "tanh")));
 }
 
+// adaLN-Zero under bf16 autocast (a float32 stream, bf16 modulation and sub-layer output) takes the
+// fused kernels, whose own tests compare them with float64; the float32 model keeps LibTorch's
+// operators; both routes agree to bf16's precision.
+TEST(Editor, AdaLnUnderBf16TakesTheFusedKernels) {
+  torch::manual_seed(6);
+  const auto x = torch::randn({7, 3, 16});
+  const auto scale = 0.3 * torch::randn({1, 3, 16}), shift = 0.3 * torch::randn({1, 3, 16});
+  const auto y = torch::randn({7, 3, 16});
+  const auto s16 = scale.to(torch::kBFloat16), b16 = shift.to(torch::kBFloat16),
+             y16 = y.to(torch::kBFloat16);
+  const auto modulated = Modulate(x, s16, b16);
+  EXPECT_EQ(modulated.scalar_type(), torch::kBFloat16);
+  EXPECT_TRUE(torch::equal(modulated, nn::ModulatedLayerNormBf16(x, s16, b16, 1e-6)));
+  const auto plain = Modulate(x, scale, shift);
+  EXPECT_TRUE(torch::equal(plain, torch::layer_norm(x, {16}, {}, {}, 1e-6) * (1 + scale) + shift));
+  const auto same = torch::layer_norm(x, {16}, {}, {}, 1e-6) * (1 + s16.to(torch::kFloat)) +
+                    b16.to(torch::kFloat);
+  EXPECT_LT((modulated.to(torch::kFloat) - same).abs().max().item<double>(),
+            0.01 * same.abs().max().item<double>());
+
+  const auto gated = GatedResidual(x, s16, y16);
+  EXPECT_EQ(gated.scalar_type(), torch::kFloat32);
+  EXPECT_TRUE(torch::equal(gated, nn::GatedResidualBf16(x, s16, y16)));
+  EXPECT_TRUE(torch::equal(GatedResidual(x, scale, y), x + scale * y));
+  EXPECT_TRUE(
+      torch::allclose(gated, x + s16.to(torch::kFloat) * y16.to(torch::kFloat), 1e-6, 1e-6));
+}
+
 // Issue 15: target positions were offset by the batch's longest source (and TMED's by its longest
 // text), so an example met offsets at edit time (batches sorted by length) that training (batches
 // nearly always holding a max_frames source) never showed it. A prediction must not depend on the

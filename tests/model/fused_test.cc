@@ -82,6 +82,95 @@ TEST(Fused, GeluTanhBf16KeepsTheEdgesOfItsDomain) {
   EXPECT_THROW(GeluTanhBf16(torch::ones({3})), std::invalid_argument);
 }
 
+// adaLN's modulated LayerNorm against the float64 expression LN(x) (1 + scale) + shift: the output
+// within one bf16 rounding (plus the float32 moments' rounding), the gradients to x as float32's
+// precision allows, to scale and shift (sums over t) within one bf16 rounding; on a stream far
+// from centred (the moments must be taken from the centred values), shapes that are no multiple of
+// a vector width and more than one task of the intra-op pool.
+TEST(Fused, ModulatedLayerNormBf16IsTheFloat32ExpressionRoundedOnce) {
+  torch::manual_seed(12);
+  const int64_t t = 9, n = 33, d = 129;
+  const auto x = (3 + 2 * torch::randn({t, n, d})).requires_grad_();
+  const auto scale = (0.5 * torch::randn({1, n, d})).to(torch::kBFloat16).requires_grad_();
+  const auto shift = (0.5 * torch::randn({1, n, d})).to(torch::kBFloat16).requires_grad_();
+  const auto y = ModulatedLayerNormBf16(x, scale, shift, 1e-6);
+  ASSERT_EQ(y.scalar_type(), torch::kBFloat16);
+  ASSERT_EQ(y.sizes(), x.sizes());
+
+  const auto x64 = x.detach().to(torch::kFloat64).requires_grad_();
+  const auto s64 = scale.detach().to(torch::kFloat64).requires_grad_();
+  const auto b64 = shift.detach().to(torch::kFloat64).requires_grad_();
+  const auto exact = torch::layer_norm(x64, {d}, {}, {}, 1e-6) * (1 + s64) + b64;
+  const auto gap = (y.to(torch::kFloat64) - exact.detach()).abs();
+  EXPECT_TRUE(gap.le(Bf16Ulp(exact.detach()) * 1.01 + 1e-5).all().item<bool>());
+
+  const auto dy = torch::randn({t, n, d}).to(torch::kBFloat16);
+  const auto grads = torch::autograd::grad({y}, {x, scale, shift}, {dy});
+  ASSERT_EQ(grads[0].scalar_type(), torch::kFloat32);
+  ASSERT_EQ(grads[1].scalar_type(), torch::kBFloat16);
+  ASSERT_EQ(grads[1].sizes(), scale.sizes());
+  ASSERT_EQ(grads[2].sizes(), shift.sizes());
+  const auto exact_grads =
+      torch::autograd::grad({exact}, {x64, s64, b64}, {dy.to(torch::kFloat64)});
+  const double dx_scale = exact_grads[0].abs().max().item<double>();
+  EXPECT_LT((grads[0].to(torch::kFloat64) - exact_grads[0]).abs().max().item<double>(),
+            1e-5 * dx_scale);
+  for (int k = 1; k < 3; ++k) {
+    const auto want = exact_grads[k];
+    const auto got = grads[k].to(torch::kFloat64);
+    EXPECT_TRUE((got - want).abs().le(Bf16Ulp(want) * 1.01 + 1e-4).all().item<bool>()) << k;
+  }
+  // [N, d] modulation is the same as [1, N, d].
+  EXPECT_TRUE(torch::equal(
+      y, ModulatedLayerNormBf16(x.detach(), scale.detach()[0], shift.detach()[0], 1e-6)));
+  // What it refuses, by name.
+  EXPECT_THROW(
+      ModulatedLayerNormBf16(x.detach(), scale.detach().to(torch::kFloat), shift.detach(), 1e-6),
+      std::invalid_argument);
+  EXPECT_THROW(
+      ModulatedLayerNormBf16(x.detach().to(torch::kBFloat16), scale.detach(), shift.detach(), 1e-6),
+      std::invalid_argument);
+  EXPECT_THROW(
+      ModulatedLayerNormBf16(x.detach(), scale.detach().narrow(2, 0, d - 1), shift.detach(), 1e-6),
+      std::invalid_argument);
+}
+
+// adaLN-Zero's gated residual x + gate y against float64: h to float32's rounding (the product is
+// not rounded to bf16 first), dx = dh, dgate (a sum over t) and dy within one bf16 rounding.
+TEST(Fused, GatedResidualBf16IsTheFloat32Expression) {
+  torch::manual_seed(13);
+  const int64_t t = 9, n = 33, d = 129;
+  const auto x = torch::randn({t, n, d}).requires_grad_();
+  const auto gate = torch::randn({1, n, d}).to(torch::kBFloat16).requires_grad_();
+  const auto y = torch::randn({t, n, d}).to(torch::kBFloat16).requires_grad_();
+  const auto h = GatedResidualBf16(x, gate, y);
+  ASSERT_EQ(h.scalar_type(), torch::kFloat32);
+  const auto x64 = x.detach().to(torch::kFloat64).requires_grad_();
+  const auto g64 = gate.detach().to(torch::kFloat64).requires_grad_();
+  const auto y64 = y.detach().to(torch::kFloat64).requires_grad_();
+  const auto exact = x64 + g64 * y64;
+  EXPECT_LT((h.to(torch::kFloat64) - exact.detach()).abs().max().item<double>(),
+            1e-6 * exact.detach().abs().max().item<double>());
+
+  const auto dh = torch::randn({t, n, d});
+  const auto grads = torch::autograd::grad({h}, {x, gate, y}, {dh});
+  const auto exact_grads =
+      torch::autograd::grad({exact}, {x64, g64, y64}, {dh.to(torch::kFloat64)});
+  EXPECT_TRUE(torch::equal(grads[0], dh));
+  ASSERT_EQ(grads[1].scalar_type(), torch::kBFloat16);
+  ASSERT_EQ(grads[1].sizes(), gate.sizes());
+  ASSERT_EQ(grads[2].scalar_type(), torch::kBFloat16);
+  for (int k = 1; k < 3; ++k) {
+    const auto want = exact_grads[k];
+    const auto got = grads[k].to(torch::kFloat64);
+    EXPECT_TRUE((got - want).abs().le(Bf16Ulp(want) * 1.01 + 1e-4).all().item<bool>()) << k;
+  }
+  EXPECT_THROW(GatedResidualBf16(x.detach(), gate.detach(), y.detach().to(torch::kFloat)),
+               std::invalid_argument);
+  EXPECT_THROW(GatedResidualBf16(x.detach(), gate.detach(), y.detach().narrow(0, 0, t - 1)),
+               std::invalid_argument);
+}
+
 // Clipping by the global norm and AdamW's step in one pass: the same parameters, moments and step
 // counts as torch::nn::utils::clip_grad_norm_ followed by torch::optim::AdamW::step, over steps
 // that clip and steps that do not, with decoupled weight decay; a parameter without a gradient is
