@@ -146,48 +146,39 @@ MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const uint16_t* scal
   }
 }
 
-// Its gradient for the batch elements [n_begin, n_end) over every t (so that the sums over t of
-// each element's scale and shift gradients stay in one task): with xhat = (x - mean) rstd and
-// g = dy (1 + scale), dx = rstd (g - mean(g) - xhat mean(g xhat)); dscale = sum_t dy xhat,
-// dshift = sum_t dy (float32 sums, then rounded).
+// Its gradient over rows [begin, end), in memory order: with xhat = (x - mean) rstd and
+// g = dy (1 + scale), dx = rstd (g - mean(g) - xhat mean(g xhat)); each row's dy xhat and dy are
+// added to its batch element's float32 sums (sum_scale, sum_shift: [N, d]) for dscale and dshift.
 MOTIONPIPE_CLONES void ModulatedNormBackward(const float* x, const uint16_t* scale,
                                              const uint16_t* dy, const float* mean,
-                                             const float* rstd, float* dx, uint16_t* dscale,
-                                             uint16_t* dshift, float* sum_scale, float* sum_shift,
-                                             int64_t n_begin, int64_t n_end, int64_t t_count,
+                                             const float* rstd, float* dx, float* sum_scale,
+                                             float* sum_shift, int64_t begin, int64_t end,
                                              int64_t n, int64_t d) {
-  for (int64_t e = n_begin; e < n_end; ++e) {
+  for (int64_t r = begin; r < end; ++r) {
+    const int64_t e = r % n;
     const uint16_t* s = scale + e * d;
-#pragma omp simd
-    for (int64_t k = 0; k < d; ++k) sum_scale[k] = sum_shift[k] = 0;
-    for (int64_t t = 0; t < t_count; ++t) {
-      const int64_t r = t * n + e;
-      const float* row = x + r * d;
-      const uint16_t* g_row = dy + r * d;
-      float* out = dx + r * d;
-      const float mu = mean[r], inv = rstd[r];
-      float g_sum = 0, gx_sum = 0;
+    float* ss = sum_scale + e * d;
+    float* sb = sum_shift + e * d;
+    const float* row = x + r * d;
+    const uint16_t* g_row = dy + r * d;
+    float* out = dx + r * d;
+    const float mu = mean[r], inv = rstd[r];
+    float g_sum = 0, gx_sum = 0;
 #pragma omp simd reduction(+ : g_sum, gx_sum)
-      for (int64_t k = 0; k < d; ++k) {
-        const float g = Bf16ToFloat(g_row[k]);
-        const float xhat = (row[k] - mu) * inv;
-        const float gs = g * (1.0f + Bf16ToFloat(s[k]));
-        g_sum += gs;
-        gx_sum += gs * xhat;
-        sum_scale[k] += g * xhat;
-        sum_shift[k] += g;
-      }
-      const float a = g_sum / static_cast<float>(d), c = gx_sum / static_cast<float>(d);
-#pragma omp simd
-      for (int64_t k = 0; k < d; ++k) {
-        const float xhat = (row[k] - mu) * inv;
-        out[k] = inv * (Bf16ToFloat(g_row[k]) * (1.0f + Bf16ToFloat(s[k])) - a - xhat * c);
-      }
+    for (int64_t k = 0; k < d; ++k) {
+      const float g = Bf16ToFloat(g_row[k]);
+      const float xhat = (row[k] - mu) * inv;
+      const float gs = g * (1.0f + Bf16ToFloat(s[k]));
+      g_sum += gs;
+      gx_sum += gs * xhat;
+      ss[k] += g * xhat;
+      sb[k] += g;
     }
+    const float a = g_sum / static_cast<float>(d), c = gx_sum / static_cast<float>(d);
 #pragma omp simd
     for (int64_t k = 0; k < d; ++k) {
-      dscale[e * d + k] = FloatToBf16(sum_scale[k]);
-      dshift[e * d + k] = FloatToBf16(sum_shift[k]);
+      const float xhat = (row[k] - mu) * inv;
+      out[k] = inv * (Bf16ToFloat(g_row[k]) * (1.0f + Bf16ToFloat(s[k])) - a - xhat * c);
     }
   }
 }
@@ -204,28 +195,46 @@ MOTIONPIPE_CLONES void GatedResidualForward(const float* x, const uint16_t* gate
   }
 }
 
-// Its gradient for the batch elements [n_begin, n_end) over every t: dy = dh gate (rounded),
-// dgate = sum_t dh y (a float32 sum, then rounded); dx is dh itself.
+// Its gradient over rows [begin, end), in memory order: dy = dh gate (rounded); each row's dh y is
+// added to its batch element's float32 sum ([N, d]) for dgate; dx is dh itself.
 MOTIONPIPE_CLONES void GatedResidualBackward(const float* dh, const uint16_t* gate,
-                                             const uint16_t* y, uint16_t* dy, uint16_t* dgate,
-                                             float* sum, int64_t n_begin, int64_t n_end,
-                                             int64_t t_count, int64_t n, int64_t d) {
-  for (int64_t e = n_begin; e < n_end; ++e) {
-    const uint16_t* g = gate + e * d;
+                                             const uint16_t* y, uint16_t* dy, float* sum,
+                                             int64_t begin, int64_t end, int64_t n, int64_t d) {
+  for (int64_t r = begin; r < end; ++r) {
+    const uint16_t* g = gate + (r % n) * d;
+    float* acc = sum + (r % n) * d;
+    const int64_t o = r * d;
 #pragma omp simd
-    for (int64_t k = 0; k < d; ++k) sum[k] = 0;
-    for (int64_t t = 0; t < t_count; ++t) {
-      const int64_t r = (t * n + e) * d;
-#pragma omp simd
-      for (int64_t k = 0; k < d; ++k) {
-        const float v = dh[r + k];
-        sum[k] += v * Bf16ToFloat(y[r + k]);
-        dy[r + k] = FloatToBf16(v * Bf16ToFloat(g[k]));
-      }
+    for (int64_t k = 0; k < d; ++k) {
+      const float v = dh[o + k];
+      acc[k] += v * Bf16ToFloat(y[o + k]);
+      dy[o + k] = FloatToBf16(v * Bf16ToFloat(g[k]));
     }
-#pragma omp simd
-    for (int64_t k = 0; k < d; ++k) dgate[e * d + k] = FloatToBf16(sum[k]);
   }
+}
+
+// Runs `rows_kernel(begin, end, sums)` over the rows of [T, N, d] in at most one chunk of whole
+// frames per intra-op thread, each chunk adding into its own zeroed float32 buffer of `width`
+// values, and returns the buffers summed in chunk order (the same result for a thread count).
+template <typename F>
+std::vector<float> RowsWithSums(int64_t t_count, int64_t n, int64_t width, F&& rows_kernel) {
+  const int64_t chunks = std::max<int64_t>(1, std::min<int64_t>(at::get_num_threads(), t_count));
+  std::vector<float> sums(static_cast<size_t>(chunks * width), 0.0f);
+  at::parallel_for(0, chunks, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t c = begin; c < end; ++c)
+      rows_kernel(c * t_count / chunks * n, (c + 1) * t_count / chunks * n,
+                  sums.data() + c * width);
+  });
+  for (int64_t c = 1; c < chunks; ++c)
+    for (int64_t k = 0; k < width; ++k)
+      sums[static_cast<size_t>(k)] += sums[static_cast<size_t>(c * width + k)];
+  sums.resize(static_cast<size_t>(width));
+  return sums;
+}
+
+MOTIONPIPE_CLONES void RoundToBf16(const float* in, uint16_t* out, int64_t count) {
+#pragma omp simd
+  for (int64_t k = 0; k < count; ++k) out[k] = FloatToBf16(in[k]);
 }
 
 const uint16_t* Bf16Data(const torch::Tensor& t) {
@@ -286,13 +295,14 @@ struct ModulatedLayerNormFunction : torch::autograd::Function<ModulatedLayerNorm
     auto dx = torch::empty_like(x);
     auto dscale = torch::empty({n, d}, x.options().dtype(torch::kBFloat16));
     auto dshift = torch::empty({n, d}, x.options().dtype(torch::kBFloat16));
-    at::parallel_for(0, n, 1, [&](int64_t begin, int64_t end) {
-      std::vector<float> sums(static_cast<size_t>(2 * d));
-      ModulatedNormBackward(x.data_ptr<float>(), Bf16Data(scale), Bf16Data(dy),
-                            mean.data_ptr<float>(), rstd.data_ptr<float>(), dx.data_ptr<float>(),
-                            Bf16Data(dscale), Bf16Data(dshift), sums.data(), sums.data() + d, begin,
-                            end, t_count, n, d);
-    });
+    const auto sums =
+        RowsWithSums(t_count, n, 2 * n * d, [&](int64_t begin, int64_t end, float* acc) {
+          ModulatedNormBackward(x.data_ptr<float>(), Bf16Data(scale), Bf16Data(dy),
+                                mean.data_ptr<float>(), rstd.data_ptr<float>(),
+                                dx.data_ptr<float>(), acc, acc + n * d, begin, end, n, d);
+        });
+    RoundToBf16(sums.data(), Bf16Data(dscale), n * d);
+    RoundToBf16(sums.data() + n * d, Bf16Data(dshift), n * d);
     return {dx, dscale.view(ctx->saved_data["scale_sizes"].toIntVector()),
             dshift.view(ctx->saved_data["shift_sizes"].toIntVector()), torch::Tensor()};
   }
@@ -325,11 +335,11 @@ struct GatedResidualFunction : torch::autograd::Function<GatedResidualFunction> 
     const int64_t t_count = y.size(0), n = y.size(1), d = y.size(2);
     auto dy = torch::empty_like(y);
     auto dgate = torch::empty({n, d}, y.options());
-    at::parallel_for(0, n, 1, [&](int64_t begin, int64_t end) {
-      std::vector<float> sum(static_cast<size_t>(d));
-      GatedResidualBackward(dh.data_ptr<float>(), Bf16Data(gate), Bf16Data(y), Bf16Data(dy),
-                            Bf16Data(dgate), sum.data(), begin, end, t_count, n, d);
+    const auto sum = RowsWithSums(t_count, n, n * d, [&](int64_t begin, int64_t end, float* acc) {
+      GatedResidualBackward(dh.data_ptr<float>(), Bf16Data(gate), Bf16Data(y), Bf16Data(dy), acc,
+                            begin, end, n, d);
     });
+    RoundToBf16(sum.data(), Bf16Data(dgate), n * d);
     return {dh, dgate.view(ctx->saved_data["gate_sizes"].toIntVector()), dy};
   }
 };
