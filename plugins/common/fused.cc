@@ -244,14 +244,15 @@ uint16_t* Bf16Data(torch::Tensor& t) {
   return reinterpret_cast<uint16_t*>(t.data_ptr<at::BFloat16>());
 }
 
-// Checks the shapes and dtypes of adaLN's operands: x [T, N, d] float32, every other [T, N, d] or
-// per-element ([N, d] or [1, N, d]) bf16. Returns the per-element ones as contiguous [N, d].
+// adaLN's stream x must be [T, N, d] float32.
 void CheckStream(const char* what, const torch::Tensor& x) {
   if (x.dim() != 3 || x.scalar_type() != torch::kFloat)
     throw std::invalid_argument(std::string(what) + " takes x as [T, N, d] float32, not " +
                                 std::string(c10::toString(x.scalar_type())) + " of " +
                                 std::to_string(x.dim()) + " dimensions");
 }
+// A per-element operand (scale, shift, gate) must be bf16 of [N, d] or [1, N, d]; returned as a
+// contiguous [N, d].
 torch::Tensor PerElement(const char* what, const char* name, const torch::Tensor& v,
                          const torch::Tensor& x) {
   const int64_t n = x.size(1), d = x.size(2);
