@@ -319,7 +319,6 @@ double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool 
     return ExamplesPerSecond([&] { step(precision); }, a.steps, batch);
   };
   const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
-  if (profile) Profile(a.profile, [&] { step(nn::Precision::kBf16); });
   const double python = a.reference ? PythonReference(a, size, net, b) : 0;
   const auto tokens = net->text_encoder()->TokenIds(b.texts);
   const double flops =
@@ -332,6 +331,7 @@ double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool 
               python > 0 ? cpp / python : 0.0, achieved, peak, 100 * achieved / peak, bf16,
               bf16 / cpp);
   std::fflush(stdout);
+  if (profile) Profile(a.profile, [&] { step(nn::Precision::kBf16); });
   return 1e3 * static_cast<double>(batch) / bf16;
 }
 
