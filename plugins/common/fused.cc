@@ -89,12 +89,20 @@ MOTIONPIPE_CLONES void GeluBackward(const uint16_t* x, const uint16_t* dy, uint1
 
 constexpr int64_t kGrain = 1 << 15;  // elements per task of torch's intra-op pool
 
+// A bf16 tensor's storage as raw 16-bit words.
+const uint16_t* Bf16Data(const torch::Tensor& t) {
+  return reinterpret_cast<const uint16_t*>(t.data_ptr<at::BFloat16>());
+}
+uint16_t* Bf16Data(torch::Tensor& t) {
+  return reinterpret_cast<uint16_t*>(t.data_ptr<at::BFloat16>());
+}
+
 struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction> {
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x) {
     const auto input = x.contiguous();
     auto y = torch::empty_like(input);
-    const auto* in = reinterpret_cast<const uint16_t*>(input.data_ptr<at::BFloat16>());
-    auto* out = reinterpret_cast<uint16_t*>(y.data_ptr<at::BFloat16>());
+    const uint16_t* in = Bf16Data(input);
+    uint16_t* out = Bf16Data(y);
     at::parallel_for(0, input.numel(), kGrain, [&](int64_t begin, int64_t end) {
       GeluForward(in + begin, out + begin, end - begin);
     });
@@ -107,9 +115,9 @@ struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction> {
     const auto input = ctx->get_saved_variables()[0];
     const auto dy = grads[0].to(torch::kBFloat16).contiguous();
     auto dx = torch::empty_like(input);
-    const auto* in = reinterpret_cast<const uint16_t*>(input.data_ptr<at::BFloat16>());
-    const auto* g = reinterpret_cast<const uint16_t*>(dy.data_ptr<at::BFloat16>());
-    auto* out = reinterpret_cast<uint16_t*>(dx.data_ptr<at::BFloat16>());
+    const uint16_t* in = Bf16Data(input);
+    const uint16_t* g = Bf16Data(dy);
+    uint16_t* out = Bf16Data(dx);
     at::parallel_for(0, input.numel(), kGrain, [&](int64_t begin, int64_t end) {
       GeluBackward(in + begin, g + begin, out + begin, end - begin);
     });
@@ -235,13 +243,6 @@ std::vector<float> RowsWithSums(int64_t t_count, int64_t n, int64_t width, F&& r
 MOTIONPIPE_CLONES void RoundToBf16(const float* in, uint16_t* out, int64_t count) {
 #pragma omp simd
   for (int64_t k = 0; k < count; ++k) out[k] = FloatToBf16(in[k]);
-}
-
-const uint16_t* Bf16Data(const torch::Tensor& t) {
-  return reinterpret_cast<const uint16_t*>(t.data_ptr<at::BFloat16>());
-}
-uint16_t* Bf16Data(torch::Tensor& t) {
-  return reinterpret_cast<uint16_t*>(t.data_ptr<at::BFloat16>());
 }
 
 // adaLN's stream x must be [T, N, d] float32.
