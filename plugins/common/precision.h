@@ -4,8 +4,14 @@
 // their gradients and the optimiser's moments stay float32 (they are never cast in place).
 // Measured here (issue 15): a bf16 matrix product runs 2.2-2.4x as fast as OpenBLAS's float32 one
 // on one core; how much of a training step that saves, bench/mdt_bench and bench/train_bench print
-// (the bf16/f32 column).
+// (the bf16/f32 column). On a CPU without them (no AVX512-BF16, no AMX) LibTorch's bf16 products
+// fall back to a reference path: 25x slower than float32 on a Zen 3 EPYC (issue 15), so a
+// trainer asked for bf16 there runs in float32 (`EffectivePrecision`).
 #pragma once
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <cpuid.h>
+#endif
 
 #include <ATen/autocast_mode.h>
 #include <torch/torch.h>
@@ -25,6 +31,36 @@ inline Precision ParsePrecision(const std::string& value, const std::string& whe
 }
 
 inline const char* PrecisionName(Precision p) { return p == Precision::kBf16 ? "bf16" : "float32"; }
+
+// Whether this CPU multiplies bf16 natively: AVX512-BF16 (CPUID leaf 7 subleaf 1, EAX bit 5) with
+// AVX512F (leaf 7 subleaf 0, EBX bit 16) and an OS that saves the AVX-512 state (XCR0 bits 5-7,
+// with SSE/AVX state bits 1-2), or AMX-BF16 (leaf 7 subleaf 0, EDX bit 22). Read once.
+inline bool CpuHasNativeBf16() {
+#if defined(__x86_64__) || defined(__i386__)
+  static const bool native = [] {
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    if (!__get_cpuid_count(1, 0, &a, &b, &c, &d) || !(c & (1u << 27))) return false;  // OSXSAVE
+    uint32_t xcr0_low = 0, xcr0_high = 0;
+    __asm__ volatile("xgetbv" : "=a"(xcr0_low), "=d"(xcr0_high) : "c"(0));
+    if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return false;
+    const bool avx512f = (b & (1u << 16)) && (xcr0_low & 0xe6u) == 0xe6u;
+    const bool amx_bf16 = (d & (1u << 22)) != 0;
+    unsigned a1 = 0, b1 = 0, c1 = 0, d1 = 0;
+    const bool avx512_bf16 = __get_cpuid_count(7, 1, &a1, &b1, &c1, &d1) && (a1 & (1u << 5));
+    return (avx512f && avx512_bf16) || amx_bf16;
+  }();
+  return native;
+#else
+  return false;
+#endif
+}
+
+// The precision a training runs in: bf16 only where the CPU multiplies bf16 natively; asked for
+// bf16 elsewhere, float32 (the same losses within bf16's rounding, README "Training in bf16"),
+// since emulated bf16 products cost many times float32's.
+inline Precision EffectivePrecision(Precision requested, bool native_bf16) {
+  return requested == Precision::kBf16 && !native_bf16 ? Precision::kFloat32 : requested;
+}
 
 // Scope guard: bf16 autocast on the CPU for the forward pass run inside it (the backward pass
 // follows the dtypes the forward chose, so it may run outside). Restores the previous state and,

@@ -13,7 +13,8 @@
 //   lowest validation loss), gloo_host (the address other ranks reach this one on; default
 //   127.0.0.1), store (tcp | file; default tcp), collective_timeout (seconds, default 120),
 //   precision (float32 | bf16: the forward pass under bf16 autocast, plugins/common/precision.h;
-//   weights, gradients and optimiser state stay float32)
+//   weights, gradients and optimiser state stay float32; on a CPU without native bf16 products,
+//   bf16 runs as float32 with a warning, and rank-R.json says which ran)
 //
 // Rank r of W takes every W-th example of each global batch, and the gradients are averaged over
 // the ranks (all-reduce of one flattened buffer), so W ranks take the same step as one rank on the
@@ -63,7 +64,8 @@ struct Options {
   std::string keep = "last";
   double lr = 3e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.999, min_lr = 0, clip_grad = 1.0;
   std::string schedule = "cosine";
-  nn::Precision precision = nn::Precision::kFloat32;
+  nn::Precision requested_precision = nn::Precision::kFloat32;  // params.precision
+  nn::Precision precision = nn::Precision::kFloat32;            // what this CPU runs
   uint64_t seed = 1;
   std::string gloo_host = "127.0.0.1";
   std::string store = "tcp";
@@ -99,8 +101,9 @@ struct Options {
     o.clip_grad = p.value("clip_grad", o.clip_grad);
     o.schedule = p.value("schedule", o.schedule);
     try {
-      o.precision =
+      o.requested_precision =
           nn::ParsePrecision(p.value("precision", std::string("float32")), "params.precision");
+      o.precision = nn::EffectivePrecision(o.requested_precision, nn::CpuHasNativeBf16());
     } catch (const std::invalid_argument& e) {
       throw plugin::BadInput(e.what());
     }
@@ -127,7 +130,8 @@ struct Options {
             {"weight_decay", weight_decay},
             {"betas", {beta1, beta2}},
             {"schedule", schedule},
-            {"precision", nn::PrecisionName(precision)},
+            {"precision", nn::PrecisionName(requested_precision)},
+            {"precision_run", nn::PrecisionName(precision)},
             {"min_lr", min_lr},
             {"clip_grad", clip_grad},
             {"checkpoint_every", checkpoint_every},
@@ -315,6 +319,11 @@ class Trainer {
     fs::create_directories(state_dir_);
     fs::create_directories(out_dir_);
     nn::SetTorchThreads(omp_get_max_threads());
+    if (options_.precision != options_.requested_precision && rank_ == 0)
+      task_.Log(MP_LOG_WARN,
+                "params.precision bf16: this CPU has no native bf16 products (AVX512-BF16 or "
+                "AMX), where LibTorch's emulated ones cost many times float32's; training in "
+                "float32");
     torch::manual_seed(options_.seed);
     CreateModel();
     MakeDatasets();
@@ -628,10 +637,14 @@ class Trainer {
     const int64_t local = options_.batch_size / world_;
     const double samples_per_second =
         static_cast<double>(trained * local) / std::max(seconds, 1e-9);
-    json summary = {{"rank", rank_},           {"world_size", world_},
-                    {"resumed_from", start},   {"steps", trained},
-                    {"seconds", seconds},      {"samples_per_second", samples_per_second},
-                    {"final_loss", last_loss_}};
+    json summary = {{"rank", rank_},
+                    {"world_size", world_},
+                    {"resumed_from", start},
+                    {"steps", trained},
+                    {"seconds", seconds},
+                    {"samples_per_second", samples_per_second},
+                    {"final_loss", last_loss_},
+                    {"precision", nn::PrecisionName(options_.precision)}};
     if (rank_ == 0 && best_step_ >= 0)
       summary["best"] = {{"step", best_step_}, {"val_loss", best_val_}, {"kept", options_.keep}};
     const Status s =
