@@ -16,6 +16,7 @@
 #include <ATen/autocast_mode.h>
 #include <torch/torch.h>
 
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 
@@ -34,7 +35,9 @@ inline const char* PrecisionName(Precision p) { return p == Precision::kBf16 ? "
 
 // Whether this CPU multiplies bf16 natively: AVX512-BF16 (CPUID leaf 7 subleaf 1, EAX bit 5) with
 // AVX512F (leaf 7 subleaf 0, EBX bit 16) and an OS that saves the AVX-512 state (XCR0 bits 5-7,
-// with SSE/AVX state bits 1-2), or AMX-BF16 (leaf 7 subleaf 0, EDX bit 22). Read once.
+// with SSE/AVX state bits 1-2), or AMX-BF16 (leaf 7 subleaf 0, EDX bit 22). Read once. Only x86
+// is read; elsewhere (an ARM CPU's BF16 extension included) it answers false, and bf16 runs as
+// float32.
 inline bool CpuHasNativeBf16() {
 #if defined(__x86_64__) || defined(__i386__)
   static const bool native = [] {
