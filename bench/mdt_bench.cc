@@ -535,10 +535,7 @@ int main(int argc, char** argv) {
       static_cast<long long>(args->threads));
   // The bf16 columns time LibTorch's bf16 products as they are on this CPU; the train stage
   // runs bf16 as float32 where they are emulated (plugins/common/precision.h).
-  std::printf("bf16 products on this CPU: %s\n",
-              nn::CpuHasNativeBf16() ? "native (AVX512-BF16 or AMX)"
-                                     : "emulated (no AVX512-BF16, no AMX: the train stage runs "
-                                       "float32 instead)");
+  std::printf("bf16 products on this CPU: %s\n", nn::Bf16ProductsOnThisCpu());
   std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s %12s %9s\n", "size", "params", "C++ samp/s",
               "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
               "bf16/f32");

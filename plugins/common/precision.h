@@ -58,6 +58,13 @@ inline bool CpuHasNativeBf16() {
 #endif
 }
 
+// What `CpuHasNativeBf16` found, in words for a benchmark's or a log's header.
+inline const char* Bf16ProductsOnThisCpu() {
+  return CpuHasNativeBf16()
+             ? "native (AVX512-BF16 or AMX)"
+             : "emulated (no AVX512-BF16, no AMX: the train stage runs float32 instead)";
+}
+
 // The precision a training runs in: bf16 only where the CPU multiplies bf16 natively; asked for
 // bf16 elsewhere, float32 (the same losses within bf16's rounding, README "Training in bf16"),
 // since emulated bf16 products cost many times float32's.
