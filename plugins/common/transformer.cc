@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <stdexcept>
 
+#include "fused.h"
+
 namespace motionpipe::nn {
 
 namespace {
@@ -84,24 +86,39 @@ torch::Tensor SelfAttentionImpl::forward(const torch::Tensor& x, const torch::Te
   const auto q = qkv[0] * (1.0 / std::sqrt(static_cast<double>(head_dim)));
   const auto& k = qkv[1];
   const auto& v = qkv[2];
+  // The dropout mask is drawn before either route, so a seed gives the same masks in both.
+  const auto mask = is_training() && dropout_ > 0
+                        ? DropoutMask({n * heads_, length, length}, dropout_)
+                        : torch::Tensor();
+  // float32: the same arithmetic in one pass per matrix (plugins/common/fused.h); under bf16
+  // autocast q, k, v are bf16 and ATen's bmm takes them.
+  const auto out = q.scalar_type() == torch::kFloat ? AttentionFloat32(q, k, v, padding, mask)
+                                                    : AttentionThroughAten(q, k, v, padding, mask);
+  return ApplyLinear(
+      out_proj_,
+      out.view({n, heads_, length, head_dim}).permute({2, 0, 1, 3}).reshape({length, n, dim_}));
+}
+
+torch::Tensor AttentionThroughAten(const torch::Tensor& q, const torch::Tensor& k,
+                                   const torch::Tensor& v, const torch::Tensor& padding,
+                                   const torch::Tensor& dropout_mask) {
+  const int64_t length = q.size(1);
   torch::Tensor scores;
   if (padding.defined()) {
     // A large negative bias on ignored keys (finite: a row with every key ignored stays finite),
     // per example, broadcast over heads and queries.
-    const auto bias = torch::zeros({n, 1, 1, length})
+    const int64_t n = padding.size(0), heads = q.size(0) / n;
+    const auto bias = torch::zeros({n, 1, 1, length}, q.options())
                           .masked_fill(padding.view({n, 1, 1, length}), -1e9)
-                          .expand({n, heads_, 1, length})
-                          .reshape({n * heads_, 1, length});
+                          .expand({n, heads, 1, length})
+                          .reshape({n * heads, 1, length});
     scores = torch::baddbmm(bias, q, k.transpose(1, 2));
   } else {
     scores = torch::bmm(q, k.transpose(1, 2));
   }
-  auto weights = Dropout(torch::softmax(scores, -1), dropout_, is_training());
-  const auto out = torch::bmm(weights, v)
-                       .view({n, heads_, length, head_dim})
-                       .permute({2, 0, 1, 3})
-                       .reshape({length, n, dim_});
-  return ApplyLinear(out_proj_, out);
+  auto weights = torch::softmax(scores, -1);
+  if (dropout_mask.defined()) weights = weights * dropout_mask.to(weights.scalar_type());
+  return torch::bmm(weights, v);
 }
 
 EncoderLayerImpl::EncoderLayerImpl(const TransformerOptions& o) : o_(o) {

@@ -35,6 +35,13 @@ struct TransformerOptions {
   double dropout = 0.1;
 };
 
+// Multi-head attention's core through ATen (baddbmm, softmax, bmm), the route for bf16 autocast and
+// the reference for nn::AttentionFloat32 (fused.h), whose arguments it takes: q, k, v [B, L, Dh]
+// (q scaled), padding [N, L] bool or undefined, dropout_mask [B, L, L] or undefined.
+torch::Tensor AttentionThroughAten(const torch::Tensor& q, const torch::Tensor& k,
+                                   const torch::Tensor& v, const torch::Tensor& padding,
+                                   const torch::Tensor& dropout_mask);
+
 class SelfAttentionImpl : public torch::nn::Module {
  public:
   SelfAttentionImpl(int64_t dim, int64_t heads, double dropout);
