@@ -7,12 +7,14 @@
 // paper size), and the same step under bf16 autocast (plugins/common/precision.h) as the ratio
 // bf16/f32 of samples/s. The step clips and steps AdamW with the fused kernel, as the train stage
 // does; the fused kernels (plugins/common/fused.h: tanh-GELU, adaLN's modulated LayerNorm and
-// gated residual, clip + AdamW) and ATen's linear (nn::ApplyLinear, for a DiT block's four linears)
-// are then timed against the LibTorch route they replace on the same inputs at the training shape,
-// forward and backward, with the share of a bf16 step each saves.
-// With --profile N, N bf16 steps of the first size run under LibTorch's profiler and the operators
-// are listed by their own (self) time per step, to show where a step goes besides the matrix
-// products.
+// gated residual, clip + AdamW, attention's float32 core) and ATen's linear (nn::ApplyLinear, for a
+// DiT block's four linears) are then timed against the LibTorch route they replace on the same
+// inputs at the training shape, forward and backward, with the share each saves of the step the
+// train stage runs here (bf16, or float32 where the CPU would emulate bf16 products).
+// With --profile N, N steps of the first size, in the precision the train stage runs for bf16 on
+// this CPU (float32 where its bf16 products are emulated), run under LibTorch's profiler and the
+// operators are listed by their own (self) time per step, to show where a step goes besides the
+// matrix products.
 //   mdt_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //             [--no-reference] [--no-latency] [--no-fused] [--profile N]
 #include <torch/csrc/autograd/profiler_legacy.h>
@@ -201,7 +203,7 @@ namespace profiler = torch::autograd::profiler;
 // their self time per step (their time less that of the operators they call, e.g. autograd's
 // backward nodes less the kernels inside them), the largest first, down to 1% of the step.
 template <typename F>
-void Profile(int64_t steps, F&& step) {
+void Profile(int64_t steps, const char* precision, F&& step) {
   step();  // warm-up outside the profile
   profiler::thread_event_lists lists;
   const auto started = Clock::now();
@@ -239,10 +241,10 @@ void Profile(int64_t steps, F&& step) {
             [](const auto& x, const auto& y) { return x.second.self_us > y.second.self_us; });
   const double n = static_cast<double>(steps);
   std::printf(
-      "\nwhere a bf16 step goes (%lld steps profiled, %.1f ms a step under the profiler, %.1f ms "
+      "\nwhere a %s step goes (%lld steps profiled, %.1f ms a step under the profiler, %.1f ms "
       "inside operators): self ms per step\n%-44s %9s %7s %9s\n",
-      static_cast<long long>(steps), wall_ms, covered_us / 1e3 / n, "operator", "ms", "of step",
-      "calls");
+      precision, static_cast<long long>(steps), wall_ms, covered_us / 1e3 / n, "operator", "ms",
+      "of step", "calls");
   for (const auto& [name, row] : sorted) {
     const double ms = row.self_us / 1e3 / n;
     if (ms < 0.01 * wall_ms) break;
@@ -283,8 +285,9 @@ double PythonReference(const Args& a, const Size& size, EditorNet& net, const Tr
 }
 
 // One size: our training step's samples/s, the reference's, and our GFLOP/s against the sgemm
-// rate measured here; with `profile`, then where a bf16 step's time goes. Returns the bf16 step's
-// milliseconds.
+// rate measured here; with `profile`, then where a step's time goes. Returns the milliseconds of
+// the step the train stage runs for bf16 on this CPU (float32 where the bf16 products are
+// emulated).
 double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool profile) {
   torch::manual_seed(1);
   EditorNet net = Build(size);
@@ -331,8 +334,12 @@ double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool 
               python > 0 ? cpp / python : 0.0, achieved, peak, 100 * achieved / peak, bf16,
               bf16 / cpp);
   std::fflush(stdout);
-  if (profile) Profile(a.profile, [&] { step(nn::Precision::kBf16); });
-  return 1e3 * static_cast<double>(batch) / bf16;
+  // The profile is of the step the train stage runs when asked for bf16: float32 where this CPU
+  // would emulate the bf16 products (plugins/common/precision.h).
+  const nn::Precision profiled =
+      nn::EffectivePrecision(nn::Precision::kBf16, nn::CpuHasNativeBf16());
+  if (profile) Profile(a.profile, nn::PrecisionName(profiled), [&] { step(profiled); });
+  return 1e3 * static_cast<double>(batch) / (profiled == nn::Precision::kBf16 ? bf16 : cpp);
 }
 
 // Milliseconds per call of `f`: the best of five rounds of `reps` calls after one warm-up call.
@@ -351,13 +358,20 @@ double MsPerCall(F&& f, int reps) {
 // The fused kernels against LibTorch's operators on the same inputs at one size's training shape:
 // DiT's tanh-GELU forward and backward over one block's MLP activation in bf16 (batch x (2 frames
 // + 1) tokens x ff; LibTorch's route is the float32 kernel between two conversions, what the MDT
-// ran before; `layers` calls a step), and clipping + AdamW over the net's parameters (one call).
-// "of a step": what each saves, as a share of the bf16 step without it (the step above runs both).
-void BenchFused(const Args& a, const Size& size, double bf16_step_ms) {
+// ran before; `layers` calls a step), adaLN and the linears under bf16 autocast, clipping + AdamW
+// over the net's parameters (one call), and attention's core in float32. "of a step": what each
+// saves, as a share of the step without it (the step above runs them), for the kernels of the
+// step's precision.
+void BenchFused(const Args& a, const Size& size, double step_ms) {
+  // The step of the table: the one the train stage runs for bf16 on this CPU.
+  const nn::Precision stepped =
+      nn::EffectivePrecision(nn::Precision::kBf16, nn::CpuHasNativeBf16());
   struct Row {
     std::string name;
     double torch_ms, fused_ms;
-    int64_t calls;  // per training step
+    int64_t calls;      // per training step
+    bool bf16 = true;   // a kernel of bf16 steps (else of float32 ones)
+    bool both = false;  // of either
   };
   std::vector<Row> table;
   torch::manual_seed(3);
@@ -442,12 +456,37 @@ void BenchFused(const Args& a, const Size& size, double bf16_step_ms) {
     };
     table.push_back({"clip + AdamW, " + std::to_string(parameters) + " params",
                      MsPerCall(libtorch_step, 10),
-                     MsPerCall([&] { (void)nn::AdamWStep(ours, 1.0); }, 10), 1});
+                     MsPerCall([&] { (void)nn::AdamWStep(ours, 1.0); }, 10), 1, true, true});
   }
+  {
+    // Attention's core in float32 (the DiT blocks' and the condition encoder's self-attention over
+    // the source, separator and target tokens): ATen's baddbmm, softmax and bmm against the fused
+    // kernel, forward and backward, some keys ignored by padding.
+    const int64_t b = a.batch * size.heads, head_dim = size.dim / size.heads;
+    const auto q = torch::randn({b, tokens, head_dim}) / std::sqrt(static_cast<double>(head_dim));
+    const auto k = torch::randn({b, tokens, head_dim}), v = torch::randn({b, tokens, head_dim});
+    const auto padding = torch::arange(tokens).view({1, -1}).ge(
+        tokens - torch::arange(a.batch).remainder(a.frames / 2).view({-1, 1}));
+    const auto dout = torch::randn({b, tokens, head_dim});
+    const auto attend = [&](bool fused) {
+      const auto qi = q.detach().requires_grad_(), ki = k.detach().requires_grad_(),
+                 vi = v.detach().requires_grad_();
+      const auto out = fused ? nn::AttentionFloat32(qi, ki, vi, padding, {})
+                             : nn::AttentionThroughAten(qi, ki, vi, padding, {});
+      out.backward(dout);
+    };
+    table.push_back({"attention core, float32 [" + std::to_string(b) + " x " +
+                         std::to_string(tokens) + " x " + std::to_string(head_dim) + "]",
+                     MsPerCall([&] { attend(false); }, 10), MsPerCall([&] { attend(true); }, 10),
+                     size.layers + size.cond_layers, false});
+  }
+  const auto counts = [&](const Row& row) {
+    return row.both || row.bf16 == (stepped == nn::Precision::kBf16);
+  };
   double saved = 0;
   for (const Row& row : table)
-    saved += static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms);
-  const double unfused = bf16_step_ms + saved;
+    if (counts(row)) saved += static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms);
+  const double unfused = step_ms + saved;
   std::printf(
       "\nfused kernels (plugins/common/fused.h) and ATen's linear, %s size, batch %lld, %lld "
       "frames, %lld thread(s): ms per call fwd+bwd, best of 5\n",
@@ -456,12 +495,18 @@ void BenchFused(const Args& a, const Size& size, double bf16_step_ms) {
   std::printf("%-52s %9s %9s %7s %6s %11s\n", "kernel", "LibTorch", "ours", "ratio", "calls",
               "of a step");
   for (const Row& row : table) {
-    std::printf("%-52s %9.3f %9.3f %6.2fx %6lld %10.1f%%\n", row.name.c_str(), row.torch_ms,
-                row.fused_ms, row.torch_ms / row.fused_ms, static_cast<long long>(row.calls),
-                100 * static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms) / unfused);
+    std::printf("%-52s %9.3f %9.3f %6.2fx %6lld ", row.name.c_str(), row.torch_ms, row.fused_ms,
+                row.torch_ms / row.fused_ms, static_cast<long long>(row.calls));
+    if (counts(row))
+      std::printf("%10.1f%%\n",
+                  100 * static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms) / unfused);
+    else
+      std::printf("%11s\n", row.bf16 ? "(bf16 only)" : "(f32 only)");
   }
-  std::printf("bf16 step %.1f ms with these; %.1f ms without (estimated): %.1f%% saved\n",
-              bf16_step_ms, unfused, 100 * saved / unfused);
+  std::printf(
+      "%s step (the train stage's here) %.1f ms with these; %.1f ms without (estimated): "
+      "%.1f%% saved\n",
+      nn::PrecisionName(stepped), step_ms, unfused, 100 * saved / unfused);
   std::fflush(stdout);
 }
 
@@ -540,15 +585,15 @@ int main(int argc, char** argv) {
               "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
               "bf16/f32");
   const TrainBatch batch = MakeTrainBatch(*args);
-  std::vector<std::pair<Size, double>> bf16_step_ms;
+  std::vector<std::pair<Size, double>> step_ms;
   for (const Size& size : all) {
     if (args->sizes.find(size.name) != std::string::npos) {
-      const bool profile = args->profile > 0 && bf16_step_ms.empty();
-      bf16_step_ms.emplace_back(size, BenchTraining(*args, size, batch, profile));
+      const bool profile = args->profile > 0 && step_ms.empty();
+      step_ms.emplace_back(size, BenchTraining(*args, size, batch, profile));
     }
   }
   if (args->fused) {
-    for (const auto& [size, ms] : bf16_step_ms) BenchFused(*args, size, ms);
+    for (const auto& [size, ms] : step_ms) BenchFused(*args, size, ms);
   }
   if (args->latency) BenchLatency(*args, all[0], batch.texts);
   return 0;
