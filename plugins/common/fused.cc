@@ -396,14 +396,16 @@ MOTIONPIPE_CLONES void AdamWKernel(float* p, const float* grad, float* m, float*
 
 using Vec8 = float __attribute__((vector_size(32)));  // 8 lanes: ymm under AVX2, two xmm below
 
-// C[R x 16] = A[R x k] (row stride lda) . B[k x 16] (row stride ldb), C's row stride ldc: R rows of
-// two 8-lane accumulators, A's entry broadcast against B's row (the register tile of a GEMM
-// micro-kernel; 6 x 16 uses 12 of AVX2's 16 vector registers). The loops over rows are unrolled
-// by pragma: at -O2 GCC 12 otherwise keeps the accumulators on the stack (a third of the speed).
-template <int R>
-__attribute__((always_inline)) inline void TileNn(int64_t k, const float* a, int64_t lda,
-                                                  const float* b, int64_t ldb, float* c,
-                                                  int64_t ldc) {
+// C[R x 16] = A[R x k] . B[k x 16], B's and C's row strides ldb and ldc: R rows of two 8-lane
+// accumulators, A's entry broadcast against B's row (the register tile of a GEMM micro-kernel;
+// 6 x 16 uses 12 of AVX2's 16 vector registers). A is row-major with row stride lda, or with
+// kTransposedA stored as its transpose ([k x R], row stride lda), so that A^T B needs no copy. The
+// loops over rows are unrolled by pragma: at -O2 GCC 12 otherwise keeps the accumulators on the
+// stack (a third of the speed).
+template <int R, bool kTransposedA>
+__attribute__((always_inline)) inline void Tile(int64_t k, const float* a, int64_t lda,
+                                                const float* b, int64_t ldb, float* c,
+                                                int64_t ldc) {
   Vec8 lo[R], hi[R];
 #pragma GCC unroll 8
   for (int r = 0; r < R; ++r) lo[r] = hi[r] = Vec8{};
@@ -413,7 +415,7 @@ __attribute__((always_inline)) inline void TileNn(int64_t k, const float* a, int
     std::memcpy(&b1, b + p * ldb + 8, sizeof b1);
 #pragma GCC unroll 8
     for (int r = 0; r < R; ++r) {
-      const float x = a[r * lda + p];
+      const float x = kTransposedA ? a[p * lda + r] : a[r * lda + p];
       lo[r] += x * b0;
       hi[r] += x * b1;
     }
@@ -425,31 +427,36 @@ __attribute__((always_inline)) inline void TileNn(int64_t k, const float* a, int
   }
 }
 
-// C[m x n] = A[m x k] . B[k x n], all row-major with strides lda, ldb, ldc (C overwritten): tiles
-// of 6 x 16, then the rows left over, then the columns past the last multiple of 16 one at a time.
-MOTIONPIPE_CLONES_AVX2 void GemmNn(int64_t m, int64_t n, int64_t k, const float* a, int64_t lda,
-                                   const float* b, int64_t ldb, float* c, int64_t ldc) {
+// C[m x n] = A[m x k] . B[k x n] (A stored transposed with kTransposedA), row-major with strides
+// lda, ldb, ldc (C overwritten): tiles of 6 x 16, then the rows left over, then the columns past
+// the last multiple of 16 one at a time.
+template <bool kTransposedA>
+__attribute__((always_inline)) inline void Gemm(int64_t m, int64_t n, int64_t k, const float* a,
+                                                int64_t lda, const float* b, int64_t ldb, float* c,
+                                                int64_t ldc) {
+  const auto row = [&](int64_t i) { return kTransposedA ? a + i : a + i * lda; };
   const int64_t n16 = n / 16 * 16;
   for (int64_t j = 0; j < n16; j += 16) {
     int64_t i = 0;
-    for (; i + 6 <= m; i += 6) TileNn<6>(k, a + i * lda, lda, b + j, ldb, c + i * ldc + j, ldc);
-    const float* ai = a + i * lda;
+    for (; i + 6 <= m; i += 6)
+      Tile<6, kTransposedA>(k, row(i), lda, b + j, ldb, c + i * ldc + j, ldc);
+    const float* ai = row(i);
     float* ci = c + i * ldc + j;
     switch (m - i) {
       case 5:
-        TileNn<5>(k, ai, lda, b + j, ldb, ci, ldc);
+        Tile<5, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
         break;
       case 4:
-        TileNn<4>(k, ai, lda, b + j, ldb, ci, ldc);
+        Tile<4, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
         break;
       case 3:
-        TileNn<3>(k, ai, lda, b + j, ldb, ci, ldc);
+        Tile<3, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
         break;
       case 2:
-        TileNn<2>(k, ai, lda, b + j, ldb, ci, ldc);
+        Tile<2, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
         break;
       case 1:
-        TileNn<1>(k, ai, lda, b + j, ldb, ci, ldc);
+        Tile<1, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
         break;
       default:
         break;
@@ -458,10 +465,23 @@ MOTIONPIPE_CLONES_AVX2 void GemmNn(int64_t m, int64_t n, int64_t k, const float*
   for (int64_t i = 0; i < m; ++i) {
     for (int64_t j = n16; j < n; ++j) {
       float sum = 0;
-      for (int64_t p = 0; p < k; ++p) sum += a[i * lda + p] * b[p * ldb + j];
+      for (int64_t p = 0; p < k; ++p)
+        sum += (kTransposedA ? a[p * lda + i] : a[i * lda + p]) * b[p * ldb + j];
       c[i * ldc + j] = sum;
     }
   }
+}
+
+// C = A B.
+MOTIONPIPE_CLONES_AVX2 void GemmNn(int64_t m, int64_t n, int64_t k, const float* a, int64_t lda,
+                                   const float* b, int64_t ldb, float* c, int64_t ldc) {
+  Gemm<false>(m, n, k, a, lda, b, ldb, c, ldc);
+}
+
+// C = A^T B, A given as [k x m] with row stride lda.
+MOTIONPIPE_CLONES_AVX2 void GemmTn(int64_t m, int64_t n, int64_t k, const float* a, int64_t lda,
+                                   const float* b, int64_t ldb, float* c, int64_t ldc) {
+  Gemm<true>(m, n, k, a, lda, b, ldb, c, ldc);
 }
 
 // out[c x ldo] = in[r x c]^T (in's row stride ldi); out's columns r..ldo-1 set to 0.
@@ -608,7 +628,7 @@ struct AttentionFunction : torch::autograd::Function<AttentionFunction> {
     const float* md = mask.defined() ? mask.data_ptr<float>() : nullptr;
     float *dqd = dq.data_ptr<float>(), *dkd = dk.data_ptr<float>(), *dvd = dv.data_ptr<float>();
     at::parallel_for(0, s.b, 1, [&](int64_t begin, int64_t end) {
-      std::vector<float> vt(static_cast<size_t>(s.d * s.l16)), dp(s.l * s.l16), t(s.l * s.l);
+      std::vector<float> vt(static_cast<size_t>(s.d * s.l16)), dp(s.l * s.l16);
       for (int64_t b = begin; b < end; ++b) {
         const int64_t at = b * s.l * s.d;
         const float* p = pd + b * s.l * s.l;
@@ -619,8 +639,7 @@ struct AttentionFunction : torch::autograd::Function<AttentionFunction> {
           MultiplyInto(dp.data(), md + b * s.l * s.l, s.l * s.l);
           weighted = dp.data();
         }
-        Transpose(weighted, s.l, s.l, s.l, t.data(), s.l);
-        GemmNn(s.l, s.d, s.l, t.data(), s.l, gd + at, s.d, dvd + at, s.d);
+        GemmTn(s.l, s.d, s.l, weighted, s.l, gd + at, s.d, dvd + at, s.d);
         // dP = (dO V^T) o M, then the softmax's backward in place: dS
         Transpose(vd + at, s.l, s.d, s.d, vt.data(), s.l16);
         GemmNn(s.l, s.l16, s.d, gd + at, s.d, vt.data(), s.l16, dp.data(), s.l16);
@@ -631,8 +650,7 @@ struct AttentionFunction : torch::autograd::Function<AttentionFunction> {
         }
         // dQ = dS K, dK = dS^T Q
         GemmNn(s.l, s.d, s.l, dp.data(), s.l16, kd + at, s.d, dqd + at, s.d);
-        Transpose(dp.data(), s.l, s.l, s.l16, t.data(), s.l);
-        GemmNn(s.l, s.d, s.l, t.data(), s.l, qd + at, s.d, dkd + at, s.d);
+        GemmTn(s.l, s.d, s.l, dp.data(), s.l16, qd + at, s.d, dkd + at, s.d);
       }
     });
     return {dq, dk, dv, torch::Tensor(), torch::Tensor()};
