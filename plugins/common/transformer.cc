@@ -117,7 +117,7 @@ torch::Tensor AttentionThroughAten(const torch::Tensor& q, const torch::Tensor& 
     scores = torch::bmm(q, k.transpose(1, 2));
   }
   auto weights = torch::softmax(scores, -1);
-  if (dropout_mask.defined()) weights = weights * dropout_mask.to(weights.scalar_type());
+  if (dropout_mask.defined()) weights = weights * dropout_mask;  // float32 mask: as before
   return torch::bmm(weights, v);
 }
 
