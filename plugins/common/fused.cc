@@ -427,9 +427,22 @@ __attribute__((always_inline)) inline void Tile(int64_t k, const float* a, int64
   }
 }
 
+// The rows left after the 6-row tiles: `rows` (0 to R) through the tile unrolled for that count.
+template <int R, bool kTransposedA>
+__attribute__((always_inline)) inline void TailTile(int64_t rows, int64_t k, const float* a,
+                                                    int64_t lda, const float* b, int64_t ldb,
+                                                    float* c, int64_t ldc) {
+  if constexpr (R > 0) {
+    if (rows == R)
+      Tile<R, kTransposedA>(k, a, lda, b, ldb, c, ldc);
+    else
+      TailTile<R - 1, kTransposedA>(rows, k, a, lda, b, ldb, c, ldc);
+  }
+}
+
 // C[m x n] = A[m x k] . B[k x n] (A stored transposed with kTransposedA), row-major with strides
-// lda, ldb, ldc (C overwritten): tiles of 6 x 16, then the rows left over, then the columns past
-// the last multiple of 16 one at a time.
+// lda, ldb, ldc (C overwritten): tiles of 6 x 16 and one of the rows left over, then the columns
+// past the last multiple of 16 one at a time.
 template <bool kTransposedA>
 __attribute__((always_inline)) inline void Gemm(int64_t m, int64_t n, int64_t k, const float* a,
                                                 int64_t lda, const float* b, int64_t ldb, float* c,
@@ -440,27 +453,7 @@ __attribute__((always_inline)) inline void Gemm(int64_t m, int64_t n, int64_t k,
     int64_t i = 0;
     for (; i + 6 <= m; i += 6)
       Tile<6, kTransposedA>(k, row(i), lda, b + j, ldb, c + i * ldc + j, ldc);
-    const float* ai = row(i);
-    float* ci = c + i * ldc + j;
-    switch (m - i) {
-      case 5:
-        Tile<5, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
-        break;
-      case 4:
-        Tile<4, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
-        break;
-      case 3:
-        Tile<3, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
-        break;
-      case 2:
-        Tile<2, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
-        break;
-      case 1:
-        Tile<1, kTransposedA>(k, ai, lda, b + j, ldb, ci, ldc);
-        break;
-      default:
-        break;
-    }
+    TailTile<5, kTransposedA>(m - i, k, row(i), lda, b + j, ldb, c + i * ldc + j, ldc);
   }
   for (int64_t i = 0; i < m; ++i) {
     for (int64_t j = n16; j < n; ++j) {
@@ -681,7 +674,6 @@ torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gat
 torch::Tensor AttentionFloat32(const torch::Tensor& q, const torch::Tensor& k,
                                const torch::Tensor& v, const torch::Tensor& padding,
                                const torch::Tensor& dropout_mask) {
-  (void)CheckAttention(q, k, v, padding, dropout_mask);
   return AttentionFunction::apply(
       q, k, v, padding.defined() ? c10::optional<torch::Tensor>(padding) : c10::nullopt,
       dropout_mask.defined() ? c10::optional<torch::Tensor>(dropout_mask) : c10::nullopt);
