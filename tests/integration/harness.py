@@ -15,10 +15,20 @@ MOTIONPIPE = os.environ.get("MOTIONPIPE_BIN", "motionpipe")
 GARBAGE = os.environ.get("MOTIONPIPE_GARBAGE", "motionpipe_garbage")
 
 
+_HANDED_OUT = set()
+
+
 def free_port(host="127.0.0.1"):
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
+    """A port free now and not handed out before by this process: the kernel can give a port just
+    closed to the next bind, and a test that asks for two ports (a coordinator's worker socket and a
+    worker's /metrics) must get two."""
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind((host, 0))
+            port = s.getsockname()[1]
+        if port not in _HANDED_OUT:
+            _HANDED_OUT.add(port)
+            return port
 
 
 class Process:
