@@ -10,6 +10,7 @@
 #pragma once
 
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -77,6 +78,12 @@ ClaimVerdict DecideClaim(const std::vector<double>& better, const std::vector<do
 // `paired` (same sizes), else of the difference of two independent means.
 double TwoStandardErrors(const std::vector<double>& better, const std::vector<double>& worse,
                          bool paired);
+
+// Seconds of training until a validated R@1 first reached `bar` (the training table's time to a
+// retrieval quality): seconds[k] of the first k with r1[k] >= bar; nullopt if none did (or the two
+// columns differ in length).
+std::optional<double> SecondsToReach(const std::vector<double>& r1,
+                                     const std::vector<double>& seconds, double bar);
 
 // Base64 (RFC 4648, with padding): the report's data: URIs.
 std::string Base64(std::string_view bytes);

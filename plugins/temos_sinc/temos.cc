@@ -232,6 +232,7 @@ std::map<std::string, torch::Tensor> TemosImpl::Losses(
                                  NearDuplicates(texts, options_.duplicate_threshold));
     loss = loss + options_.contrastive * out["contrastive"];
   }
+  out["retrieval_r1"] = BatchRetrievalR1(t.mu, m.mu);
   out["loss"] = loss;
   return out;
 }
@@ -294,6 +295,19 @@ torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double tem
   const auto target = torch::arange(a.size(0), torch::kInt64);
   return 0.5 * (torch::nn::functional::cross_entropy(logits, target) +
                 torch::nn::functional::cross_entropy(logits.t(), target));
+}
+
+torch::Tensor BatchRetrievalR1(const torch::Tensor& text, const torch::Tensor& motion) {
+  torch::NoGradGuard no_grad;
+  const auto unit = [](const torch::Tensor& x) {
+    return torch::nn::functional::normalize(x.detach().to(torch::kFloat),
+                                            torch::nn::functional::NormalizeFuncOptions().dim(1));
+  };
+  // Products summed by hand rather than torch::mm, which bf16 autocast would round.
+  const auto cosine = (unit(text).unsqueeze(1) * unit(motion).unsqueeze(0)).sum(2);  // [N, N]
+  const auto own = cosine.diagonal().unsqueeze(1);
+  const auto nearest = (cosine >= own).sum(1).eq(1);  // only its own motion is as near
+  return nearest.to(torch::kFloat).mean() * 100.0;
 }
 
 }  // namespace motionpipe::temos

@@ -100,7 +100,8 @@ class TemosImpl : public torch::nn::Module {
   torch::Tensor Decode(const torch::Tensor& z, const torch::Tensor& padding) {
     return decoder_->forward(z, padding);
   }
-  // features [T, N, 135] (normalised), padding [N, T]: every loss term and "loss".
+  // features [T, N, 135] (normalised), padding [N, T]: every loss term and "loss", and
+  // "retrieval_r1" (BatchRetrievalR1 of the two encoders' means; logged, not a loss).
   // example_seeds [N] (optional): the seed of each example's reparameterisation noise.
   std::map<std::string, torch::Tensor> Losses(const std::vector<std::vector<std::string>>& texts,
                                               const torch::Tensor& features,
@@ -135,5 +136,10 @@ torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logva
 // (duplicate[i][j] true, i != j) are removed from the negatives.
 torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature,
                       const torch::Tensor& duplicate);
+// Text-to-motion R@1 in percent within a batch: the share of rows of `text` [N, D] whose own row of
+// `motion` is strictly the nearest by cosine (a tie counts as a miss, as the evaluation's averaged
+// ranks do). Float32 whatever the inputs' dtype; no gradient. The evaluation's retrieval
+// (eval/metrics.h) on the batch at hand: a training run's text-specificity over time.
+torch::Tensor BatchRetrievalR1(const torch::Tensor& text, const torch::Tensor& motion);
 
 }  // namespace motionpipe::temos

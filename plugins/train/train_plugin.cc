@@ -20,7 +20,9 @@
 // the ranks (all-reduce of one flattened buffer), so W ranks take the same step as one rank on the
 // whole batch. Rank 0 writes the checkpoints (state_dir/ckpt-NNNNNNNN, then state_dir/latest) and,
 // at the end, the trained model into its output: model/ (model.pt, model.json, extras),
-// state_dict.pt (loadable by Python's torch.load) and losses.csv.
+// state_dict.pt (loadable by Python's torch.load), losses.csv (every term of every step) and, when
+// validating, val_losses.csv (step, val_loss, the wall seconds of training so far across resumes,
+// and val_<term> for the model's other terms on the held-out batches).
 #include <omp.h>
 #include <torch/torch.h>
 
@@ -30,6 +32,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -203,6 +206,7 @@ void WriteModelDir(plugin::Model& model, const Options& options, int64_t step,
 struct Checkpoint {
   int64_t step = 0;
   std::string dir;
+  double seconds = 0;  // wall seconds of training up to it (0 from a version that did not record)
 };
 
 std::optional<Checkpoint> LatestCheckpoint(const std::string& state_dir) {
@@ -213,7 +217,8 @@ std::optional<Checkpoint> LatestCheckpoint(const std::string& state_dir) {
   const std::string dir = state_dir + "/" + name;
   auto meta = ReadFile(dir + "/trainer.json");
   if (!meta.ok()) return std::nullopt;
-  return Checkpoint{json::parse(*meta).value("step", int64_t{0}), dir};
+  const json trainer = json::parse(*meta);
+  return Checkpoint{trainer.value("step", int64_t{0}), dir, trainer.value("seconds", 0.0)};
 }
 
 // The losses CSV keeps exactly the rows of steps before `step` (a resumed run continues the curve).
@@ -271,12 +276,15 @@ c10::intrusive_ptr<c10d::Store> OpenStore(const Options& options, const std::str
   }
 }
 
-// The mean loss over `batches` fixed batches of the held-out split: the same examples and the same
-// per-example draws (diffusion steps, noise, reparameterisation) at every validation, dropout off.
-double Validate(plugin::Model& model, plugin::Dataset& val, const Options& options) {
+// The mean of each of the model's terms over `batches` fixed batches of the held-out split ("loss",
+// the validation loss, and what the model logs beside it, e.g. TEMOS's retrieval_r1): the same
+// examples and the same per-example draws (diffusion steps, noise, reparameterisation) at every
+// validation, dropout off.
+std::map<std::string, double> Validate(plugin::Model& model, plugin::Dataset& val,
+                                       const Options& options) {
   torch::NoGradGuard no_grad;
   model.Module().eval();
-  double total = 0;
+  std::map<std::string, double> total;
   const int64_t n = val.size();
   for (int64_t b = 0; b < options.val_batches; ++b) {
     std::vector<int64_t> indices;
@@ -292,10 +300,11 @@ double Validate(plugin::Model& model, plugin::Dataset& val, const Options& optio
         val.Get(indices, MixSeed(options.seed, 0x76616cull + static_cast<uint64_t>(b)));
     batch.tensors["example_seed"] = torch::tensor(example_seeds, torch::kInt64);
     torch::manual_seed(MixSeed(options.seed, 0x76616c00ull + static_cast<uint64_t>(b)));
-    total += model.Losses(batch, 0).at("loss").item<double>();
+    for (const auto& [name, value] : model.Losses(batch, 0)) total[name] += value.item<double>();
   }
   model.Module().train();
-  return total / static_cast<double>(options.val_batches);
+  for (auto& [name, value] : total) value /= static_cast<double>(options.val_batches);
+  return total;
 }
 
 // One rank of a training gang: the model, its data, the optimiser, the gang's process group and,
@@ -336,7 +345,7 @@ class Trainer {
                                                            .weight_decay(options_.weight_decay));
     const int64_t start = Resume();
     JoinGang();
-    const auto started = std::chrono::steady_clock::now();
+    started_ = std::chrono::steady_clock::now();
     model().Module().train();
     for (int64_t step = start; step < options_.steps; ++step) {
       if (task_.cancelled()) throw std::runtime_error("cancelled at step " + std::to_string(step));
@@ -349,7 +358,7 @@ class Trainer {
     }
     if (log_.is_open()) log_.close();
     const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
     if (rank_ == 0) WriteOutputs();
     WriteSummary(start, seconds);
   }
@@ -417,6 +426,7 @@ class Trainer {
     LoadModule(model().Module(), layout::ModelWeightsFile(latest->dir));
     torch::load(*optimizer_, latest->dir + "/optimizer.pt");
     const int64_t start = latest->step;
+    seconds_before_ = latest->seconds;
     task_.Log(MP_LOG_INFO,
               "rank " + std::to_string(rank_) + " resumes from step " + std::to_string(start));
     if (rank_ == 0) {
@@ -562,13 +572,31 @@ class Trainer {
     }
   }
 
-  // Rank 0: the held-out loss after `step`, logged; a new lowest one writes best/ (atomically).
+  // Wall seconds of training since step 0: this attempt's, plus those of the attempts before it up
+  // to the checkpoint it resumed from (validations and checkpoints included).
+  double TrainingSeconds() const {
+    return seconds_before_ +
+           std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+  }
+
+  // Rank 0: the held-out loss after `step`, logged with the training seconds so far and the
+  // model's other terms on the same batches (val_<term>: the time to a validation quality, e.g. a
+  // TMR's retrieval); a new lowest loss writes best/ (atomically).
   void ValidateAndKeepBest(int64_t step) {
-    const double val_loss = Validate(model(), *val_dataset_, options_);
+    const std::map<std::string, double> terms = Validate(model(), *val_dataset_, options_);
+    const double val_loss = terms.at("loss");
     const bool fresh = !fs::exists(val_csv_);
     std::ofstream val_log(val_csv_, std::ios::app);
-    if (fresh) val_log << "step,val_loss\n";
-    val_log << step << "," << val_loss << "\n";
+    if (fresh) {
+      val_log << "step,val_loss,seconds";
+      for (const auto& term : terms)
+        if (term.first != "loss") val_log << ",val_" << term.first;
+      val_log << "\n";
+    }
+    val_log << step << "," << val_loss << "," << TrainingSeconds();
+    for (const auto& [name, value] : terms)
+      if (name != "loss") val_log << "," << value;
+    val_log << "\n";
     task_.Metric("val_loss", val_loss);
     if (val_loss >= best_val_) return;
     best_val_ = val_loss, best_step_ = step + 1;
@@ -593,10 +621,12 @@ class Trainer {
     fs::create_directories(tmp);
     SaveModule(model().Module(), layout::ModelWeightsFile(tmp));
     torch::save(*optimizer_, tmp + "/optimizer.pt");
-    const Status s = WriteFileAtomic(
-        tmp + "/trainer.json",
-        json({{"step", step + 1}, {"epoch", step / per_epoch}, {"world_size", world_}}).dump() +
-            "\n");
+    const Status s = WriteFileAtomic(tmp + "/trainer.json", json({{"step", step + 1},
+                                                                  {"epoch", step / per_epoch},
+                                                                  {"world_size", world_},
+                                                                  {"seconds", TrainingSeconds()}})
+                                                                    .dump() +
+                                                                "\n");
     if (!s.ok()) throw std::runtime_error(s.message());
     fs::remove_all(state_dir_ + "/" + name);
     fs::rename(tmp, state_dir_ + "/" + name);
@@ -669,6 +699,8 @@ class Trainer {
   double last_loss_ = 0;
   double best_val_ = std::numeric_limits<double>::infinity();
   int64_t best_step_ = -1;
+  std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
+  double seconds_before_ = 0;
 };
 
 void Train(const Task& task) { Trainer(task).Run(); }

@@ -6,6 +6,7 @@ ones in the real formats (BABEL's JSON, AMASS's npz, MotionFix after tools/motio
 written by `motionpipe data synth-corpus`, and moved to places of their own so that nothing depends
 on the corpus's layout. Also tiny-scale smoke tests of the two claims graphs (every row of both
 papers' tables, seeds included)."""
+import csv
 import glob
 import json
 import os
@@ -70,10 +71,16 @@ class RealDataTest(EngineTest):
         # Validated on the held-out split at the last step: the loss logged, the best model recorded.
         with open(os.path.join(job, "mdt", "task-00000", "val_losses.csv")) as f:
             rows = f.read().split()
-        self.assertEqual(rows[0], "step,val_loss")
+        self.assertEqual(rows[0].split(",")[:3], ["step", "val_loss", "seconds"])
         self.assertEqual(rows[1].split(",")[0], "1")
+        self.assertGreater(float(rows[1].split(",")[2]), 0)
         self.assertEqual(rank0["best"]["step"], 2)
         self.assertAlmostEqual(rank0["best"]["val_loss"], float(rows[1].split(",")[1]), places=4)
+        # The TMR evaluator's validation logs its retrieval of the held-out texts beside its loss.
+        with open(os.path.join(job, "evaluator", "task-00000", "val_losses.csv")) as f:
+            val = list(csv.DictReader(f))
+        self.assertEqual([r["step"] for r in val], ["1"])
+        self.assertTrue(0 <= float(val[0]["val_retrieval_r1"]) <= 100, val)
         with open(os.path.join(job, "mdt_untrained", "task-00000", "rank-0.json")) as f:
             self.assertEqual(json.load(f)["steps"], 0)  # the untrained yardstick: initial weights
 

@@ -21,7 +21,7 @@ PIPELINE = """
 name: train_test
 output_root: OUT
 seed: 1
-vars: {world: 1, steps: 2, dropout: 0.0, every: 100, lr: 0.001, split: train}
+vars: {world: 1, steps: 2, dropout: 0.0, every: 100, lr: 0.001, split: train, validate: 0}
 stages:
   corpus: {kind: corpus, params: {clips: 40, triplets: 0, shard_size: 20}}
   singles: {kind: singles, inputs: [corpus], params: {labeler: lexicon}}
@@ -42,6 +42,7 @@ stages:
       warmup: 0
       schedule: constant
       checkpoint_every: "${vars.every}"
+      validate_every: "${vars.validate}"
       collective_timeout: 20
   gen:
     kind: generate
@@ -118,8 +119,8 @@ def torch_load(path):
         return {k: z[k] for k in z.files}
 
 
-def losses(job_dir):
-    with open(os.path.join(job_dir, "sinc", "task-00000", "losses.csv")) as f:
+def losses(job_dir, name="losses.csv"):
+    with open(os.path.join(job_dir, "sinc", "task-00000", name)) as f:
         return list(csv.DictReader(f))
 
 
@@ -293,7 +294,7 @@ class TrainStageTest(EngineTest):
             self.assertIn(reason, result.stdout + result.stderr)
 
     def test_a_gang_that_loses_a_rank_resumes_from_its_checkpoint_and_finishes(self):
-        overrides = ["vars.world=2", "vars.steps=160", "vars.dropout=0.1", "vars.every=20"]
+        overrides = ["vars.world=2", "vars.steps=160", "vars.dropout=0.1", "vars.every=20", "vars.validate=20"]
         reference = self.run_pipeline("reference", 2, *overrides)
 
         self.coordinator()
@@ -326,6 +327,17 @@ class TrainStageTest(EngineTest):
         self.assertEqual([int(r["step"]) for r in resumed], list(range(160)))
         for a, b in zip(resumed, uninterrupted):
             self.assertAlmostEqual(float(a["loss"]), float(b["loss"]), places=4, msg=f"step {a['step']}")
+        # The validations too, with the training seconds counted across the resume (the attempt
+        # before it up to its checkpoint, then this one) and the model's other terms beside the loss.
+        val, val_reference = losses(job_dir, "val_losses.csv"), losses(reference, "val_losses.csv")
+        self.assertEqual([int(r["step"]) for r in val], list(range(19, 160, 20)))
+        for a, b in zip(val, val_reference):
+            self.assertAlmostEqual(float(a["val_loss"]), float(b["val_loss"]), places=4, msg=f"step {a['step']}")
+            # (32 held-out texts: one that changes its nearest motion moves it by 3.125)
+            self.assertAlmostEqual(float(a["val_retrieval_r1"]), float(b["val_retrieval_r1"]), delta=3.2)
+            self.assertTrue(0 <= float(a["val_retrieval_r1"]) <= 100, a)
+        seconds = [float(r["seconds"]) for r in val]
+        self.assertTrue(all(0 < x < y for x, y in zip(seconds, seconds[1:])), seconds)
 
 
 if __name__ == "__main__":

@@ -348,6 +348,51 @@ TEST(Temos, ConstantFeatureColumnsKeepUnitScale) {
   EXPECT_NEAR(s2[0].item<double>(), 0.2, 1e-6);
 }
 
+// The retrieval a training run logs beside its losses (issue 15: time to a TMR's quality): texts
+// whose own motion is strictly the nearest by cosine, in percent.
+TEST(Temos, BatchRetrievalR1CountsTextsWhoseOwnMotionIsStrictlyNearest) {
+  // Text 0 and 3 are nearest their own motions; text 1 is nearer motion 0 than its own motion 1;
+  // text 2's own motion 2 ties with motion 1 (a tie is a miss, as the evaluation's averaged ranks).
+  const auto text = torch::tensor({{1.f, 0.f}, {1.f, 0.1f}, {0.f, 1.f}, {-1.f, 0.f}});
+  const auto motion = torch::tensor({{2.f, 0.f}, {0.f, 3.f}, {0.f, 1.f}, {-0.5f, 0.2f}});
+  const auto r1 = temos::BatchRetrievalR1(text, motion);
+  EXPECT_EQ(r1.scalar_type(), torch::kFloat);
+  EXPECT_DOUBLE_EQ(r1.item<double>(), 50.0);
+  // Cosine: the scale of either side does not matter; bf16 inputs give the same answer here.
+  EXPECT_DOUBLE_EQ(temos::BatchRetrievalR1(7 * text, 0.1 * motion).item<double>(), 50.0);
+  EXPECT_DOUBLE_EQ(temos::BatchRetrievalR1(text.to(torch::kBFloat16), motion.to(torch::kBFloat16))
+                       .item<double>(),
+                   50.0);
+  // Each text's own motion made its nearest: 100; the motions reversed: only the middle pair.
+  EXPECT_DOUBLE_EQ(temos::BatchRetrievalR1(text, text).item<double>(), 100.0);
+  const auto three = torch::tensor({{1.f, 0.f}, {0.6f, 0.8f}, {0.f, 1.f}});
+  EXPECT_NEAR(temos::BatchRetrievalR1(three, three.flip(0)).item<double>(), 100.0 / 3, 1e-4);
+}
+
+TEST(Temos, LossesLogTheBatchRetrievalOfTheEncodersMeansWithoutGradient) {
+  auto net = TinyTemos(0.0, {{"contrastive", 0.1}});
+  net->eval();
+  const TinyBatch batch;
+  const auto seeds = torch::arange(4, torch::kInt64);
+  const auto losses = net->Losses(batch.texts, batch.features, batch.padding, seeds);
+  ASSERT_EQ(losses.count("retrieval_r1"), 1u);
+  EXPECT_FALSE(losses.at("retrieval_r1").requires_grad());
+  torch::NoGradGuard no_grad;
+  const auto expected =
+      temos::BatchRetrievalR1(net->EncodeText(batch.texts, false).mu,
+                              net->EncodeMotion(batch.features, batch.padding, false).mu);
+  EXPECT_DOUBLE_EQ(losses.at("retrieval_r1").item<double>(), expected.item<double>());
+  // Not part of the loss: the loss is the weighted sum of the other terms.
+  const auto& l = losses;
+  const auto kl =
+      l.at("kl_text_motion") + l.at("kl_motion_text") + l.at("kl_text") + l.at("kl_motion");
+  EXPECT_NEAR(l.at("loss").item<double>(),
+              (l.at("recon_text") + l.at("recon_motion") + 1e-5 * kl + 1e-5 * l.at("latent") +
+               0.1 * l.at("contrastive"))
+                  .item<double>(),
+              1e-6);
+}
+
 TEST(Temos, OverfitsASmallBatch) {
   torch::manual_seed(2);
   auto net = TinyTemos(0.0);

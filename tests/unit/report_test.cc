@@ -324,5 +324,18 @@ TEST(Papers, AThirdPapersTableIsOneFile) {
   fs::remove_all(dir);
 }
 
+// The training table's time to a retrieval quality: the seconds of the first validation at or
+// above the bar, not of a later one or of the best.
+TEST(Training, SecondsToReachIsTheFirstValidationAtTheBar) {
+  const std::vector<double> r1 = {3.1, 25.0, 40.0, 38.5, 62.5};
+  const std::vector<double> seconds = {60, 120, 180, 240, 300};
+  EXPECT_EQ(SecondsToReach(r1, seconds, 40), std::optional<double>(180));
+  EXPECT_EQ(SecondsToReach(r1, seconds, 50), std::optional<double>(300));
+  EXPECT_EQ(SecondsToReach(r1, seconds, 3), std::optional<double>(60));
+  EXPECT_FALSE(SecondsToReach(r1, seconds, 70).has_value());
+  EXPECT_FALSE(SecondsToReach({}, {}, 40).has_value());
+  EXPECT_FALSE(SecondsToReach(r1, {60, 120}, 40).has_value());  // columns of different lengths
+}
+
 }  // namespace
 }  // namespace motionpipe::report
