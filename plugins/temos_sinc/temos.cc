@@ -5,6 +5,9 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <stdexcept>
+
+#include "motionpipe/eval/metrics.h"
 
 namespace motionpipe::temos {
 
@@ -298,16 +301,16 @@ torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double tem
 }
 
 torch::Tensor BatchRetrievalR1(const torch::Tensor& text, const torch::Tensor& motion) {
-  torch::NoGradGuard no_grad;
-  const auto unit = [](const torch::Tensor& x) {
-    return torch::nn::functional::normalize(x.detach().to(torch::kFloat),
-                                            torch::nn::functional::NormalizeFuncOptions().dim(1));
+  // The evaluation's own retrieval (one batch of every row, ties averaged) on the detached means.
+  const auto embeddings = [](const torch::Tensor& x) {
+    const auto rows = x.detach().to(torch::kDouble).contiguous();
+    const double* data = rows.data_ptr<double>();
+    return eval::Embeddings{rows.size(0), rows.size(1),
+                            std::vector<double>(data, data + rows.numel())};
   };
-  // Products summed by hand rather than torch::mm, which bf16 autocast would round.
-  const auto cosine = (unit(text).unsqueeze(1) * unit(motion).unsqueeze(0)).sum(2);  // [N, N]
-  const auto own = cosine.diagonal().unsqueeze(1);
-  const auto nearest = (cosine >= own).sum(1).eq(1);  // only its own motion is as near
-  return nearest.to(torch::kFloat).mean() * 100.0;
+  const auto scores = eval::Retrieval(embeddings(text), embeddings(motion), 0, 0);
+  if (!scores.ok()) throw std::invalid_argument("retrieval_r1: " + scores.status().message());
+  return torch::tensor(static_cast<float>(scores->r1));
 }
 
 }  // namespace motionpipe::temos

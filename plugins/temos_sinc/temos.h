@@ -137,9 +137,9 @@ torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logva
 torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature,
                       const torch::Tensor& duplicate);
 // Text-to-motion R@1 in percent within a batch: the share of rows of `text` [N, D] whose own row of
-// `motion` is strictly the nearest by cosine (a tie counts as a miss, as the evaluation's averaged
-// ranks do). Float32 whatever the inputs' dtype; no gradient. The evaluation's retrieval
-// (eval/metrics.h) on the batch at hand: a training run's text-specificity over time.
+// `motion` is strictly the nearest by cosine (ties averaged, so a tie is a miss): the evaluation's
+// eval::Retrieval on the batch at hand, in double whatever the inputs' dtype; no gradient. A
+// training run's text-specificity over time.
 torch::Tensor BatchRetrievalR1(const torch::Tensor& text, const torch::Tensor& motion);
 
 }  // namespace motionpipe::temos

@@ -357,8 +357,7 @@ class Trainer {
         SaveCheckpoint(step);
     }
     if (log_.is_open()) log_.close();
-    const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+    const double seconds = TrainingSeconds() - seconds_before_;  // this attempt's
     if (rank_ == 0) WriteOutputs();
     WriteSummary(start, seconds);
   }
