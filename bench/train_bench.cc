@@ -3,10 +3,13 @@
 // by Debian's /usr/bin/python3) on the same batch with the same threads, in one run; then the train
 // stage's own rate through workers with world_size 1 and 2 (scaling from 1 to 2 ranks). The step is
 // also timed under bf16 autocast (plugins/common/precision.h, the train stage's precision: bf16):
-// the ratio bf16/f32 of samples/s.
+// the ratio bf16/f32 of samples/s. With --quality, only the time to a retrieval quality
+// (tmr_quality.h): the demo's TMR evaluator trained by us and by the PyTorch-Python reference on
+// the same stream until its test singles' text-to-motion R@1 reaches 40 (about 15 min).
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
-//   [--no-reference]
-//               [--no-scaling]
+//               [--no-reference] [--no-scaling]
+//   train_bench --quality [--spans SPANS.npz] [--quality-steps S] [--every E] [--threads T]
+//               [--no-reference]
 #include <sys/wait.h>
 #include <torch/torch.h>
 
@@ -28,11 +31,13 @@
 #include "../plugins/temos_sinc/temos.h"
 #include "bench_util.h"
 #include "motionpipe/formats/npy.h"
+#include "tmr_quality.h"
 
 namespace fs = std::filesystem;
 using namespace motionpipe;
 using bench::Clock;
 using bench::ExamplesPerSecond;
+using bench::QualityArgs;
 using bench::Run;
 using bench::Since;
 using nlohmann::json;
@@ -66,7 +71,8 @@ std::vector<std::string> Texts(int64_t n) {
 struct Args {
   std::string sizes = "demo,paper";
   int64_t steps = 8, threads = 1, batch = 32, frames = 150;
-  bool reference = true, scaling = true;
+  bool reference = true, scaling = true, quality = false;
+  QualityArgs time_to_quality;
 };
 
 std::optional<Args> ParseArgs(int argc, char** argv) {
@@ -86,6 +92,14 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.reference = false;
     else if (!std::strcmp(argv[k], "--no-scaling"))
       a.scaling = false;
+    else if (!std::strcmp(argv[k], "--quality"))
+      a.quality = true;
+    else if (!std::strcmp(argv[k], "--spans") && k + 1 < argc)
+      a.time_to_quality.spans = argv[++k];
+    else if (!std::strcmp(argv[k], "--quality-steps") && k + 1 < argc)
+      a.time_to_quality.steps = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--every") && k + 1 < argc)
+      a.time_to_quality.every = std::atoll(argv[++k]);
     else
       return std::nullopt;
   }
@@ -234,8 +248,21 @@ int main(int argc, char** argv) {
   if (!args) {
     std::fprintf(stderr,
                  "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
-                 "[--frames F] [--no-reference] [--no-scaling]\n");
+                 "[--frames F] [--no-reference] [--no-scaling]\n"
+                 "       train_bench --quality [--spans SPANS.npz] [--quality-steps S] "
+                 "[--every E] [--threads T] [--no-reference]\n");
     return 2;
+  }
+  if (args->quality) {
+    QualityArgs q = args->time_to_quality;
+    q.threads = args->threads;
+    q.reference = args->reference;
+    if (q.steps < 1 || q.every < 1) {
+      std::fprintf(stderr, "train_bench: --quality-steps and --every must be at least 1\n");
+      return 2;
+    }
+    bench::BenchTimeToQuality(q);
+    return 0;
   }
   nn::SetTorchThreads(static_cast<int>(args->threads));
   const std::vector<Size> all = {{"demo", 128, 2, 4, 512, 1}, {"paper", 256, 6, 4, 1024, 2}};

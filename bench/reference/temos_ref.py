@@ -39,6 +39,10 @@ class TextEncoder(nn.Module):
         super().__init__()
         self.dim = dim
         self.embed = nn.Embedding(vocab + 2, dim, padding_idx=0)
+        # As plugins/common/text_encoder.cc: entries N(0, 1/dim), times sqrt(dim) in forward().
+        with torch.no_grad():
+            self.embed.weight.normal_(0.0, 1.0 / math.sqrt(dim))
+            self.embed.weight[0].zero_()
         self.encoder = encoder(dim, heads, ff, dropout, layers)
 
     def forward(self, tokens):
@@ -89,7 +93,8 @@ def masked_smooth_l1(prediction, target, padding):
 
 
 def kl(mu_q, logvar_q, mu_p, logvar_p):
-    return (0.5 * (logvar_p - logvar_q + (logvar_q.exp() + (mu_q - mu_p) ** 2) / logvar_p.exp() - 1.0)).sum(1).mean()
+    # The mean over every element, as TEMOS's kl_divergence(q, p).mean() and plugins/temos_sinc.
+    return (0.5 * (logvar_p - logvar_q + (logvar_q.exp() + (mu_q - mu_p) ** 2) / logvar_p.exp() - 1.0)).mean()
 
 
 class Temos(nn.Module):

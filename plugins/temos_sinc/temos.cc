@@ -19,8 +19,13 @@ nn::TransformerOptions Layers(const TemosOptions& o) {
   return {o.latent, o.heads, o.ff, o.layers, o.dropout};
 }
 
-// Lexical near-duplicates: cosine of bag-of-words counts above `threshold` (TMR masks negatives
-// whose texts mean the same; without a sentence encoder offline, word overlap stands in).
+// 1 on a batch's unpadded frames, 0 on its padding: [T, N, 1] from padding [N, T] (true = pad).
+torch::Tensor FrameMask(const torch::Tensor& padding, torch::ScalarType dtype) {
+  return padding.logical_not().transpose(0, 1).unsqueeze(2).to(dtype);
+}
+
+}  // namespace
+
 torch::Tensor NearDuplicates(const std::vector<std::vector<std::string>>& texts, double threshold) {
   const auto n = static_cast<int64_t>(texts.size());
   std::vector<std::map<std::string, double>> bags(static_cast<size_t>(n));
@@ -55,13 +60,6 @@ torch::Tensor NearDuplicates(const std::vector<std::vector<std::string>>& texts,
   }
   return out;
 }
-
-// 1 on a batch's unpadded frames, 0 on its padding: [T, N, 1] from padding [N, T] (true = pad).
-torch::Tensor FrameMask(const torch::Tensor& padding, torch::ScalarType dtype) {
-  return padding.logical_not().transpose(0, 1).unsqueeze(2).to(dtype);
-}
-
-}  // namespace
 
 TemosOptions TemosOptions::FromJson(const nlohmann::json& j) {
   TemosOptions o;

@@ -132,6 +132,10 @@ torch::Tensor MaskedVelocitySmoothL1(const torch::Tensor& prediction, const torc
 // KL(q || p) of diagonal Gaussians, averaged over the batch and the latent dimensions.
 torch::Tensor KlDivergence(const torch::Tensor& mu_q, const torch::Tensor& logvar_q,
                            const torch::Tensor& mu_p, const torch::Tensor& logvar_p);
+// Lexical near-duplicates [N, N] bool: the cosine of two examples' bag-of-words counts (their texts
+// joined, lower case) above `threshold`, the diagonal false. TMR masks negatives whose texts mean
+// the same; without a sentence encoder offline, word overlap stands in.
+torch::Tensor NearDuplicates(const std::vector<std::vector<std::string>>& texts, double threshold);
 // Symmetric InfoNCE on cosine similarities / temperature; pairs whose texts are near-duplicates
 // (duplicate[i][j] true, i != j) are removed from the negatives.
 torch::Tensor InfoNce(const torch::Tensor& a, const torch::Tensor& b, double temperature,

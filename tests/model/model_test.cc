@@ -369,6 +369,24 @@ TEST(Temos, BatchRetrievalR1CountsTextsWhoseOwnMotionIsStrictlyNearest) {
   EXPECT_NEAR(temos::BatchRetrievalR1(three, three.flip(0)).item<double>(), 100.0 / 3, 1e-4);
 }
 
+TEST(Temos, NearDuplicatesAreExamplesWhoseWordCountsHaveCosineAboveTheThreshold) {
+  // Words lower-cased, an example's texts joined: 0 and 3 have the same words (cosine 1); 0 and 1
+  // share two of three (cosine 2 / sqrt(6) = 0.816); "jump" and "jump, jump" count the same word.
+  const std::vector<std::vector<std::string>> texts = {
+      {"walk forward"}, {"Walk forward slowly"}, {"jump"}, {"walk", "forward"}, {"jump, jump"}};
+  const auto dup = temos::NearDuplicates(texts, 0.6);
+  ASSERT_EQ(dup.sizes(), (std::vector<int64_t>{5, 5}));
+  const auto at = [&](int64_t i, int64_t j) { return dup[i][j].item<bool>(); };
+  for (int64_t i = 0; i < 5; ++i) EXPECT_FALSE(at(i, i)) << "the diagonal is never masked";
+  EXPECT_TRUE(at(0, 1) && at(1, 0));
+  EXPECT_TRUE(at(0, 3) && at(1, 3));
+  EXPECT_TRUE(at(2, 4));
+  EXPECT_FALSE(at(0, 2) || at(1, 4) || at(3, 2));
+  const auto strict = temos::NearDuplicates(texts, 0.9);  // 0.816 is not above 0.9
+  EXPECT_FALSE(strict[0][1].item<bool>());
+  EXPECT_TRUE(strict[0][3].item<bool>());
+}
+
 TEST(Temos, LossesLogTheBatchRetrievalOfTheEncodersMeansWithoutGradient) {
   auto net = TinyTemos(0.0, {{"contrastive", 0.1}});
   net->eval();

@@ -1,0 +1,25 @@
+// Time to a retrieval quality (issue 15): the minutes of training until the demo's TMR evaluator
+// retrieves the test split's single actions from their texts at R@1 `bar` (text-to-motion, in
+// batches of 32), for our trainer and for the PyTorch-Python reference
+// (bench/reference/tmr_ref.py) trained the same way: the same corpus, initial weights, batches
+// (the train stage's order, crops, texts, token ids, near-duplicate masks, reparameterisation
+// noise), learning-rate schedule, clipping and AdamW; only the dropout masks differ. Both sets of
+// test embeddings are scored by the evaluation's eval::Retrieval.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace motionpipe::bench {
+
+struct QualityArgs {
+  std::string spans;  // a `singles` stage's spans.npz; empty: made by the demo's corpus + singles
+  int64_t steps = 400, every = 50, threads = 1;
+  double bar = 40;
+  bool reference = true;
+  std::string dir = "/tmp/motionpipe_tmr_quality";
+};
+
+void BenchTimeToQuality(const QualityArgs& args);
+
+}  // namespace motionpipe::bench
