@@ -38,6 +38,7 @@
 #include "../plugins/common/threads.h"
 #include "../plugins/mdt_editor/editor.h"
 #include "bench_util.h"
+#include "flops.h"
 #include "motionpipe/formats/npy.h"
 
 namespace fs = std::filesystem;
@@ -45,7 +46,9 @@ using namespace motionpipe;
 using namespace motionpipe::mdt;
 using bench::Clock;
 using bench::ExamplesPerSecond;
+using bench::LayerMacs;
 using bench::Run;
+using bench::SgemmGflops;
 using bench::Since;
 using nlohmann::json;
 
@@ -77,12 +80,6 @@ std::vector<T> Values(const torch::Tensor& t) {
   return std::vector<T>(c.data_ptr<T>(), c.data_ptr<T>() + c.numel());
 }
 
-// Multiply-adds of one transformer layer over a batch of `n` sequences of `length` tokens: the
-// four d x d projections and the two feed-forward matrices per token, and QK^T and AV per sequence.
-double LayerMacs(double n, double length, double dim, double ff) {
-  return n * (length * (4 * dim * dim + 2 * dim * ff) + 2 * length * length * dim);
-}
-
 // FLOPs of one training step of the MDT, counted from its matrix products (everything else is a
 // few percent at these sizes): forward 2 x multiply-adds, backward twice the forward (gradients of
 // inputs and of weights). The text encoder is the text_encoder options' size.
@@ -99,21 +96,6 @@ double TrainingStepFlops(const Size& size, double batch, double frames, double t
   macs += LayerMacs(batch, 2 * frames + 1, d, ff) * static_cast<double>(size.layers);
   macs += batch * frames * (d * ff + ff * ff + ff * 3);  // the similarity head
   return 3 * 2 * macs;
-}
-
-// The machine's sgemm rate through LibTorch on the current threads: square products of the
-// trunk's width times a long token axis, the shape of the step's largest products.
-double SgemmGflops(int64_t dim) {
-  const auto a = torch::randn({4096, dim}), b = torch::randn({dim, dim * 2});
-  for (int k = 0; k < 3; ++k) (void)torch::mm(a, b);
-  int64_t reps = 0;
-  const auto started = Clock::now();
-  while (Since(started) < 1.0) {
-    (void)torch::mm(a, b);
-    ++reps;
-  }
-  return 2.0 * 4096 * static_cast<double>(dim) * static_cast<double>(dim * 2) *
-         static_cast<double>(reps) / Since(started) / 1e9;
 }
 
 EditorNet Build(const Size& size) {

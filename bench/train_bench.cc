@@ -3,11 +3,13 @@
 // by Debian's /usr/bin/python3) on the same batch with the same threads, in one run; then the train
 // stage's own rate through workers with world_size 1 and 2 (scaling from 1 to 2 ranks). The step is
 // also timed under bf16 autocast (plugins/common/precision.h, the train stage's precision: bf16):
-// the ratio bf16/f32 of samples/s. With --quality, only the time to a retrieval quality
+// the ratio bf16/f32 of samples/s (--no-bf16: not timed, 0). The float32 step is also given in
+// GFLOP/s (its matrix products counted, TrainingStepFlops) beside LibTorch's sgemm rate on the same
+// threads, measured in the same run. With --quality, only the time to a retrieval quality
 // (tmr_quality.h): the demo's TMR evaluator trained by us and by the PyTorch-Python reference on
-// the same stream until its test singles' text-to-motion R@1 reaches 40 (about 15 min).
+// the same stream, checked for test singles' text-to-motion R@1 40 (about 6 min).
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
-//               [--no-reference] [--no-scaling]
+//               [--no-reference] [--no-scaling] [--no-bf16]
 //   train_bench --quality [--spans SPANS.npz] [--quality-steps S] [--every E] [--threads T]
 //               [--no-reference]
 #include <sys/wait.h>
@@ -30,6 +32,7 @@
 #include "../plugins/common/threads.h"
 #include "../plugins/temos_sinc/temos.h"
 #include "bench_util.h"
+#include "flops.h"
 #include "motionpipe/formats/npy.h"
 #include "tmr_quality.h"
 
@@ -37,8 +40,10 @@ namespace fs = std::filesystem;
 using namespace motionpipe;
 using bench::Clock;
 using bench::ExamplesPerSecond;
+using bench::LayerMacs;
 using bench::QualityArgs;
 using bench::Run;
+using bench::SgemmGflops;
 using bench::Since;
 using nlohmann::json;
 
@@ -71,7 +76,7 @@ std::vector<std::string> Texts(int64_t n) {
 struct Args {
   std::string sizes = "demo,paper";
   int64_t steps = 8, threads = 1, batch = 32, frames = 150;
-  bool reference = true, scaling = true, quality = false;
+  bool reference = true, scaling = true, quality = false, bf16 = true;
   QualityArgs time_to_quality;
 };
 
@@ -92,6 +97,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.reference = false;
     else if (!std::strcmp(argv[k], "--no-scaling"))
       a.scaling = false;
+    else if (!std::strcmp(argv[k], "--no-bf16"))
+      a.bf16 = false;
     else if (!std::strcmp(argv[k], "--quality"))
       a.quality = true;
     else if (!std::strcmp(argv[k], "--spans") && k + 1 < argc)
@@ -123,6 +130,23 @@ Batch MakeBatch(const Args& a) {
   b.features = torch::randn({a.frames, a.batch, temos::kFeatureDim})
                    .masked_fill(b.padding.t().unsqueeze(2), 0.0);
   return b;
+}
+
+// FLOPs of one TEMOS training step, counted from its matrix products: the text encoder and the
+// text VAE over the tokens, the motion VAE over the frames (each VAE with its mu and logvar
+// tokens), the decoder over the frames for both branches (its cross-attention to one memory token
+// is two d x d products per example, left out) and the output layer; forward 2 x multiply-adds,
+// backward twice the forward. Padded frames are computed as the step computes them.
+double TrainingStepFlops(const Size& size, double batch, double frames, double tokens) {
+  const double d = static_cast<double>(size.latent), ff = static_cast<double>(size.ff),
+               layers = static_cast<double>(size.layers);
+  double macs = LayerMacs(batch, tokens, d, ff) * static_cast<double>(size.text_layers);
+  macs += batch * tokens * d * d + LayerMacs(batch, tokens + 2, d, ff) * layers;  // text VAE
+  macs += batch * frames * temos::kFeatureDim * d +
+          LayerMacs(batch, frames + 2, d, ff) * layers;  // motion VAE
+  macs += LayerMacs(2 * batch, frames, d, ff) * layers +
+          2 * batch * frames * d * temos::kFeatureDim;  // decoder, both branches
+  return 3 * 2 * macs;
 }
 
 // The PyTorch-Python reference (bench/reference/temos_ref.py) trained on the same batch: its
@@ -194,11 +218,17 @@ void BenchSize(const Args& a, const Size& size) {
   const auto rate = [&](nn::Precision precision) {
     return ExamplesPerSecond([&] { step(precision); }, a.steps, a.batch);
   };
-  const double cpp = rate(nn::Precision::kFloat32), bf16 = rate(nn::Precision::kBf16);
+  const double cpp = rate(nn::Precision::kFloat32), bf16 = a.bf16 ? rate(nn::Precision::kBf16) : 0;
   const double python = a.reference ? PythonReference(a, size, net, texts, b) : 0;
-  std::printf("%-6s %10lld %12.1f %12.1f %8.2f %12.1f %9.2f\n", size.name.c_str(),
-              static_cast<long long>(parameters), cpp, python, python > 0 ? cpp / python : 0.0,
-              bf16, bf16 / cpp);
+  const double tokens = static_cast<double>(net->text_encoder()->TokenIds(texts).size(1));
+  const double achieved = TrainingStepFlops(size, static_cast<double>(a.batch),
+                                            static_cast<double>(a.frames), tokens) *
+                          cpp / static_cast<double>(a.batch) / 1e9,
+               peak = SgemmGflops(size.latent);
+  std::printf("%-6s %10lld %12.1f %12.1f %8.2f %11.1f %11.1f %8.0f%% %12.1f %9.2f\n",
+              size.name.c_str(), static_cast<long long>(parameters), cpp, python,
+              python > 0 ? cpp / python : 0.0, achieved, peak, 100 * achieved / peak, bf16,
+              bf16 / cpp);
   std::fflush(stdout);
 }
 
@@ -248,7 +278,7 @@ int main(int argc, char** argv) {
   if (!args) {
     std::fprintf(stderr,
                  "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
-                 "[--frames F] [--no-reference] [--no-scaling]\n"
+                 "[--frames F] [--no-reference] [--no-scaling] [--no-bf16]\n"
                  "       train_bench --quality [--spans SPANS.npz] [--quality-steps S] "
                  "[--every E] [--threads T] [--no-reference]\n");
     return 2;
@@ -274,8 +304,9 @@ int main(int argc, char** argv) {
   // The bf16 columns time LibTorch's bf16 products as they are on this CPU; the train stage
   // runs bf16 as float32 where they are emulated (plugins/common/precision.h).
   std::printf("bf16 products on this CPU: %s\n", nn::Bf16ProductsOnThisCpu());
-  std::printf("%-6s %10s %12s %12s %8s %12s %9s\n", "size", "params", "C++ samp/s", "Py samp/s",
-              "ratio", "bf16 samp/s", "bf16/f32");
+  std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s %12s %9s\n", "size", "params", "C++ samp/s",
+              "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
+              "bf16/f32");
   for (const Size& size : all) {
     if (args->sizes.find(size.name) != std::string::npos) BenchSize(*args, size);
   }
