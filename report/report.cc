@@ -7,6 +7,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -131,36 +132,52 @@ std::optional<json> ReadJson(const std::string& path) {
   return value;
 }
 
-// losses.csv (or val_losses.csv): a header with `step` and `column` columns.
-std::optional<TrainCurve> ReadCurve(const std::string& stage, const std::string& path,
-                                    const char* loss_column = "loss") {
+// A CSV of numbers under a header (losses.csv, val_losses.csv), read once. A cell that is missing
+// (a row shorter than the header) or not a number reads NaN.
+struct CsvTable {
+  std::vector<std::string> header;
+  std::vector<std::vector<double>> rows;
+
+  // The columns `names`, in that order, over the rows where each of them is a finite number;
+  // nullopt when a name is not in the header or no row has them all.
+  std::optional<std::vector<std::vector<double>>> Columns(
+      const std::vector<std::string>& names) const {
+    std::vector<size_t> at;
+    for (const std::string& name : names) {
+      const auto it = std::find(header.begin(), header.end(), name);
+      if (it == header.end()) return std::nullopt;
+      at.push_back(static_cast<size_t>(it - header.begin()));
+    }
+    std::vector<std::vector<double>> out(names.size());
+    for (const auto& row : rows) {
+      if (std::any_of(at.begin(), at.end(),
+                      [&](size_t k) { return k >= row.size() || !std::isfinite(row[k]); }))
+        continue;
+      for (size_t c = 0; c < at.size(); ++c) out[c].push_back(row[at[c]]);
+    }
+    if (out.front().empty()) return std::nullopt;
+    return out;
+  }
+};
+
+std::optional<CsvTable> ReadCsvTable(const std::string& path) {
   std::ifstream in(path);
   std::string line;
   if (!in || !std::getline(in, line)) return std::nullopt;
-  std::vector<std::string> header;
+  CsvTable table;
   std::stringstream hs(line);
-  for (std::string cell; std::getline(hs, cell, ',');) header.push_back(cell);
-  const auto column = [&](const char* name) {
-    const auto it = std::find(header.begin(), header.end(), name);
-    return it == header.end() ? -1 : static_cast<int>(it - header.begin());
-  };
-  const int step_col = column("step"), loss_col = column(loss_column);
-  if (step_col < 0 || loss_col < 0) return std::nullopt;
-  TrainCurve curve;
-  curve.stage = stage;
+  for (std::string cell; std::getline(hs, cell, ',');) table.header.push_back(cell);
   while (std::getline(in, line)) {
-    std::vector<std::string> cells;
+    std::vector<double> row;
     std::stringstream ls(line);
-    for (std::string cell; std::getline(ls, cell, ',');) cells.push_back(cell);
-    if (static_cast<int>(cells.size()) <= std::max(step_col, loss_col)) continue;
-    char* end = nullptr;
-    const double step = std::strtod(cells[static_cast<size_t>(step_col)].c_str(), &end);
-    const double loss = std::strtod(cells[static_cast<size_t>(loss_col)].c_str(), &end);
-    if (!std::isfinite(step) || !std::isfinite(loss)) continue;
-    curve.steps.push_back(step), curve.losses.push_back(loss);
+    for (std::string cell; std::getline(ls, cell, ',');) {
+      char* end = nullptr;
+      const double value = std::strtod(cell.c_str(), &end);
+      row.push_back(end != cell.c_str() ? value : std::numeric_limits<double>::quiet_NaN());
+    }
+    table.rows.push_back(std::move(row));
   }
-  if (curve.steps.empty()) return std::nullopt;
-  return curve;
+  return table;
 }
 
 // ---- statistics over seeds
@@ -753,16 +770,21 @@ JobRuns ReadJob(const std::string& job) {
         m.runs.push_back({stage, task, *metrics});
       }
     }
-    if (auto curve = ReadCurve(stage, layout::LossesFile(task))) {
+    const auto losses = ReadCsvTable(layout::LossesFile(task));
+    if (const auto train = losses ? losses->Columns({"step", "loss"}) : std::nullopt) {
+      TrainCurve curve;
+      curve.stage = stage;
+      curve.steps = (*train)[0], curve.losses = (*train)[1];
       if (auto rank = ReadJson(layout::RankSummaryFile(task, 0)))
-        curve->seconds = rank->value("seconds", 0.0);
-      if (auto val = ReadCurve(stage, layout::ValLossesFile(task), "val_loss"))
-        curve->val_steps = val->steps, curve->val_losses = val->losses;
-      auto r1 = ReadCurve(stage, layout::ValLossesFile(task), "val_retrieval_r1");
-      auto seconds = ReadCurve(stage, layout::ValLossesFile(task), "seconds");
-      if (r1 && seconds && r1->steps == seconds->steps)
-        curve->val_r1 = r1->losses, curve->val_seconds = seconds->losses;
-      runs.curves.push_back(std::move(*curve));
+        curve.seconds = rank->value("seconds", 0.0);
+      if (const auto val = ReadCsvTable(layout::ValLossesFile(task))) {
+        if (const auto loss = val->Columns({"step", "val_loss"}))
+          curve.val_steps = (*loss)[0], curve.val_losses = (*loss)[1];
+        // Paired by row: a validation's R@1 and the training seconds when it was taken.
+        if (const auto r1 = val->Columns({"val_retrieval_r1", "seconds"}))
+          curve.val_r1 = (*r1)[0], curve.val_seconds = (*r1)[1];
+      }
+      runs.curves.push_back(std::move(curve));
     }
     if (auto showcase = ReadJson(layout::ShowcaseFile(task)))
       runs.showcases.push_back({stage, *showcase});

@@ -337,5 +337,48 @@ TEST(Training, SecondsToReachIsTheFirstValidationAtTheBar) {
   EXPECT_FALSE(SecondsToReach(r1, {60, 120}, 40).has_value());  // columns of different lengths
 }
 
+// The training table reads each stage's losses.csv and val_losses.csv by column name: a row is
+// used where the columns it needs are numbers (a validation whose seconds are missing still gives
+// its loss, not a time), and an older val_losses.csv without R@1 or seconds leaves that cell empty.
+TEST(Training, TheTableReadsTheLoggedColumnsByNameRowByRow) {
+  namespace fs = std::filesystem;
+  const std::string dir = ::testing::TempDir() + "/training_table", job = dir + "/job";
+  fs::remove_all(dir);
+  const auto write = [&](const std::string& stage, const std::string& file,
+                         const std::string& text) {
+    fs::create_directories(job + "/" + stage + "/task-00000");
+    ASSERT_TRUE(WriteFileAtomic(job + "/" + stage + "/task-00000/" + file, text).ok());
+  };
+  write("evaluator", "losses.csv",
+        "step,epoch,lr,loss,retrieval_r1\n0,0,1e-05,1.5,3.1\n1,0,2e-05,1.25,6.2\n");
+  write("evaluator", "val_losses.csv",
+        "step,val_loss,seconds,val_retrieval_r1\n249,0.4,60,25\n499,0.33,120,40\n"
+        "749,0.2,,45\n999,0.28,240,62.5\n1249,oops,300,70\n");
+  write("old", "losses.csv", "step,epoch,lr,loss\n0,0,1e-05,2\n1,0,2e-05,1.75\n");
+  write("old", "val_losses.csv", "step,val_loss\n1,0.9\n");
+  ReportOptions options;
+  options.job_dir = job;
+  options.previews = false;
+  auto summary = WriteReport(options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_EQ(summary->train_stages, 2);
+  auto html = ReadFile(summary->path);
+  ASSERT_TRUE(html.ok());
+  const auto row = [&](const std::string& stage) {
+    const size_t at = html->find("<tr><td>" + stage + "</td>");
+    return at == std::string::npos ? std::string() : html->substr(at, html->find("</tr>", at) - at);
+  };
+  // Held-out loss: last 0.28 (the row with `oops` has no loss), best 0.2 at step 750 (its seconds
+  // missing); R@1: last 70 (that row's R@1 and seconds are numbers), first at 40 after 120 s.
+  const std::string evaluator = row("evaluator");
+  EXPECT_NE(evaluator.find("<td>1.5000</td><td>1.2500</td><td>0.2800</td><td>0.2000 (750)</td>"),
+            std::string::npos)
+      << evaluator;
+  EXPECT_NE(evaluator.find("<td>70.0 (2.0 min)</td>"), std::string::npos) << evaluator;
+  const std::string old = row("old");
+  EXPECT_NE(old.find("<td>0.9000</td><td>0.9000 (2)</td><td>&ndash;</td>"), std::string::npos)
+      << old;
+}
+
 }  // namespace
 }  // namespace motionpipe::report
