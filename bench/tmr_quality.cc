@@ -145,8 +145,10 @@ eval::Embeddings ToEmbeddings(const torch::Tensor& rows) {
 }
 
 double TextToMotionR1(const torch::Tensor& text, const torch::Tensor& motion) {
+  // As the evaluation (stages/eval_generate.cc): batches of 32, or one of every row when fewer.
+  const int64_t batch = std::min<int64_t>(kBatch, text.size(0));
   const auto scores =
-      eval::Retrieval(ToEmbeddings(text), ToEmbeddings(motion), kBatch, kRetrievalSeed);
+      eval::Retrieval(ToEmbeddings(text), ToEmbeddings(motion), batch, kRetrievalSeed);
   if (!scores.ok()) {
     std::fprintf(stderr, "tmr_quality: %s\n", scores.status().message().c_str());
     std::exit(1);
