@@ -33,7 +33,6 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 // The demo's evaluator stage (configs/demo.yaml `evaluator`): its model, data and schedule.
-constexpr uint64_t kSeed = 101;
 constexpr int64_t kBatch = 32, kMaxFrames = 40, kScheduleSteps = 3600, kWarmup = 100;
 constexpr double kFps = 10, kLr = 5e-4, kWeightDecay = 0.01, kClip = 1.0;
 constexpr uint64_t kRetrievalSeed = 1;
@@ -101,14 +100,14 @@ struct StepBatch {
 
 class BatchStream {
  public:
-  explicit BatchStream(temos::SincDataset& data) : data_(data) {}
+  BatchStream(temos::SincDataset& data, uint64_t seed) : data_(data), seed_(seed) {}
   StepBatch Of(int64_t step) {
     const int64_t n = data_.size(), per_epoch = std::max<int64_t>(1, n / kBatch);
     const int64_t epoch = step / per_epoch;
     if (epoch != epoch_) {
       order_.resize(static_cast<size_t>(n));
       std::iota(order_.begin(), order_.end(), 0);
-      std::mt19937_64 rng(MixSeed(kSeed, static_cast<uint64_t>(epoch)));
+      std::mt19937_64 rng(MixSeed(seed_, static_cast<uint64_t>(epoch)));
       std::shuffle(order_.begin(), order_.end(), rng);
       epoch_ = epoch;
     }
@@ -117,9 +116,9 @@ class BatchStream {
     for (int64_t k = 0; k < kBatch; ++k) {
       indices.push_back(order_[static_cast<size_t>((base + k) % n)]);
       seeds.push_back(static_cast<int64_t>(
-          MixSeed(MixSeed(kSeed, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >> 1));
+          MixSeed(MixSeed(seed_, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >> 1));
     }
-    StepBatch out{data_.Get(indices, MixSeed(kSeed, static_cast<uint64_t>(step))), {}};
+    StepBatch out{data_.Get(indices, MixSeed(seed_, static_cast<uint64_t>(step))), {}};
     out.batch.tensors["example_seed"] = torch::tensor(seeds, torch::kInt64);
     for (const auto& t : out.batch.texts) out.groups.push_back({t});
     return out;
@@ -127,6 +126,7 @@ class BatchStream {
 
  private:
   temos::SincDataset& data_;
+  uint64_t seed_;
   std::vector<int64_t> order_;
   int64_t epoch_ = -1;
 };
@@ -197,7 +197,7 @@ void BenchTimeToQuality(const QualityArgs& a) {
   nn::SetTorchThreads(static_cast<int>(a.threads));
 
   // As the train stage: the seed, then the model, then the data (tokenizer and statistics).
-  torch::manual_seed(kSeed);
+  torch::manual_seed(a.seed);
   temos::Temos net(temos::TemosOptions::FromJson(ModelConfig()));
   temos::SincDataOptions options;
   options.spans = spans;
@@ -251,7 +251,7 @@ void BenchTimeToQuality(const QualityArgs& a) {
       NpyArray::Int64({test.tokens.size(0), test.tokens.size(1)},
                       std::vector<int64_t>(test_tokens.data_ptr<int64_t>(),
                                            test_tokens.data_ptr<int64_t>() + test_tokens.numel())));
-  BatchStream stream(train);
+  BatchStream stream(train, a.seed);
   const int64_t max_tokens = net->text_encoder()->options().max_tokens;
   Stream s;
   double first_eval_loss = 0;
@@ -319,7 +319,7 @@ void BenchTimeToQuality(const QualityArgs& a) {
   for (int64_t step = 0; step < n; ++step) {
     const StepBatch sb = stream.Of(step);
     const auto started = Clock::now();
-    torch::manual_seed(MixSeed(kSeed, static_cast<uint64_t>(step)));
+    torch::manual_seed(MixSeed(a.seed, static_cast<uint64_t>(step)));
     const auto losses =
         net->Losses(sb.groups, sb.batch.tensors.at("features"), sb.batch.tensors.at("padding"),
                     sb.batch.tensors.at("example_seed"));
@@ -365,9 +365,10 @@ void BenchTimeToQuality(const QualityArgs& a) {
 
   std::printf(
       "\ntime to quality: the demo's TMR evaluator (10 fps, latent 128, batch 32, lr 5e-4 on the "
-      "3,600-step schedule), float32, %lld thread(s), %lld test singles; text-to-motion R@1 in "
-      "batches of 32\n",
-      static_cast<long long>(a.threads), static_cast<long long>(test.features.size(1)));
+      "3,600-step schedule), seed %llu, float32, %lld thread(s), %lld test singles; "
+      "text-to-motion R@1 in batches of 32\n",
+      static_cast<unsigned long long>(a.seed), static_cast<long long>(a.threads),
+      static_cast<long long>(test.features.size(1)));
   std::printf(
       "same model: the first batch's loss, dropout off, initial weights: C++ %.6f, Python %.6f; "
       "C++ first training loss %.6f\n",

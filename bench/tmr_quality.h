@@ -15,6 +15,7 @@ namespace motionpipe::bench {
 struct QualityArgs {
   std::string spans;  // a `singles` stage's spans.npz; empty: made by the demo's corpus + singles
   int64_t steps = 400, every = 50, threads = 1;
+  uint64_t seed = 101;  // the training's (initial weights, batch order, draws): the demo's
   double bar = 40;
   bool reference = true;
   std::string dir = "/tmp/motionpipe_tmr_quality";

@@ -11,7 +11,8 @@
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //               [--no-reference] [--no-scaling] [--no-bf16]
 //   train_bench --quality [--spans SPANS.npz] [--quality-steps S] [--every E] [--threads T]
-//               [--no-reference] [--dir DIR (default /tmp/motionpipe_tmr_quality)]
+//               [--no-reference] [--seed S (default 101, the demo's)]
+//               [--dir DIR (default /tmp/motionpipe_tmr_quality)]
 #include <sys/wait.h>
 #include <torch/torch.h>
 
@@ -107,6 +108,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.time_to_quality.steps = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--every") && k + 1 < argc)
       a.time_to_quality.every = std::atoll(argv[++k]);
+    else if (!std::strcmp(argv[k], "--seed") && k + 1 < argc)
+      a.time_to_quality.seed = std::strtoull(argv[++k], nullptr, 10);
     else if (!std::strcmp(argv[k], "--dir") && k + 1 < argc)
       a.time_to_quality.dir = argv[++k];
     else
@@ -282,7 +285,7 @@ int main(int argc, char** argv) {
                  "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
                  "[--frames F] [--no-reference] [--no-scaling] [--no-bf16]\n"
                  "       train_bench --quality [--spans SPANS.npz] [--quality-steps S] "
-                 "[--every E] [--threads T] [--no-reference] [--dir DIR]\n");
+                 "[--every E] [--threads T] [--no-reference] [--seed S] [--dir DIR]\n");
     return 2;
   }
   if (args->quality) {
