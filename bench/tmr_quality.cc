@@ -314,6 +314,16 @@ void BenchTimeToQuality(const QualityArgs& a) {
   torch::optim::AdamW optimizer(
       params, torch::optim::AdamWOptions(kLr).betas({0.9, 0.999}).weight_decay(kWeightDecay));
   std::vector<Checkpoint> cpp;
+  // The test R@1 of the current weights (eval mode: no draws, so training is unchanged by it).
+  const auto score = [&] {
+    torch::NoGradGuard no_grad;
+    net->eval();
+    const auto t = net->EncodeText(test.groups, false).mu;
+    const auto m = net->EncodeMotion(test.features, test.padding, false).mu;
+    net->train();
+    return TextToMotionR1(t, m);
+  };
+  cpp.push_back({0, 0, score()});  // the untrained yardstick: the same weights as the reference's
   double seconds = 0, first_loss = 0;
   net->train();
   for (int64_t step = 0; step < n; ++step) {
@@ -330,14 +340,7 @@ void BenchTimeToQuality(const QualityArgs& a) {
     nn::AdamWStep(optimizer, kClip);
     seconds += Since(started);
     if (step == 0) first_loss = losses.at("loss").item<double>();
-    if ((step + 1) % a.every == 0 || step + 1 == n) {
-      torch::NoGradGuard no_grad;
-      net->eval();
-      const auto t = net->EncodeText(test.groups, false).mu;
-      const auto m = net->EncodeMotion(test.features, test.padding, false).mu;
-      net->train();
-      cpp.push_back({step + 1, seconds, TextToMotionR1(t, m)});
-    }
+    if ((step + 1) % a.every == 0 || step + 1 == n) cpp.push_back({step + 1, seconds, score()});
   }
 
   std::vector<Checkpoint> python;

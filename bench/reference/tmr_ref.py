@@ -5,7 +5,7 @@ removed from the negatives), trained the way bench/tmr_quality.cc trains plugins
 the stream it writes into --dir: its initial weights (init/*.npy, C++ names), every step's batch
 (features, padding, token ids, near-duplicate mask, reparameterisation noise) and learning rate.
 AdamW (betas 0.9/0.999, weight decay 0.01) after clipping the gradients' norm to 1, as the train
-stage. Every --every steps the test singles' text and motion means go to
+stage. Before training and every --every steps the test singles' text and motion means go to
 python_<step>_text.npy / python_<step>_motion.npy for the C++ side to score; the training seconds
 exclude those encodings.
 
@@ -126,11 +126,22 @@ def main():
                 torch.from_numpy(padding[step, :, :t]), torch.from_numpy(eps[step]),
                 torch.from_numpy(duplicate[step]))
 
+    def save_test_means(step):
+        model.eval()
+        with torch.no_grad():
+            text_mu, _ = model.encode_text(test_tokens)
+            motion_mu, _ = model.motion_vae(test_features, test_padding)
+        model.train()
+        prefix = os.path.join(d, f"python_{step}")
+        np.save(prefix + "_text.npy", text_mu.numpy().astype(np.float32))
+        np.save(prefix + "_motion.npy", motion_mu.numpy().astype(np.float32))
+
     model.eval()
     with torch.no_grad():
         first_eval_loss = model.tmr_loss(*batch(0)).item()
+    save_test_means(0)  # the untrained yardstick
     model.train()
-    seconds, first_loss, checkpoints = 0.0, None, []
+    seconds, first_loss, checkpoints = 0.0, None, [{"step": 0, "seconds": 0.0}]
     for step in range(a.steps):
         inputs = batch(step)
         started = time.perf_counter()
@@ -145,14 +156,7 @@ def main():
         if first_loss is None:
             first_loss = loss.item()
         if (step + 1) % a.every == 0 or step + 1 == a.steps:
-            model.eval()
-            with torch.no_grad():
-                text_mu, _ = model.encode_text(test_tokens)
-                motion_mu, _ = model.motion_vae(test_features, test_padding)
-            model.train()
-            prefix = os.path.join(d, f"python_{step + 1}")
-            np.save(prefix + "_text.npy", text_mu.numpy().astype(np.float32))
-            np.save(prefix + "_motion.npy", motion_mu.numpy().astype(np.float32))
+            save_test_means(step + 1)
             checkpoints.append({"step": step + 1, "seconds": seconds})
     print(json.dumps({"first_eval_loss": first_eval_loss, "first_loss": first_loss, "checkpoints": checkpoints}))
 

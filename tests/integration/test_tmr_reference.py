@@ -60,10 +60,16 @@ class TmrReference(unittest.TestCase):
         self.assertAlmostEqual(cpp, python, delta=1e-4 * cpp, msg=self.out)
         self.assertNotEqual(cpp, first, "training has dropout on: its loss differs from eval mode's")
 
-    def test_both_trainers_are_scored_at_every_checkpoint(self):
+    def test_both_trainers_are_scored_before_training_and_at_every_checkpoint(self):
         rows = re.findall(r"^\s+(\d+)\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)$", self.out, re.M)
-        self.assertEqual([int(r[0]) for r in rows], [2, 4], self.out)
-        for _, cpp_s, cpp_r1, py_s, py_r1 in rows:
+        self.assertEqual([int(r[0]) for r in rows], [0, 2, 4], self.out)
+        queries = int(re.search(r"(\d+) test singles", self.out).group(1))
+        # Step 0, the untrained yardstick: the same weights encode the same test set, so both read
+        # the same R@1 (within one query, should two cosines tie to float precision).
+        _, cpp_s, cpp_r1, py_s, py_r1 = rows[0]
+        self.assertEqual((float(cpp_s), float(py_s)), (0.0, 0.0))
+        self.assertLessEqual(abs(float(cpp_r1) - float(py_r1)), 100 / queries + 1e-9, self.out)
+        for _, cpp_s, cpp_r1, py_s, py_r1 in rows[1:]:
             self.assertGreater(float(cpp_s), 0)
             self.assertGreater(float(py_s), 0)
             for r1 in (float(cpp_r1), float(py_r1)):
