@@ -105,19 +105,26 @@ class Temos(nn.Module):
         self.motion_vae = VaeEncoder(135, a.latent, a.heads, a.ff, a.dropout, a.layers)
         self.decoder = Decoder(a.latent, a.heads, a.ff, a.dropout, a.layers)
 
-    def losses(self, tokens, features, padding):
+    def encode_text(self, tokens):
         text, text_padding = self.text_encoder(tokens)
-        t_mu, t_logvar = self.text_vae(text, text_padding)
+        return self.text_vae(text, text_padding)
+
+    def losses(self, tokens, features, padding, eps=None):
+        """TEMOS's loss; with `eps` [2, N, latent] the reparameterisation noise of the text and
+        motion latents is given (else drawn). Returns the loss and the two encoders' means."""
+        t_mu, t_logvar = self.encode_text(tokens)
         m_mu, m_logvar = self.motion_vae(features, padding)
-        t_z = t_mu + torch.exp(0.5 * t_logvar) * torch.randn_like(t_mu)
-        m_z = m_mu + torch.exp(0.5 * m_logvar) * torch.randn_like(m_mu)
+        if eps is None:
+            eps = torch.randn(2, *t_mu.shape)
+        t_z = t_mu + torch.exp(0.5 * t_logvar) * eps[0]
+        m_z = m_mu + torch.exp(0.5 * m_logvar) * eps[1]
         n = features.shape[1]
         decoded = self.decoder(torch.cat([t_z, m_z]), padding.repeat(2, 1))
         zeros = torch.zeros_like(m_mu)
         loss = masked_smooth_l1(decoded[:, :n], features, padding) + masked_smooth_l1(decoded[:, n:], features, padding)
         loss = loss + 1e-5 * (kl(t_mu, t_logvar, m_mu, m_logvar) + kl(m_mu, m_logvar, t_mu, t_logvar) +
                               kl(t_mu, t_logvar, zeros, zeros) + kl(m_mu, m_logvar, zeros, zeros))
-        return loss + 1e-5 * F.smooth_l1_loss(t_z, m_z)
+        return loss + 1e-5 * F.smooth_l1_loss(t_z, m_z), t_mu, m_mu
 
 
 def report_timed_steps(step, warmup, steps, batch):
@@ -132,19 +139,24 @@ def report_timed_steps(step, warmup, steps, batch):
     print(json.dumps({"samples_per_second": steps * batch / seconds, "seconds": seconds, "loss": loss}))
 
 
-def main():
-    p = argparse.ArgumentParser()
-    p.add_argument("--batch-dir", required=True)
+def add_model_arguments(p, vocab):
+    """The model's sizes, as the C++ side passes them."""
     p.add_argument("--latent", type=int, default=128)
     p.add_argument("--layers", type=int, default=2)
     p.add_argument("--heads", type=int, default=4)
     p.add_argument("--ff", type=int, default=512)
     p.add_argument("--text-layers", type=int, default=1)
-    p.add_argument("--vocab", type=int, default=1000)
+    p.add_argument("--vocab", type=int, default=vocab)
     p.add_argument("--dropout", type=float, default=0.1)
+    p.add_argument("--threads", type=int, default=1)
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--batch-dir", required=True)
+    add_model_arguments(p, vocab=1000)
     p.add_argument("--steps", type=int, default=10)
     p.add_argument("--warmup", type=int, default=2)
-    p.add_argument("--threads", type=int, default=1)
     a = p.parse_args()
     torch.set_num_threads(a.threads)
     torch.manual_seed(1)
@@ -156,7 +168,7 @@ def main():
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=0.01)
 
     def step():
-        loss = model.losses(tokens, features, padding)
+        loss, _, _ = model.losses(tokens, features, padding)
         optimizer.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)

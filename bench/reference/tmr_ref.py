@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from temos_ref import Temos, kl, masked_smooth_l1  # noqa: E402
+from temos_ref import Temos, add_model_arguments  # noqa: E402
 
 
 def info_nce(a, b, temperature, duplicate):
@@ -34,22 +34,8 @@ def info_nce(a, b, temperature, duplicate):
 
 
 class Tmr(Temos):
-    def encode_text(self, tokens):
-        text, text_padding = self.text_encoder(tokens)
-        return self.text_vae(text, text_padding)
-
     def tmr_loss(self, tokens, features, padding, eps, duplicate):
-        t_mu, t_logvar = self.encode_text(tokens)
-        m_mu, m_logvar = self.motion_vae(features, padding)
-        t_z = t_mu + torch.exp(0.5 * t_logvar) * eps[0]
-        m_z = m_mu + torch.exp(0.5 * m_logvar) * eps[1]
-        n = features.shape[1]
-        decoded = self.decoder(torch.cat([t_z, m_z]), padding.repeat(2, 1))
-        zeros = torch.zeros_like(m_mu)
-        loss = masked_smooth_l1(decoded[:, :n], features, padding) + masked_smooth_l1(decoded[:, n:], features, padding)
-        loss = loss + 1e-5 * (kl(t_mu, t_logvar, m_mu, m_logvar) + kl(m_mu, m_logvar, t_mu, t_logvar) +
-                              kl(t_mu, t_logvar, zeros, zeros) + kl(m_mu, m_logvar, zeros, zeros))
-        loss = loss + 1e-5 * F.smooth_l1_loss(t_z, m_z)
+        loss, t_mu, m_mu = self.losses(tokens, features, padding, eps)
         return loss + 0.1 * info_nce(t_mu, m_mu, 0.1, duplicate)
 
 
@@ -92,16 +78,9 @@ def load_cpp_weights(model, init_dir):
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--dir", required=True)
-    p.add_argument("--latent", type=int, default=128)
-    p.add_argument("--layers", type=int, default=2)
-    p.add_argument("--heads", type=int, default=4)
-    p.add_argument("--ff", type=int, default=512)
-    p.add_argument("--text-layers", type=int, default=1)
-    p.add_argument("--vocab", type=int, default=800)
-    p.add_argument("--dropout", type=float, default=0.1)
+    add_model_arguments(p, vocab=800)
     p.add_argument("--steps", type=int, default=400)
     p.add_argument("--every", type=int, default=50)
-    p.add_argument("--threads", type=int, default=1)
     a = p.parse_args()
     torch.set_num_threads(a.threads)
     torch.manual_seed(1)
