@@ -10,13 +10,13 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <numeric>
-#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "../plugins/common/fused.h"
 #include "../plugins/common/threads.h"
+#include "../plugins/common/train_order.h"
 #include "../plugins/temos_sinc/sinc_data.h"
 #include "../plugins/temos_sinc/temos.h"
 #include "bench_util.h"
@@ -49,12 +49,10 @@ const json& ModelConfig() {
   return config;
 }
 
-// The train stage's learning rate at `step` (plugins/train: linear warm-up, then cosine to 0).
+// The train stage's learning rate (plugins/common/train_order.h) with the evaluator stage's
+// settings.
 double LearningRate(int64_t step) {
-  if (step < kWarmup) return kLr * static_cast<double>(step + 1) / static_cast<double>(kWarmup);
-  const double progress =
-      static_cast<double>(step - kWarmup) / static_cast<double>(kScheduleSteps - kWarmup);
-  return 0.5 * kLr * (1 + std::cos(3.14159265358979323846 * std::min(1.0, progress)));
+  return nn::LearningRateSchedule{kLr, 0, kWarmup, kScheduleSteps, true}.At(step);
 }
 
 std::string EnsureSpans(const QualityArgs& a) {
@@ -91,8 +89,8 @@ std::vector<float> Floats(const torch::Tensor& t) {
   return {c.data_ptr<float>(), c.data_ptr<float>() + c.numel()};
 }
 
-// The train stage's batch of `step` for one rank (plugins/train BatchOf): every example of an
-// order shuffled once per epoch, each with its own seed.
+// The train stage's batch of `step` for one rank (plugins/train BatchOf, through the same
+// nn::EpochOrder).
 struct StepBatch {
   plugin::Batch batch;
   std::vector<std::vector<std::string>> groups;
@@ -100,35 +98,18 @@ struct StepBatch {
 
 class BatchStream {
  public:
-  BatchStream(temos::SincDataset& data, uint64_t seed) : data_(data), seed_(seed) {}
+  BatchStream(temos::SincDataset& data, uint64_t seed)
+      : data_(data), order_(data.size(), kBatch, seed) {}
   StepBatch Of(int64_t step) {
-    const int64_t n = data_.size(), per_epoch = std::max<int64_t>(1, n / kBatch);
-    const int64_t epoch = step / per_epoch;
-    if (epoch != epoch_) {
-      order_.resize(static_cast<size_t>(n));
-      std::iota(order_.begin(), order_.end(), 0);
-      std::mt19937_64 rng(MixSeed(seed_, static_cast<uint64_t>(epoch)));
-      std::shuffle(order_.begin(), order_.end(), rng);
-      epoch_ = epoch;
-    }
-    std::vector<int64_t> indices, seeds;
-    const int64_t base = (step % per_epoch) * kBatch;
-    for (int64_t k = 0; k < kBatch; ++k) {
-      indices.push_back(order_[static_cast<size_t>((base + k) % n)]);
-      seeds.push_back(static_cast<int64_t>(
-          MixSeed(MixSeed(seed_, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >> 1));
-    }
-    StepBatch out{data_.Get(indices, MixSeed(seed_, static_cast<uint64_t>(step))), {}};
-    out.batch.tensors["example_seed"] = torch::tensor(seeds, torch::kInt64);
+    StepBatch out{data_.Get(order_.Indices(step), order_.BatchSeed(step)), {}};
+    out.batch.tensors["example_seed"] = torch::tensor(order_.ExampleSeeds(step), torch::kInt64);
     for (const auto& t : out.batch.texts) out.groups.push_back({t});
     return out;
   }
 
  private:
   temos::SincDataset& data_;
-  uint64_t seed_;
-  std::vector<int64_t> order_;
-  int64_t epoch_ = -1;
+  nn::EpochOrder order_;
 };
 
 // The test split's single actions as the evaluation scores them (each whole, at the network's

@@ -34,6 +34,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -46,6 +47,7 @@
 #include "../common/fused.h"
 #include "../common/precision.h"
 #include "../common/threads.h"
+#include "../common/train_order.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/base/random.h"
@@ -146,13 +148,8 @@ struct Options {
 };
 
 double LearningRate(const Options& o, int64_t step) {
-  if (o.warmup > 0 && step < o.warmup)
-    return o.lr * static_cast<double>(step + 1) / static_cast<double>(o.warmup);
-  if (o.schedule == "constant") return o.lr;
-  const double progress = static_cast<double>(step - o.warmup) /
-                          static_cast<double>(std::max<int64_t>(1, o.steps - o.warmup));
-  return o.min_lr +
-         0.5 * (o.lr - o.min_lr) * (1 + std::cos(3.14159265358979323846 * std::min(1.0, progress)));
+  return nn::LearningRateSchedule{o.lr, o.min_lr, o.warmup, o.steps, o.schedule == "cosine"}.At(
+      step);
 }
 
 // The model through its plugin's factory (and its destructor through the same factory).
@@ -464,29 +461,11 @@ class Trainer {
   // once per epoch, with each example's own seed (its place in the global batch) for models whose
   // sampling must not depend on how the batch was split over ranks.
   plugin::Batch BatchOf(int64_t step) {
-    const int64_t n = dataset_->size();
-    const int64_t per_epoch = std::max<int64_t>(1, n / options_.batch_size);
-    const int64_t epoch = step / per_epoch;
-    if (epoch != order_epoch_) {
-      order_.resize(static_cast<size_t>(n));
-      std::iota(order_.begin(), order_.end(), 0);
-      std::mt19937_64 rng(MixSeed(options_.seed, static_cast<uint64_t>(epoch)));
-      std::shuffle(order_.begin(), order_.end(), rng);
-      order_epoch_ = epoch;
-    }
-    std::vector<int64_t> indices;
-    const int64_t base = (step % per_epoch) * options_.batch_size;
-    for (int64_t k = rank_; k < options_.batch_size; k += world_)
-      indices.push_back(order_[static_cast<size_t>((base + k) % n)]);
+    if (!order_) order_.emplace(dataset_->size(), options_.batch_size, options_.seed);
     plugin::Batch batch =
-        dataset_->Get(indices, MixSeed(options_.seed, static_cast<uint64_t>(step)));
-    std::vector<int64_t> example_seeds;
-    for (int64_t k = rank_; k < options_.batch_size; k += world_) {
-      example_seeds.push_back(static_cast<int64_t>(
-          MixSeed(MixSeed(options_.seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(k)) >>
-          1));
-    }
-    batch.tensors["example_seed"] = torch::tensor(example_seeds, torch::kInt64);
+        dataset_->Get(order_->Indices(step, rank_, world_), order_->BatchSeed(step));
+    batch.tensors["example_seed"] =
+        torch::tensor(order_->ExampleSeeds(step, rank_, world_), torch::kInt64);
     return batch;
   }
 
@@ -692,8 +671,7 @@ class Trainer {
   std::vector<torch::Tensor> params_;
   std::unique_ptr<torch::optim::AdamW> optimizer_;
   c10::intrusive_ptr<c10d::ProcessGroupGloo> group_;
-  std::vector<int64_t> order_;
-  int64_t order_epoch_ = -1;
+  std::optional<nn::EpochOrder> order_;  // made with the training dataset
   std::ofstream log_;
   double last_loss_ = 0;
   double best_val_ = std::numeric_limits<double>::infinity();

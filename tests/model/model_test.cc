@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include "../../plugins/common/text_encoder.h"
+#include "../../plugins/common/train_order.h"
 #include "../../plugins/common/transformer.h"
 #include "../../plugins/temos_sinc/sinc_data.h"
 #include "../../plugins/temos_sinc/temos.h"
@@ -367,6 +368,34 @@ TEST(Temos, BatchRetrievalR1CountsTextsWhoseOwnMotionIsStrictlyNearest) {
   EXPECT_DOUBLE_EQ(temos::BatchRetrievalR1(text, text).item<double>(), 100.0);
   const auto three = torch::tensor({{1.f, 0.f}, {0.6f, 0.8f}, {0.f, 1.f}});
   EXPECT_NEAR(temos::BatchRetrievalR1(three, three.flip(0)).item<double>(), 100.0 / 3, 1e-4);
+}
+
+// The train stage's stream (plugins/common/train_order.h): two ranks' shares interleave into the
+// one-rank batch with the same seeds, an epoch visits every example once, and the schedule warms
+// up linearly and ends at min_lr.
+TEST(TrainOrder, RanksShareTheGlobalBatchAndAnEpochVisitsEveryExampleOnce) {
+  nn::EpochOrder one(10, 4, 7), rank0(10, 4, 7), rank1(10, 4, 7);
+  std::vector<int64_t> seen;
+  for (int64_t step = 0; step < 2; ++step) {  // 10 / 4 = 2 batches an epoch
+    const auto all = one.Indices(step), a = rank0.Indices(step, 0, 2),
+               b = rank1.Indices(step, 1, 2);
+    ASSERT_EQ(all.size(), 4u);
+    EXPECT_EQ(std::vector<int64_t>({a[0], b[0], a[1], b[1]}), all);
+    const auto seeds = one.ExampleSeeds(step), s0 = one.ExampleSeeds(step, 0, 2);
+    EXPECT_EQ(s0, std::vector<int64_t>({seeds[0], seeds[2]}));
+    for (const int64_t seed : seeds) EXPECT_GE(seed, 0);
+    seen.insert(seen.end(), all.begin(), all.end());
+  }
+  std::sort(seen.begin(), seen.end());
+  EXPECT_EQ(std::adjacent_find(seen.begin(), seen.end()), seen.end()) << "an example twice";
+  EXPECT_NE(one.Indices(2), one.Indices(0)) << "the next epoch is shuffled again";
+  EXPECT_NE(one.BatchSeed(0), one.BatchSeed(1));
+  const nn::LearningRateSchedule cosine{1e-3, 1e-5, 10, 110, true};
+  EXPECT_DOUBLE_EQ(cosine.At(0), 1e-4);
+  EXPECT_DOUBLE_EQ(cosine.At(9), 1e-3);
+  EXPECT_NEAR(cosine.At(60), 0.5 * (1e-3 + 1e-5), 1e-12);
+  EXPECT_DOUBLE_EQ(cosine.At(110), 1e-5);
+  EXPECT_DOUBLE_EQ((nn::LearningRateSchedule{1e-3, 0, 10, 110, false}.At(80)), 1e-3);
 }
 
 TEST(Temos, NearDuplicatesAreExamplesWhoseWordCountsHaveCosineAboveTheThreshold) {
