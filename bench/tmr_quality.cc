@@ -37,16 +37,24 @@ constexpr int64_t kBatch = 32, kMaxFrames = 40, kScheduleSteps = 3600, kWarmup =
 constexpr double kFps = 10, kLr = 5e-4, kWeightDecay = 0.01, kClip = 1.0;
 constexpr uint64_t kRetrievalSeed = 1;
 
-const json& ModelConfig() {
-  static const json config = {
-      {"latent", 128},
-      {"layers", 2},
-      {"heads", 4},
-      {"ff", 512},
-      {"dropout", 0.1},
-      {"contrastive", 0.1},  // variant tmr
-      {"text_encoder", {{"kind", "learned"}, {"layers", 1}, {"vocab", 800}}}};
-  return config;
+// The evaluator's model at `size` (the demo's: latent 128, 2 layers, 4 heads, feed-forward 512, a
+// one-layer learned text encoder).
+json ModelConfig(const TemosSize& size) {
+  return {{"latent", size.latent},
+          {"layers", size.layers},
+          {"heads", size.heads},
+          {"ff", size.ff},
+          {"dropout", 0.1},
+          {"contrastive", 0.1},  // variant tmr
+          {"text_encoder",
+           {{"kind", "learned"}, {"layers", size.text_layers}, {"vocab", 800}, {"ff", size.ff}}}};
+}
+
+const TemosSize& SizeNamed(const std::string& name) {
+  for (const auto& size : TemosSizes())
+    if (size.name == name) return size;
+  std::fprintf(stderr, "tmr_quality: --quality-size %s: not a size (demo, paper)\n", name.c_str());
+  std::exit(2);
 }
 
 // The train stage's learning rate (plugins/common/train_order.h) with the evaluator stage's
@@ -167,6 +175,7 @@ const Checkpoint* FirstAtBar(const std::vector<Checkpoint>& run, double bar) {
 }  // namespace
 
 void BenchTimeToQuality(const QualityArgs& a) {
+  const TemosSize& size = SizeNamed(a.size);
   fs::create_directories(a.dir);
   const std::string spans = EnsureSpans(a);
   auto read = sinc::ReadSpans(spans);
@@ -179,7 +188,7 @@ void BenchTimeToQuality(const QualityArgs& a) {
 
   // As the train stage: the seed, then the model, then the data (tokenizer and statistics).
   torch::manual_seed(a.seed);
-  temos::Temos net(temos::TemosOptions::FromJson(ModelConfig()));
+  temos::Temos net(temos::TemosOptions::FromJson(ModelConfig(size)));
   temos::SincDataOptions options;
   options.spans = spans;
   options.real_pairs = true;
@@ -332,7 +341,8 @@ void BenchTimeToQuality(const QualityArgs& a) {
     std::ostringstream command;
     command << "OMP_NUM_THREADS=" << a.threads << " OPENBLAS_NUM_THREADS=" << a.threads
             << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR << "/bench/reference/tmr_ref.py --dir "
-            << a.dir << " --latent " << latent << " --layers 2 --heads 4 --ff 512 --text-layers 1"
+            << a.dir << " --latent " << latent << " --layers " << size.layers << " --heads "
+            << size.heads << " --ff " << size.ff << " --text-layers " << size.text_layers
             << " --vocab " << vocab << " --steps " << n << " --every " << a.every << " --threads "
             << a.threads << " 2>&1";
     const std::string out = Run(command.str());
@@ -348,9 +358,12 @@ void BenchTimeToQuality(const QualityArgs& a) {
   }
 
   std::printf(
-      "\ntime to quality: the demo's TMR evaluator (10 fps, latent 128, batch 32, lr 5e-4 on the "
-      "3,600-step schedule), seed %llu, float32, %lld thread(s), %lld test singles; "
-      "text-to-motion R@1 in batches of 32\n",
+      "\ntime to quality: the demo's TMR evaluator (10 fps, batch 32, lr 5e-4 on the 3,600-step "
+      "schedule) at %s size (latent %lld, %lld layers, feed-forward %lld, %lld text layer(s)), "
+      "seed %llu, float32, %lld thread(s), %lld test singles; text-to-motion R@1 in batches of "
+      "32\n",
+      size.name.c_str(), static_cast<long long>(size.latent), static_cast<long long>(size.layers),
+      static_cast<long long>(size.ff), static_cast<long long>(size.text_layers),
       static_cast<unsigned long long>(a.seed), static_cast<long long>(a.threads),
       static_cast<long long>(test.features.size(1)));
   std::printf(

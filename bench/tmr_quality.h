@@ -9,11 +9,26 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace motionpipe::bench {
 
+// A TEMOS/TMR size: the demo's (configs/demo.yaml's evaluator) and the paper's (TEMOS and TMR:
+// latent 256, 6 layers, 4 heads, feed-forward 1024), with our learned text encoder's layers.
+struct TemosSize {
+  std::string name;
+  int64_t latent, layers, heads, ff, text_layers;
+};
+
+inline const std::vector<TemosSize>& TemosSizes() {
+  static const std::vector<TemosSize> sizes = {{"demo", 128, 2, 4, 512, 1},
+                                               {"paper", 256, 6, 4, 1024, 2}};
+  return sizes;
+}
+
 struct QualityArgs {
   std::string spans;  // a `singles` stage's spans.npz; empty: made by the demo's corpus + singles
+  std::string size = "demo";  // a TemosSizes() name; every other setting is the demo evaluator's
   int64_t steps = 400, every = 50, threads = 1;
   uint64_t seed = 101;  // the training's (initial weights, batch order, draws): the demo's
   double bar = 40;

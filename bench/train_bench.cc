@@ -10,7 +10,8 @@
 // the same stream, checked for test singles' text-to-motion R@1 40 (about 6 min).
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //               [--no-reference] [--no-scaling] [--no-bf16]
-//   train_bench --quality [--spans SPANS.npz] [--quality-steps S] [--every E] [--threads T]
+//   train_bench --quality [--spans SPANS.npz] [--quality-size demo|paper (default demo)]
+//               [--quality-steps S] [--every E] [--threads T]
 //               [--no-reference] [--seed S (default 101, the demo's)]
 //               [--dir DIR (default /tmp/motionpipe_tmr_quality)]
 #include <sys/wait.h>
@@ -46,14 +47,10 @@ using bench::QualityArgs;
 using bench::Run;
 using bench::SgemmGflops;
 using bench::Since;
+using bench::TemosSize;
 using nlohmann::json;
 
 namespace {
-
-struct Size {
-  std::string name;
-  int64_t latent, layers, heads, ff, text_layers;
-};
 
 // Action texts like the corpus's, to train the tokenizer and fill the batch.
 std::vector<std::string> Texts(int64_t n) {
@@ -104,6 +101,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.quality = true;
     else if (!std::strcmp(argv[k], "--spans") && k + 1 < argc)
       a.time_to_quality.spans = argv[++k];
+    else if (!std::strcmp(argv[k], "--quality-size") && k + 1 < argc)
+      a.time_to_quality.size = argv[++k];
     else if (!std::strcmp(argv[k], "--quality-steps") && k + 1 < argc)
       a.time_to_quality.steps = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--every") && k + 1 < argc)
@@ -142,7 +141,7 @@ Batch MakeBatch(const Args& a) {
 // tokens), the decoder over the frames for both branches (its cross-attention to one memory token
 // is two d x d products per example, left out) and the output layer; forward 2 x multiply-adds,
 // backward twice the forward. Padded frames are computed as the step computes them.
-double TrainingStepFlops(const Size& size, double batch, double frames, double tokens) {
+double TrainingStepFlops(const TemosSize& size, double batch, double frames, double tokens) {
   const double d = static_cast<double>(size.latent), ff = static_cast<double>(size.ff),
                layers = static_cast<double>(size.layers);
   double macs = LayerMacs(batch, tokens, d, ff) * static_cast<double>(size.text_layers);
@@ -156,7 +155,7 @@ double TrainingStepFlops(const Size& size, double batch, double frames, double t
 
 // The PyTorch-Python reference (bench/reference/temos_ref.py) trained on the same batch: its
 // samples per second.
-double PythonReference(const Args& a, const Size& size, temos::Temos& net,
+double PythonReference(const Args& a, const TemosSize& size, temos::Temos& net,
                        const std::vector<std::string>& texts, const Batch& b) {
   const std::string dir = "/tmp/motionpipe_train_bench";
   fs::create_directories(dir);
@@ -188,7 +187,7 @@ double PythonReference(const Args& a, const Size& size, temos::Temos& net,
 }
 
 // One size: our training step's samples per second against the reference's, on the same batch.
-void BenchSize(const Args& a, const Size& size) {
+void BenchSize(const Args& a, const TemosSize& size) {
   const json config = {
       {"latent", size.latent},
       {"layers", size.layers},
@@ -284,7 +283,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] "
                  "[--frames F] [--no-reference] [--no-scaling] [--no-bf16]\n"
-                 "       train_bench --quality [--spans SPANS.npz] [--quality-steps S] "
+                 "       train_bench --quality [--spans SPANS.npz] [--quality-size demo|paper] "
+                 "[--quality-steps S] "
                  "[--every E] [--threads T] [--no-reference] [--seed S] [--dir DIR]\n");
     return 2;
   }
@@ -300,7 +300,6 @@ int main(int argc, char** argv) {
     return 0;
   }
   nn::SetTorchThreads(static_cast<int>(args->threads));
-  const std::vector<Size> all = {{"demo", 128, 2, 4, 512, 1}, {"paper", 256, 6, 4, 1024, 2}};
   std::printf(
       "TEMOS training step (forward, backward, clip, AdamW), batch %lld, up to %lld frames, %lld "
       "thread(s)\n",
@@ -312,7 +311,7 @@ int main(int argc, char** argv) {
   std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s %12s %9s\n", "size", "params", "C++ samp/s",
               "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
               "bf16/f32");
-  for (const Size& size : all) {
+  for (const TemosSize& size : bench::TemosSizes()) {
     if (args->sizes.find(size.name) != std::string::npos) BenchSize(*args, size);
   }
   if (args->scaling) BenchScaling();

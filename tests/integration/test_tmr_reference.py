@@ -51,14 +51,30 @@ class TmrReference(unittest.TestCase):
     def tearDownClass(cls):
         shutil.rmtree(cls.tmp, ignore_errors=True)
 
-    def test_the_reference_computes_the_same_loss_from_the_same_weights_and_batch(self):
+    def assert_same_loss(self, out):
         match = re.search(r"dropout off, initial weights: C\+\+ ([0-9.]+), Python ([0-9.]+); "
-                          r"C\+\+ first training loss ([0-9.]+)", self.out)
-        self.assertIsNotNone(match, self.out)
+                          r"C\+\+ first training loss ([0-9.]+)", out)
+        self.assertIsNotNone(match, out)
         cpp, python, first = (float(g) for g in match.groups())
-        self.assertGreater(cpp, 0.1, self.out)  # a real loss, not an empty batch's
-        self.assertAlmostEqual(cpp, python, delta=1e-4 * cpp, msg=self.out)
+        self.assertGreater(cpp, 0.1, out)  # a real loss, not an empty batch's
+        self.assertAlmostEqual(cpp, python, delta=1e-4 * cpp, msg=out)
         self.assertNotEqual(cpp, first, "training has dropout on: its loss differs from eval mode's")
+
+    def test_the_reference_computes_the_same_loss_from_the_same_weights_and_batch(self):
+        self.assertIn("at demo size (latent 128, 2 layers, feed-forward 512, 1 text layer(s))", self.out)
+        self.assert_same_loss(self.out)
+
+    def test_at_the_papers_size_too(self):
+        out = run([TRAIN_BENCH, "--quality", "--quality-size", "paper", "--spans", self.spans,
+                   "--quality-steps", "1", "--every", "1", "--dir", os.path.join(self.tmp, "paper")]).stdout
+        self.assertIn("at paper size (latent 256, 6 layers, feed-forward 1024, 2 text layer(s))", out)
+        self.assert_same_loss(out)
+
+    def test_an_unknown_size_is_refused(self):
+        result = run([TRAIN_BENCH, "--quality", "--quality-size", "huge", "--spans", self.spans,
+                      "--dir", os.path.join(self.tmp, "huge")], expect_ok=False)
+        self.assertEqual(result.returncode, 2)
+        self.assertIn("--quality-size huge: not a size (demo, paper)", result.stderr)
 
     def test_both_trainers_are_scored_before_training_and_at_every_checkpoint(self):
         rows = re.findall(r"^\s+(\d+)\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)$", self.out, re.M)
