@@ -7,7 +7,8 @@
 // GFLOP/s (its matrix products counted, TrainingStepFlops) beside LibTorch's sgemm rate on the same
 // threads, measured in the same run. With --quality, only the time to a retrieval quality
 // (tmr_quality.h): the demo's TMR evaluator trained by us and by the PyTorch-Python reference on
-// the same stream, checked for test singles' text-to-motion R@1 40 (about 6 min).
+// the same stream, checked for test singles' text-to-motion R@1 40 (about 6 min; at the paper's
+// size, --quality-size paper, about an hour for 500 steps on one thread).
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //               [--no-reference] [--no-scaling] [--no-bf16]
 //   train_bench --quality [--spans SPANS.npz] [--quality-size demo|paper (default demo)]
