@@ -51,9 +51,13 @@ json ModelConfig(const TemosSize& size) {
 }
 
 const TemosSize& SizeNamed(const std::string& name) {
-  for (const auto& size : TemosSizes())
+  std::string names;
+  for (const auto& size : TemosSizes()) {
     if (size.name == name) return size;
-  std::fprintf(stderr, "tmr_quality: --quality-size %s: not a size (demo, paper)\n", name.c_str());
+    names += (names.empty() ? "" : ", ") + size.name;
+  }
+  std::fprintf(stderr, "tmr_quality: --quality-size %s: not a size (%s)\n", name.c_str(),
+               names.c_str());
   std::exit(2);
 }
 
