@@ -441,23 +441,22 @@ void BenchFused(const Args& a, const Size& size, double step_ms) {
                      MsPerCall([&] { (void)nn::AdamWStep(ours, 1.0); }, 10), 1, true, true});
   }
   {
-    // Attention's core in float32 (the DiT blocks' and the condition encoder's self-attention over
-    // the source, separator and target tokens): ATen's baddbmm, softmax and bmm against the fused
+    // Self-attention's core in float32 (the DiT blocks' and the condition encoder's, over the
+    // source, separator and target tokens), from in_proj's output to out_proj's input: ATen's
+    // route (the heads taken apart, baddbmm, softmax, bmm, the heads put back) against the fused
     // kernel, forward and backward, some keys ignored by padding.
-    const int64_t b = a.batch * size.heads, head_dim = size.dim / size.heads;
-    const auto q = torch::randn({b, tokens, head_dim}) / std::sqrt(static_cast<double>(head_dim));
-    const auto k = torch::randn({b, tokens, head_dim}), v = torch::randn({b, tokens, head_dim});
+    const int64_t head_dim = size.dim / size.heads;
+    const auto qkv = torch::randn({tokens, a.batch, 3 * size.dim});
     const auto padding = torch::arange(tokens).view({1, -1}).ge(
         tokens - torch::arange(a.batch).remainder(a.frames / 2).view({-1, 1}));
-    const auto dout = torch::randn({b, tokens, head_dim});
+    const auto dout = torch::randn({tokens, a.batch, size.dim});
     const auto attend = [&](bool fused) {
-      const auto qi = q.detach().requires_grad_(), ki = k.detach().requires_grad_(),
-                 vi = v.detach().requires_grad_();
-      const auto out = fused ? nn::AttentionFloat32(qi, ki, vi, padding, {})
-                             : nn::AttentionThroughAten(qi, ki, vi, padding, {});
+      const auto x = qkv.detach().requires_grad_();
+      const auto out = fused ? nn::SelfAttentionFloat32(x, size.heads, padding, {})
+                             : nn::SelfAttentionThroughAten(x, size.heads, padding, {});
       out.backward(dout);
     };
-    table.push_back({"attention core, float32 [" + std::to_string(b) + " x " +
+    table.push_back({"attention core, float32 [" + std::to_string(a.batch * size.heads) + " x " +
                          std::to_string(tokens) + " x " + std::to_string(head_dim) + "]",
                      MsPerCall([&] { attend(false); }, 10), MsPerCall([&] { attend(true); }, 10),
                      size.layers + size.cond_layers, false});

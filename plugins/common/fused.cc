@@ -386,7 +386,7 @@ MOTIONPIPE_CLONES void AdamWKernel(float* p, const float* grad, float* m, float*
   }
 }
 
-// ---- Multi-head attention's core in float32 (AttentionFloat32) ----
+// ---- Multi-head self-attention's core in float32 (SelfAttentionFloat32) ----
 //
 // Per (example, head) matrix the products are small (L x L x Dh: 81 x 81 x 32 at the editors'
 // training shape). LibTorch 1.13 without MKL runs bmm as a loop of per-matrix GEMM calls through
@@ -525,43 +525,48 @@ MOTIONPIPE_CLONES void MultiplyInto(float* x, const float* y, int64_t n) {
   for (int64_t j = 0; j < n; ++j) x[j] *= y[j];
 }
 
-// The shapes of one call: B = N x H matrices of L x Dh.
+// The shapes of one call: N examples of H heads, matrices of L x Dh, on the in_proj output
+// qkv [L, N, 3 H Dh] (each token's q, k, v, each of H heads of Dh) and the output [L, N, H Dh].
+// Matrix b = n H + h; its row i of q starts at qkv + i ld_in + n 3 H Dh + h Dh (k H Dh further,
+// v 2 H Dh), of out at out + i ld_out + n H Dh + h Dh.
 struct AttentionShape {
-  int64_t b, l, d, heads, l16;  // l16: L rounded up to a multiple of 16 (padded rows of scratch)
+  int64_t n, heads, l, d, l16;  // d = Dh; l16: L rounded up to a multiple of 16 (scratch rows)
+  int64_t width() const { return heads * d; }
+  int64_t ld_in() const { return n * 3 * width(); }
+  int64_t ld_out() const { return n * width(); }
+  int64_t matrices() const { return n * heads; }
+  int64_t q_at(int64_t b) const { return (b / heads) * 3 * width() + (b % heads) * d; }
+  int64_t out_at(int64_t b) const { return (b / heads) * width() + (b % heads) * d; }
 };
 
-AttentionShape CheckAttention(const torch::Tensor& q, const torch::Tensor& k,
-                              const torch::Tensor& v, const torch::Tensor& padding,
+AttentionShape CheckAttention(const torch::Tensor& qkv, int64_t heads, const torch::Tensor& padding,
                               const torch::Tensor& dropout_mask) {
-  for (const auto* t : {&q, &k, &v}) {
-    if (t->scalar_type() != torch::kFloat || t->dim() != 3)
-      throw std::invalid_argument("AttentionFloat32: q, k, v must be float32 [B, L, Dh]");
-  }
-  if (k.sizes() != q.sizes() || v.sizes() != q.sizes())
-    throw std::invalid_argument("AttentionFloat32: q, k and v differ in shape");
-  AttentionShape s{q.size(0), q.size(1), q.size(2), 1, (q.size(1) + 15) / 16 * 16};
-  if (padding.defined()) {
-    if (padding.scalar_type() != torch::kBool || padding.dim() != 2 || padding.size(1) != s.l ||
-        padding.size(0) == 0 || s.b % padding.size(0) != 0)
-      throw std::invalid_argument("AttentionFloat32: padding must be bool [N, L] with B = N x H");
-    s.heads = s.b / padding.size(0);
-  }
-  if (dropout_mask.defined() && (dropout_mask.scalar_type() != torch::kFloat ||
-                                 dropout_mask.sizes() != torch::IntArrayRef({s.b, s.l, s.l})))
-    throw std::invalid_argument("AttentionFloat32: the dropout mask must be float32 [B, L, L]");
+  if (qkv.scalar_type() != torch::kFloat || qkv.dim() != 3 || heads <= 0 ||
+      qkv.size(2) % (3 * heads) != 0 || qkv.size(2) == 0)
+    throw std::invalid_argument(
+        "SelfAttentionFloat32: qkv must be float32 [L, N, 3 H Dh] for the given heads");
+  const AttentionShape s{qkv.size(1), heads, qkv.size(0), qkv.size(2) / (3 * heads),
+                         (qkv.size(0) + 15) / 16 * 16};
+  if (padding.defined() &&
+      (padding.scalar_type() != torch::kBool || padding.sizes() != torch::IntArrayRef({s.n, s.l})))
+    throw std::invalid_argument("SelfAttentionFloat32: padding must be bool [N, L]");
+  if (dropout_mask.defined() &&
+      (dropout_mask.scalar_type() != torch::kFloat ||
+       dropout_mask.sizes() != torch::IntArrayRef({s.matrices(), s.l, s.l})))
+    throw std::invalid_argument(
+        "SelfAttentionFloat32: the dropout mask must be float32 [N H, L, L]");
   return s;
 }
 
 // keep[n][j]: 1 where example n attends to key j, and whether any key of n is kept.
 std::pair<std::vector<float>, std::vector<char>> KeptKeys(const torch::Tensor& padding,
                                                           const AttentionShape& s) {
-  const int64_t examples = s.b / s.heads;
-  std::vector<float> keep(static_cast<size_t>(examples * s.l), 1.0f);
-  std::vector<char> any(static_cast<size_t>(examples), 1);
+  std::vector<float> keep(static_cast<size_t>(s.n * s.l), 1.0f);
+  std::vector<char> any(static_cast<size_t>(s.n), 1);
   if (!padding.defined()) return {keep, any};
   const auto pad = padding.contiguous();
   const bool* ignored = pad.data_ptr<bool>();
-  for (int64_t n = 0; n < examples; ++n) {
+  for (int64_t n = 0; n < s.n; ++n) {
     any[n] = 0;
     for (int64_t j = 0; j < s.l; ++j) {
       keep[n * s.l + j] = ignored[n * s.l + j] ? 0.0f : 1.0f;
@@ -571,82 +576,153 @@ std::pair<std::vector<float>, std::vector<char>> KeptKeys(const torch::Tensor& p
   return {keep, any};
 }
 
+// One example's rows of qkv [L, N, 3 H Dh] to q, k, v [3, H, L, Dh] in a scratch (q multiplied by
+// `scale` as ATen's q * scale rounds it), and back into d_qkv (dq multiplied by `scale` as
+// autograd's MulBackward does). The example's rows lie 3 H Dh N floats apart (48 KiB at the
+// editors' shape, a multiple of 4 KiB: every row in the same few sets of L1 and L2), so the
+// products read their operands from the scratch, where they stay in cache, and each row of qkv is
+// touched once per pass. Taking every head apart into [3, N H, L, Dh] first (LibTorch's route, or a
+// pass of our own) moves the 4 MB twice more through memory.
+void GatherExample(const float* qkv, const AttentionShape& s, int64_t n, float scale, float* blk) {
+  for (int64_t i = 0; i < s.l; ++i) {
+    const float* row = qkv + i * s.ld_in() + n * 3 * s.width();
+    for (int64_t part = 0; part < 3; ++part)
+      for (int64_t h = 0; h < s.heads; ++h) {
+        const float* from = row + part * s.width() + h * s.d;
+        float* to = blk + ((part * s.heads + h) * s.l + i) * s.d;
+        const float f = part == 0 ? scale : 1.0f;
+        for (int64_t j = 0; j < s.d; ++j) to[j] = from[j] * f;
+      }
+  }
+}
+void ScatterExample(const float* blk, const AttentionShape& s, int64_t n, float scale, float* qkv) {
+  for (int64_t i = 0; i < s.l; ++i) {
+    float* row = qkv + i * s.ld_in() + n * 3 * s.width();
+    for (int64_t part = 0; part < 3; ++part)
+      for (int64_t h = 0; h < s.heads; ++h) {
+        const float* from = blk + ((part * s.heads + h) * s.l + i) * s.d;
+        float* to = row + part * s.width() + h * s.d;
+        const float f = part == 0 ? scale : 1.0f;
+        for (int64_t j = 0; j < s.d; ++j) to[j] = from[j] * f;
+      }
+  }
+}
+// One example's [H, L, Dh] from and to its rows of a [L, N, H Dh] tensor (the output, its
+// gradient).
+void GatherHeads(const float* wide, const AttentionShape& s, int64_t n, float* blk) {
+  for (int64_t i = 0; i < s.l; ++i)
+    for (int64_t h = 0; h < s.heads; ++h)
+      std::copy_n(wide + i * s.ld_out() + n * s.width() + h * s.d, s.d, blk + (h * s.l + i) * s.d);
+}
+void ScatterHeads(const float* blk, const AttentionShape& s, int64_t n, float* wide) {
+  for (int64_t i = 0; i < s.l; ++i)
+    for (int64_t h = 0; h < s.heads; ++h)
+      std::copy_n(blk + (h * s.l + i) * s.d, s.d, wide + i * s.ld_out() + n * s.width() + h * s.d);
+}
+
 struct AttentionFunction : torch::autograd::Function<AttentionFunction> {
-  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& q_in,
-                               const torch::Tensor& k_in, const torch::Tensor& v_in,
-                               const c10::optional<torch::Tensor>& padding_in,
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& qkv_in,
+                               int64_t heads, const c10::optional<torch::Tensor>& padding_in,
                                const c10::optional<torch::Tensor>& mask_in) {
     // The optional arguments come as optionals: autograd's apply takes every Tensor argument for
     // an input of the graph, and an undefined one has no device to record.
     const torch::Tensor padding = padding_in.value_or(torch::Tensor());
     const torch::Tensor dropout_mask = mask_in.value_or(torch::Tensor());
-    const AttentionShape s = CheckAttention(q_in, k_in, v_in, padding, dropout_mask);
-    const auto q = q_in.contiguous(), k = k_in.contiguous(), v = v_in.contiguous();
+    const AttentionShape s = CheckAttention(qkv_in, heads, padding, dropout_mask);
+    const auto qkv = qkv_in.contiguous();
     const auto mask = dropout_mask.defined() ? dropout_mask.contiguous() : dropout_mask;
-    auto out = torch::empty_like(q);
-    auto weights = torch::empty({s.b, s.l, s.l}, q.options());  // softmax, before dropout
+    const float scale = static_cast<float>(1.0 / std::sqrt(static_cast<double>(s.d)));
+    auto out = torch::empty({s.l, s.n, s.width()}, qkv.options());
+    auto weights = torch::empty({s.matrices(), s.l, s.l}, qkv.options());  // before dropout
     const auto [keep, any] = KeptKeys(padding, s);
-    const float *qd = q.data_ptr<float>(), *kd = k.data_ptr<float>(), *vd = v.data_ptr<float>();
+    const float* in = qkv.data_ptr<float>();
     const float* md = mask.defined() ? mask.data_ptr<float>() : nullptr;
     float *od = out.data_ptr<float>(), *pd = weights.data_ptr<float>();
-    at::parallel_for(0, s.b, 1, [&](int64_t begin, int64_t end) {
-      std::vector<float> kt(static_cast<size_t>(s.d * s.l16)), scores(s.l * s.l16);
-      for (int64_t b = begin; b < end; ++b) {
-        const int64_t n = b / s.heads, at = b * s.l * s.d;
-        Transpose(kd + at, s.l, s.d, s.d, kt.data(), s.l16);
-        GemmNn(s.l, s.l16, s.d, qd + at, s.d, kt.data(), s.l16, scores.data(), s.l16);
-        for (int64_t i = 0; i < s.l; ++i) {
-          float* row = scores.data() + i * s.l16;
-          float* p = pd + (b * s.l + i) * s.l;
-          SoftmaxRow(row, keep.data() + n * s.l, p, s.l, any[n] != 0);
-          std::copy(p, p + s.l, row);
-          if (md) MultiplyInto(row, md + (b * s.l + i) * s.l, s.l);
+    const int64_t rows = s.l * s.d;  // one matrix of L x Dh
+    at::parallel_for(0, s.n, 1, [&](int64_t begin, int64_t end) {
+      std::vector<float> blk(static_cast<size_t>(3 * s.heads * rows)),
+          heads_out(static_cast<size_t>(s.heads * rows)), kt(static_cast<size_t>(s.d * s.l16)),
+          scores(s.l * s.l16);
+      for (int64_t n = begin; n < end; ++n) {
+        GatherExample(in, s, n, scale, blk.data());
+        for (int64_t h = 0; h < s.heads; ++h) {
+          const int64_t b = n * s.heads + h;
+          const float* q = blk.data() + h * rows;
+          const float* k = q + s.heads * rows;
+          const float* v = k + s.heads * rows;
+          Transpose(k, s.l, s.d, s.d, kt.data(), s.l16);
+          GemmNn(s.l, s.l16, s.d, q, s.d, kt.data(), s.l16, scores.data(), s.l16);
+          for (int64_t i = 0; i < s.l; ++i) {
+            float* row = scores.data() + i * s.l16;
+            float* p = pd + (b * s.l + i) * s.l;
+            SoftmaxRow(row, keep.data() + n * s.l, p, s.l, any[n] != 0);
+            std::copy(p, p + s.l, row);
+            if (md) MultiplyInto(row, md + (b * s.l + i) * s.l, s.l);
+          }
+          GemmNn(s.l, s.d, s.l, scores.data(), s.l16, v, s.d, heads_out.data() + h * rows, s.d);
         }
-        GemmNn(s.l, s.d, s.l, scores.data(), s.l16, vd + at, s.d, od + at, s.d);
+        ScatterHeads(heads_out.data(), s, n, od);
       }
     });
-    ctx->save_for_backward({q, k, v, weights, mask.defined() ? mask : torch::Tensor()});
+    ctx->save_for_backward({qkv, weights, mask.defined() ? mask : torch::Tensor()});
+    ctx->saved_data["heads"] = heads;
     return out;
   }
 
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
                                                  torch::autograd::variable_list grads) {
     const auto saved = ctx->get_saved_variables();
-    const auto &q = saved[0], &k = saved[1], &v = saved[2], &weights = saved[3], &mask = saved[4];
+    const auto &qkv = saved[0], &weights = saved[1], &mask = saved[2];
+    const AttentionShape s = CheckAttention(qkv, ctx->saved_data["heads"].toInt(), {}, {});
     const auto d_out = grads[0].contiguous();
-    const AttentionShape s{q.size(0), q.size(1), q.size(2), 1, (q.size(1) + 15) / 16 * 16};
-    auto dq = torch::empty_like(q), dk = torch::empty_like(k), dv = torch::empty_like(v);
-    const float *qd = q.data_ptr<float>(), *kd = k.data_ptr<float>(), *vd = v.data_ptr<float>();
-    const float *pd = weights.data_ptr<float>(), *gd = d_out.data_ptr<float>();
+    auto d_qkv = torch::empty_like(qkv);  // every entry written below
+    const float scale = static_cast<float>(1.0 / std::sqrt(static_cast<double>(s.d)));
+    const float *in = qkv.data_ptr<float>(), *pd = weights.data_ptr<float>();
+    const float* gd = d_out.data_ptr<float>();
     const float* md = mask.defined() ? mask.data_ptr<float>() : nullptr;
-    float *dqd = dq.data_ptr<float>(), *dkd = dk.data_ptr<float>(), *dvd = dv.data_ptr<float>();
-    at::parallel_for(0, s.b, 1, [&](int64_t begin, int64_t end) {
-      std::vector<float> vt(static_cast<size_t>(s.d * s.l16)), dp(s.l * s.l16);
-      for (int64_t b = begin; b < end; ++b) {
-        const int64_t at = b * s.l * s.d;
-        const float* p = pd + b * s.l * s.l;
-        // dV = (P o M)^T dO
-        const float* weighted = p;  // the weights the values were summed with
-        if (md) {                   // dp is free until dP below
-          std::copy(p, p + s.l * s.l, dp.data());
-          MultiplyInto(dp.data(), md + b * s.l * s.l, s.l * s.l);
-          weighted = dp.data();
+    float* dd = d_qkv.data_ptr<float>();
+    const int64_t rows = s.l * s.d;
+    at::parallel_for(0, s.n, 1, [&](int64_t begin, int64_t end) {
+      std::vector<float> blk(static_cast<size_t>(3 * s.heads * rows)),
+          d_blk(static_cast<size_t>(3 * s.heads * rows)), g(static_cast<size_t>(s.heads * rows)),
+          vt(static_cast<size_t>(s.d * s.l16)), dp(s.l * s.l16);
+      for (int64_t n = begin; n < end; ++n) {
+        GatherExample(in, s, n, scale, blk.data());
+        GatherHeads(gd, s, n, g.data());
+        for (int64_t h = 0; h < s.heads; ++h) {
+          const int64_t b = n * s.heads + h;
+          const float* q = blk.data() + h * rows;  // scaled
+          const float* k = q + s.heads * rows;
+          const float* v = k + s.heads * rows;
+          float* dq = d_blk.data() + h * rows;  // of the scaled q: ScatterExample applies the scale
+          float* dk = dq + s.heads * rows;
+          float* dv = dk + s.heads * rows;
+          const float* go = g.data() + h * rows;  // dO
+          const float* p = pd + b * s.l * s.l;
+          // dV = (P o M)^T dO
+          const float* weighted = p;  // the weights the values were summed with
+          if (md) {                   // dp is free until dP below
+            std::copy(p, p + s.l * s.l, dp.data());
+            MultiplyInto(dp.data(), md + b * s.l * s.l, s.l * s.l);
+            weighted = dp.data();
+          }
+          GemmTn(s.l, s.d, s.l, weighted, s.l, go, s.d, dv, s.d);
+          // dP = (dO V^T) o M, then the softmax's backward in place: dS
+          Transpose(v, s.l, s.d, s.d, vt.data(), s.l16);
+          GemmNn(s.l, s.l16, s.d, go, s.d, vt.data(), s.l16, dp.data(), s.l16);
+          for (int64_t i = 0; i < s.l; ++i) {
+            float* row = dp.data() + i * s.l16;
+            if (md) MultiplyInto(row, md + (b * s.l + i) * s.l, s.l);
+            SoftmaxBackwardRow(p + i * s.l, row, s.l);
+          }
+          // dQ = dS K, dK = dS^T Q
+          GemmNn(s.l, s.d, s.l, dp.data(), s.l16, k, s.d, dq, s.d);
+          GemmTn(s.l, s.d, s.l, dp.data(), s.l16, q, s.d, dk, s.d);
         }
-        GemmTn(s.l, s.d, s.l, weighted, s.l, gd + at, s.d, dvd + at, s.d);
-        // dP = (dO V^T) o M, then the softmax's backward in place: dS
-        Transpose(vd + at, s.l, s.d, s.d, vt.data(), s.l16);
-        GemmNn(s.l, s.l16, s.d, gd + at, s.d, vt.data(), s.l16, dp.data(), s.l16);
-        for (int64_t i = 0; i < s.l; ++i) {
-          float* row = dp.data() + i * s.l16;
-          if (md) MultiplyInto(row, md + (b * s.l + i) * s.l, s.l);
-          SoftmaxBackwardRow(p + i * s.l, row, s.l);
-        }
-        // dQ = dS K, dK = dS^T Q
-        GemmNn(s.l, s.d, s.l, dp.data(), s.l16, kd + at, s.d, dqd + at, s.d);
-        GemmTn(s.l, s.d, s.l, dp.data(), s.l16, qd + at, s.d, dkd + at, s.d);
+        ScatterExample(d_blk.data(), s, n, scale, dd);
       }
     });
-    return {dq, dk, dv, torch::Tensor(), torch::Tensor()};
+    return {d_qkv, torch::Tensor(), torch::Tensor(), torch::Tensor()};
   }
 };
 
@@ -671,11 +747,11 @@ torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gat
   return GatedResidualFunction::apply(x, gate, y);
 }
 
-torch::Tensor AttentionFloat32(const torch::Tensor& q, const torch::Tensor& k,
-                               const torch::Tensor& v, const torch::Tensor& padding,
-                               const torch::Tensor& dropout_mask) {
+torch::Tensor SelfAttentionFloat32(const torch::Tensor& qkv, int64_t heads,
+                                   const torch::Tensor& padding,
+                                   const torch::Tensor& dropout_mask) {
   return AttentionFunction::apply(
-      q, k, v, padding.defined() ? c10::optional<torch::Tensor>(padding) : c10::nullopt,
+      qkv, heads, padding.defined() ? c10::optional<torch::Tensor>(padding) : c10::nullopt,
       dropout_mask.defined() ? c10::optional<torch::Tensor>(dropout_mask) : c10::nullopt);
 }
 

@@ -9,12 +9,14 @@
 //    bf16 modulation under autocast, forward and backward in one pass each. LibTorch's route makes
 //    a pass per operator (LayerNorm, add, mul, add, the cast to bf16 for the next linear), and in
 //    backward as many again plus the sums over frames for the modulation's gradients.
-//  - AttentionFloat32: multi-head attention's core (scores, key mask, softmax, dropout, weighted
-//    values) in float32, forward and backward, per (example, head) matrix in one pass through
-//    cache-resident buffers with a register-tiled GEMM. LibTorch 1.13 built without MKL runs its
-//    bmm as per-matrix GEMM calls through tensor views, and the softmax, mask and dropout as passes
-//    of their own: where the trainers run float32 (a CPU without bf16 products) that was about a
-//    quarter of an editor's step (bench/mdt_bench's attention row: 6 calls of 21 ms in 486 ms).
+//  - SelfAttentionFloat32: multi-head attention's core (scores, key mask, softmax, dropout,
+//    weighted values) in float32, forward and backward, per (example, head) matrix in one pass
+//    through cache-resident buffers with a register-tiled GEMM, reading q, k, v from in_proj's
+//    output and writing the heads side by side for out_proj where they lie. LibTorch 1.13 built
+//    without MKL runs its bmm as per-matrix GEMM calls through tensor views, the softmax, mask and
+//    dropout as passes of their own, and the heads' split and merge as strided copies: where the
+//    trainers run float32 (a CPU without bf16 products) that was about a quarter of an editor's
+//    step (bench/mdt_bench's attention row).
 //  - AdamWStep: gradient clipping by the global norm and torch::optim::AdamW's step in one pass per
 //    parameter over (p, grad, exp_avg, exp_avg_sq), on the optimiser's own state, so checkpoints
 //    stay torch::optim::AdamW's.
@@ -47,15 +49,17 @@ torch::Tensor ModulatedLayerNormBf16(const torch::Tensor& x, const torch::Tensor
 torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gate,
                                 const torch::Tensor& y);
 
-// softmax(q k^T + mask) v per matrix, q, k, v [B, L, Dh] float32 (q already scaled by the caller),
-// B = N x H matrices, example-major (matrix b belongs to example b / H). padding [N, L] bool (true:
-// that key is ignored for every query and head of example n; undefined: none), a row whose every
-// key is ignored attends to all equally. dropout_mask [B, L, L] float32 (entries 0 or 1/(1-p), as
-// nn::DropoutMask; undefined: none) multiplies the weights after the softmax. Returns [B, L, Dh];
-// gradients reach q, k and v. Other dtypes or shapes are an error (std::invalid_argument).
-torch::Tensor AttentionFloat32(const torch::Tensor& q, const torch::Tensor& k,
-                               const torch::Tensor& v, const torch::Tensor& padding,
-                               const torch::Tensor& dropout_mask);
+// Multi-head self-attention's core, softmax(q k^T / sqrt(Dh) + mask) v per (example, head), on
+// in_proj's output as it is: qkv [L, N, 3 H Dh] float32 (each token's q, k, v, each of H heads of
+// Dh); returns [L, N, H Dh], the heads side by side as out_proj takes them. padding [N, L] bool
+// (true: that key is ignored for every query and head of example n; undefined: none), a row whose
+// every key is ignored attends to all equally. dropout_mask [N H, L, L] float32 (matrix n H + h;
+// entries 0 or 1/(1-p), as nn::DropoutMask; undefined: none) multiplies the weights after the
+// softmax. The gradient reaches qkv. The same float32 values as SelfAttentionThroughAten
+// (transformer.h) computes by ATen, but for the order of the sums in the products. Other dtypes or
+// shapes are an error (std::invalid_argument).
+torch::Tensor SelfAttentionFloat32(const torch::Tensor& qkv, int64_t heads,
+                                   const torch::Tensor& padding, const torch::Tensor& dropout_mask);
 
 // One optimiser step of `optimizer` (a torch::optim::AdamW without amsgrad) at its groups' current
 // options: when max_norm > 0 the gradients are first scaled as torch::nn::utils::clip_grad_norm_

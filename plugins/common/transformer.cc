@@ -74,40 +74,39 @@ SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout)
 }
 
 torch::Tensor SelfAttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& padding) {
-  const int64_t length = x.size(0), n = x.size(1), head_dim = dim_ / heads_;
-  // [L, N, 3, H, Dh] -> q, k, v as [N*H, L, Dh]
-  const auto split = ApplyLinear(in_proj_, x)
-                         .view({length, n, 3, heads_, head_dim})
-                         .permute({2, 1, 3, 0, 4})
-                         .reshape({3, n * heads_, length, head_dim});
-  // unbind, not split[0], split[1], split[2]: indexing's backward writes each gradient into a
-  // zero-filled copy of the whole [3, N*H, L, Dh] and sums the three; unbind's stacks them once.
-  const auto qkv = split.unbind(0);
-  const auto q = qkv[0] * (1.0 / std::sqrt(static_cast<double>(head_dim)));
-  const auto& k = qkv[1];
-  const auto& v = qkv[2];
+  const int64_t length = x.size(0);
+  const auto qkv = ApplyLinear(in_proj_, x);  // [L, N, 3 dim]
   // The dropout mask is drawn before either route, so a seed gives the same masks in both.
   const auto mask = is_training() && dropout_ > 0
-                        ? DropoutMask({n * heads_, length, length}, dropout_)
+                        ? DropoutMask({x.size(1) * heads_, length, length}, dropout_)
                         : torch::Tensor();
   // float32: the same arithmetic in one pass per matrix (plugins/common/fused.h); under bf16
-  // autocast q, k, v are bf16 and ATen's bmm takes them.
-  const auto out = q.scalar_type() == torch::kFloat ? AttentionFloat32(q, k, v, padding, mask)
-                                                    : AttentionThroughAten(q, k, v, padding, mask);
-  return ApplyLinear(
-      out_proj_,
-      out.view({n, heads_, length, head_dim}).permute({2, 0, 1, 3}).reshape({length, n, dim_}));
+  // autocast qkv is bf16 and ATen's bmm takes it.
+  const auto out = qkv.scalar_type() == torch::kFloat
+                       ? SelfAttentionFloat32(qkv, heads_, padding, mask)
+                       : SelfAttentionThroughAten(qkv, heads_, padding, mask);
+  return ApplyLinear(out_proj_, out);
 }
 
-torch::Tensor AttentionThroughAten(const torch::Tensor& q, const torch::Tensor& k,
-                                   const torch::Tensor& v, const torch::Tensor& padding,
-                                   const torch::Tensor& dropout_mask) {
-  const int64_t length = q.size(1);
+torch::Tensor SelfAttentionThroughAten(const torch::Tensor& qkv, int64_t heads,
+                                       const torch::Tensor& padding,
+                                       const torch::Tensor& dropout_mask) {
+  const int64_t length = qkv.size(0), n = qkv.size(1), dim = qkv.size(2) / 3,
+                head_dim = dim / heads;
+  // [L, N, 3, H, Dh] -> q, k, v as [N*H, L, Dh]
+  const auto split = qkv.view({length, n, 3, heads, head_dim})
+                         .permute({2, 1, 3, 0, 4})
+                         .reshape({3, n * heads, length, head_dim});
+  // unbind, not split[0], split[1], split[2]: indexing's backward writes each gradient into a
+  // zero-filled copy of the whole [3, N*H, L, Dh] and sums the three; unbind's stacks them once.
+  const auto parts = split.unbind(0);
+  const auto q = parts[0] * (1.0 / std::sqrt(static_cast<double>(head_dim)));
+  const auto& k = parts[1];
+  const auto& v = parts[2];
   torch::Tensor scores;
   if (padding.defined()) {
     // A large negative bias on ignored keys (finite: a row with every key ignored stays finite),
     // per example, broadcast over heads and queries.
-    const int64_t n = padding.size(0), heads = q.size(0) / n;
     const auto bias = torch::zeros({n, 1, 1, length}, q.options())
                           .masked_fill(padding.view({n, 1, 1, length}), -1e9)
                           .expand({n, heads, 1, length})
@@ -118,7 +117,10 @@ torch::Tensor AttentionThroughAten(const torch::Tensor& q, const torch::Tensor& 
   }
   auto weights = torch::softmax(scores, -1);
   if (dropout_mask.defined()) weights = weights * dropout_mask;  // float32 mask: as before
-  return torch::bmm(weights, v);
+  return torch::bmm(weights, v)
+      .view({n, heads, length, head_dim})
+      .permute({2, 0, 1, 3})
+      .reshape({length, n, dim});
 }
 
 EncoderLayerImpl::EncoderLayerImpl(const TransformerOptions& o) : o_(o) {

@@ -35,12 +35,13 @@ struct TransformerOptions {
   double dropout = 0.1;
 };
 
-// Multi-head attention's core through ATen (baddbmm, softmax, bmm), the route for bf16 autocast and
-// the reference for nn::AttentionFloat32 (fused.h), whose arguments it takes: q, k, v [B, L, Dh]
-// (q scaled), padding [N, L] bool or undefined, dropout_mask [B, L, L] or undefined.
-torch::Tensor AttentionThroughAten(const torch::Tensor& q, const torch::Tensor& k,
-                                   const torch::Tensor& v, const torch::Tensor& padding,
-                                   const torch::Tensor& dropout_mask);
+// Multi-head self-attention's core through ATen (the heads taken apart, baddbmm, softmax, bmm,
+// the heads put back), the route for bf16 autocast and the reference for nn::SelfAttentionFloat32
+// (fused.h), whose arguments it takes: qkv [L, N, 3 H Dh], padding [N, L] bool or undefined,
+// dropout_mask [N H, L, L] or undefined; returns [L, N, H Dh].
+torch::Tensor SelfAttentionThroughAten(const torch::Tensor& qkv, int64_t heads,
+                                       const torch::Tensor& padding,
+                                       const torch::Tensor& dropout_mask);
 
 class SelfAttentionImpl : public torch::nn::Module {
  public:

@@ -228,13 +228,14 @@ TEST(Fused, AdamWStepIsLibTorchsClipAndAdamW) {
   EXPECT_EQ(a.step(), 6);
 }
 
-// Attention's core (softmax(q k^T + mask) v per matrix) in float32 through the fused kernel,
-// against the ATen route in float64 on the same inputs: outputs and the gradients of q, k and v,
-// with keys ignored by padding and a dropout mask, at the editors' training shape (81 tokens, heads
-// of 32) and at shapes that are no multiple of the kernel's tile (7 tokens, heads of 24; one
-// token). Each float32 result is within 2e-5 of float64's relative to the largest entry, as ATen's
-// float32 is.
-TEST(Fused, AttentionFloat32IsTheAtenRoute) {
+// Self-attention's core (softmax(q k^T / sqrt(Dh) + mask) v per example and head) in float32
+// through the fused kernel, on in_proj's output [L, N, 3 H Dh] as it lies, against the ATen route
+// in float64 on the same input: the output [L, N, H Dh] and the gradient of qkv, with keys ignored
+// by padding and a dropout mask, at the editors' training shape (81 tokens, 4 heads of 32) and at
+// shapes that are no multiple of the kernel's tile (7 tokens, heads of 24; one token). Each float32
+// result is within 2e-5 of float64's relative to the largest entry, as ATen's float32 is; a wrong
+// head layout (q, k, v or the heads read from the wrong columns) is off by order one.
+TEST(Fused, SelfAttentionFloat32IsTheAtenRoute) {
   torch::manual_seed(5);
   struct Case {
     int64_t n, heads, length, head_dim;
@@ -243,10 +244,8 @@ TEST(Fused, AttentionFloat32IsTheAtenRoute) {
   for (const Case& c : {Case{4, 4, 81, 32, true, false}, Case{3, 2, 7, 24, true, true},
                         Case{2, 3, 1, 8, false, false}, Case{2, 2, 33, 16, false, true}}) {
     SCOPED_TRACE("L " + std::to_string(c.length) + " Dh " + std::to_string(c.head_dim));
-    const int64_t b = c.n * c.heads;
-    const auto q = (0.3 * torch::randn({b, c.length, c.head_dim})).requires_grad_();
-    const auto k = torch::randn({b, c.length, c.head_dim}).requires_grad_();
-    const auto v = torch::randn({b, c.length, c.head_dim}).requires_grad_();
+    const int64_t width = c.heads * c.head_dim;
+    const auto qkv = torch::randn({c.length, c.n, 3 * width}).requires_grad_();
     torch::Tensor padding, mask;
     if (c.padded) {  // example n ignores its last n + 1 keys (none left of a 1-token example)
       padding = torch::zeros({c.n, c.length}, torch::kBool);
@@ -255,33 +254,31 @@ TEST(Fused, AttentionFloat32IsTheAtenRoute) {
             .narrow(0, std::max<int64_t>(0, c.length - e - 1), std::min(c.length, e + 1))
             .fill_(true);
     }
-    if (c.dropout) mask = DropoutMask({b, c.length, c.length}, 0.25);
-    const auto out = AttentionFloat32(q, k, v, padding, mask);
-    ASSERT_EQ(out.sizes(), q.sizes());
+    if (c.dropout) mask = DropoutMask({c.n * c.heads, c.length, c.length}, 0.25);
+    const auto out = SelfAttentionFloat32(qkv, c.heads, padding, mask);
+    ASSERT_EQ(out.sizes(), torch::IntArrayRef({c.length, c.n, width}));
     ASSERT_EQ(out.scalar_type(), torch::kFloat);
     const auto dout = torch::randn_like(out);
-    const auto grads = torch::autograd::grad({out}, {q, k, v}, {dout});
+    const auto grad = torch::autograd::grad({out}, {qkv}, {dout})[0];
 
-    const auto q64 = q.detach().to(torch::kFloat64).requires_grad_();
-    const auto k64 = k.detach().to(torch::kFloat64).requires_grad_();
-    const auto v64 = v.detach().to(torch::kFloat64).requires_grad_();
+    const auto qkv64 = qkv.detach().to(torch::kFloat64).requires_grad_();
     const auto mask64 = mask.defined() ? mask.to(torch::kFloat64) : mask;
-    const auto out64 = AttentionThroughAten(q64, k64, v64, padding, mask64);
-    const auto grads64 =
-        torch::autograd::grad({out64}, {q64, k64, v64}, {dout.to(torch::kFloat64)});
-    const auto out32 = AttentionThroughAten(q, k, v, padding, mask);
-    const auto grads32 = torch::autograd::grad({out32}, {q, k, v}, {dout});
+    const auto out64 = SelfAttentionThroughAten(qkv64, c.heads, padding, mask64);
+    const auto grad64 = torch::autograd::grad({out64}, {qkv64}, {dout.to(torch::kFloat64)})[0];
+    const auto out32 = SelfAttentionThroughAten(qkv, c.heads, padding, mask);
+    const auto grad32 = torch::autograd::grad({out32}, {qkv}, {dout})[0];
     const auto gap = [](const torch::Tensor& x, const torch::Tensor& exact) {
       // (one key: the softmax is constant and q's and k's gradients are exactly 0)
       const double largest = std::max(exact.abs().max().item<double>(), 1e-30);
       return (x.to(torch::kFloat64) - exact).abs().max().item<double>() / largest;
     };
     EXPECT_LT(gap(out, out64), 2e-5);
-    EXPECT_LT(gap(out32, out64), 2e-5);  // the bound holds for ATen's float32 too
-    for (int g = 0; g < 3; ++g) {
-      SCOPED_TRACE("gradient " + std::to_string(g));
-      EXPECT_LT(gap(grads[g], grads64[g]), 2e-5);
-      EXPECT_LT(gap(grads32[g], grads64[g]), 2e-5);
+    EXPECT_LT(gap(out32, out64), 2e-5);     // the bound holds for ATen's float32 too
+    for (int part = 0; part < 3; ++part) {  // q, k, v
+      SCOPED_TRACE("gradient " + std::to_string(part));
+      const auto cols = [&](const torch::Tensor& g) { return g.narrow(2, part * width, width); };
+      EXPECT_LT(gap(cols(grad), cols(grad64)), 2e-5);
+      EXPECT_LT(gap(cols(grad32), cols(grad64)), 2e-5);
     }
   }
 }
@@ -289,20 +286,22 @@ TEST(Fused, AttentionFloat32IsTheAtenRoute) {
 // A query whose every key is ignored attends to all keys equally (the ATen route's finite bias
 // rounds every float32 score to the same value), ignored keys get no weight and no gradient, and
 // bad arguments are errors that say what was wrong.
-TEST(Fused, AttentionFloat32IgnoresPaddedKeysAndRejectsBadArguments) {
+TEST(Fused, SelfAttentionFloat32IgnoresPaddedKeysAndRejectsBadArguments) {
   torch::manual_seed(6);
-  const auto q = torch::randn({2, 5, 8}), v = torch::randn({2, 5, 8});
-  const auto k = torch::randn({2, 5, 8}).requires_grad_();
+  // One head of 8: qkv [L 5, N 2, 24] from q, k, v [N, L, 8].
+  const auto q = torch::randn({2, 5, 8}), k = torch::randn({2, 5, 8}), v = torch::randn({2, 5, 8});
+  const auto qkv = torch::cat({q, k, v}, 2).transpose(0, 1).contiguous().requires_grad_();
   auto padding = torch::zeros({2, 5}, torch::kBool);
   padding[0].fill_(true);                  // example 0: every key ignored
   padding[1].narrow(0, 3, 2).fill_(true);  // example 1: keys 3 and 4
-  const auto out = AttentionFloat32(q, k, v, padding, {});
-  EXPECT_TRUE(torch::allclose(out[0], v[0].mean(0).expand({5, 8}), 1e-5, 1e-6));
-  const auto kept = torch::softmax(torch::mm(q[1], k[1].narrow(0, 0, 3).t()), -1)
+  const auto out = SelfAttentionFloat32(qkv, 1, padding, {});
+  EXPECT_TRUE(torch::allclose(out.select(1, 0), v[0].mean(0).expand({5, 8}), 1e-5, 1e-6));
+  const auto kept = torch::softmax(torch::mm(q[1], k[1].narrow(0, 0, 3).t()) / std::sqrt(8.0), -1)
                         .mm(v[1].narrow(0, 0, 3));  // example 1 with its first 3 keys alone
-  EXPECT_TRUE(torch::allclose(out[1], kept, 1e-5, 1e-6));
-  const auto dk = torch::autograd::grad({out.sum()}, {k})[0];
-  EXPECT_EQ(dk[1].narrow(0, 3, 2).abs().max().item<float>(), 0.0f);
+  EXPECT_TRUE(torch::allclose(out.select(1, 1), kept, 1e-5, 1e-6));
+  const auto grad = torch::autograd::grad({out.sum()}, {qkv})[0];
+  EXPECT_EQ(grad.select(1, 1).narrow(0, 3, 2).narrow(1, 8, 16).abs().max().item<float>(), 0.0f)
+      << "ignored keys and their values get no gradient";
 
   const auto message = [&](const std::function<void()>& f) {
     try {
@@ -312,16 +311,17 @@ TEST(Fused, AttentionFloat32IgnoresPaddedKeysAndRejectsBadArguments) {
     }
     return std::string("no error");
   };
-  EXPECT_NE(message([&] { AttentionFloat32(q.to(torch::kFloat64), k, v, {}, {}); }).find("float32"),
-            std::string::npos);
-  EXPECT_NE(message([&] { AttentionFloat32(q, k.narrow(1, 0, 4), v, {}, {}); }).find("shape"),
+  EXPECT_NE(
+      message([&] { SelfAttentionFloat32(qkv.to(torch::kFloat64), 1, {}, {}); }).find("float32"),
+      std::string::npos);
+  EXPECT_NE(message([&] { SelfAttentionFloat32(qkv, 5, {}, {}); }).find("heads"),
             std::string::npos);
   EXPECT_NE(message([&] {
-              AttentionFloat32(q, k, v, torch::zeros({3, 5}, torch::kBool), {});
+              SelfAttentionFloat32(qkv, 1, torch::zeros({3, 5}, torch::kBool), {});
             }).find("padding"),
             std::string::npos);
   EXPECT_NE(message([&] {
-              AttentionFloat32(q, k, v, {}, torch::ones({2, 5, 4}));
+              SelfAttentionFloat32(qkv, 1, {}, torch::ones({2, 5, 4}));
             }).find("dropout"),
             std::string::npos);
 }
