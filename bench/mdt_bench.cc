@@ -373,6 +373,18 @@ void BenchFused(const Args& a, const Size& size, double step_ms) {
          MsPerCall([&] { gelu(false); }, 20), MsPerCall([&] { gelu(true); }, 20), size.layers});
   }
   {
+    const auto x = torch::randn({rows, size.ff}), dy = torch::randn({rows, size.ff});
+    const auto gelu = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      const auto y = fused ? nn::GeluTanhFloat32(xi) : torch::gelu(xi, "tanh");
+      y.backward(dy);
+    };
+    table.push_back(
+        {"tanh-GELU, float32 [" + std::to_string(rows) + " x " + std::to_string(size.ff) + "]",
+         MsPerCall([&] { gelu(false); }, 20), MsPerCall([&] { gelu(true); }, 20), size.layers,
+         false});
+  }
+  {
     // adaLN around a sub-layer: float32 stream, bf16 modulation [1, N, d]; LibTorch's route ends
     // in the cast to bf16 that the next linear makes under autocast.
     const auto x = torch::randn({tokens, a.batch, size.dim});

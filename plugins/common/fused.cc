@@ -9,6 +9,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 // The loops are plain C++ vectorised by the compiler (omp simd; the file is built with
@@ -73,24 +74,54 @@ inline float GeluGate(float x) {
   return 1.0f / (1.0f + Exp(-2.0f * u));
 }
 
-MOTIONPIPE_CLONES void GeluForward(const uint16_t* x, uint16_t* y, int64_t n) {
+// An element of a bf16 (raw 16-bit words) or float32 tensor, as float32 and back (bf16: rounded
+// to nearest even).
+inline float Load(uint16_t h) { return Bf16ToFloat(h); }
+inline float Load(float f) { return f; }
+template <typename T>
+inline T Store(float f) {
+  if constexpr (std::is_same_v<T, uint16_t>)
+    return FloatToBf16(f);
+  else
+    return f;
+}
+
+template <typename T>
+__attribute__((always_inline)) inline void GeluForwardLoop(const T* x, T* y, int64_t n) {
 #pragma omp simd
   for (int64_t k = 0; k < n; ++k) {
-    const float v = Bf16ToFloat(x[k]);
-    y[k] = FloatToBf16(v * GeluGate(v));
+    const float v = Load(x[k]);
+    y[k] = Store<T>(v * GeluGate(v));
   }
 }
 
-// d/dx [x s(x)] with s = sigmoid(2u): s + 2 x s (1 - s) du/dx, du/dx = sqrt(2/pi) (1 + 3 c x^2).
-MOTIONPIPE_CLONES void GeluBackward(const uint16_t* x, const uint16_t* dy, uint16_t* dx,
-                                    int64_t n) {
+// d/dx [x s(x)] with s = sigmoid(2u): s + 2 x s (1 - s) du/dx, du/dx = sqrt(2/pi) (1 + 3 c x^2);
+// 1 - s as e s with e = e^(-2u), which keeps its relative precision where s nears 1.
+template <typename T>
+__attribute__((always_inline)) inline void GeluBackwardLoop(const T* x, const T* dy, T* dx,
+                                                            int64_t n) {
 #pragma omp simd
   for (int64_t k = 0; k < n; ++k) {
-    const float v = Bf16ToFloat(x[k]);
-    const float s = GeluGate(v);
+    const float v = Load(x[k]);
+    const float e = Exp(-2.0f * kSqrt2OverPi * (v + kCubic * v * v * v));
+    const float s = 1.0f / (1.0f + e);
     const float du = kSqrt2OverPi * (1.0f + 3.0f * kCubic * v * v);
-    dx[k] = FloatToBf16(Bf16ToFloat(dy[k]) * (s + 2.0f * v * s * (1.0f - s) * du));
+    dx[k] = Store<T>(Load(dy[k]) * (s + 2.0f * v * s * (e * s) * du));
   }
+}
+
+MOTIONPIPE_CLONES void GeluForward(const uint16_t* x, uint16_t* y, int64_t n) {
+  GeluForwardLoop(x, y, n);
+}
+MOTIONPIPE_CLONES void GeluForward(const float* x, float* y, int64_t n) {
+  GeluForwardLoop(x, y, n);
+}
+MOTIONPIPE_CLONES void GeluBackward(const uint16_t* x, const uint16_t* dy, uint16_t* dx,
+                                    int64_t n) {
+  GeluBackwardLoop(x, dy, dx, n);
+}
+MOTIONPIPE_CLONES void GeluBackward(const float* x, const float* dy, float* dx, int64_t n) {
+  GeluBackwardLoop(x, dy, dx, n);
 }
 
 constexpr int64_t kGrain = 1 << 15;  // elements per task of torch's intra-op pool
@@ -103,12 +134,30 @@ uint16_t* Bf16Data(torch::Tensor& t) {
   return reinterpret_cast<uint16_t*>(t.data_ptr<at::BFloat16>());
 }
 
-struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction> {
+// A tensor's storage as the element type of the kernels: bf16 as raw 16-bit words, or float32.
+template <typename T>
+const T* Data(const torch::Tensor& t) {
+  if constexpr (std::is_same_v<T, uint16_t>)
+    return Bf16Data(t);
+  else
+    return t.data_ptr<float>();
+}
+template <typename T>
+T* Data(torch::Tensor& t) {
+  if constexpr (std::is_same_v<T, uint16_t>)
+    return Bf16Data(t);
+  else
+    return t.data_ptr<float>();
+}
+
+// T: uint16_t for bf16 tensors, float for float32 ones.
+template <typename T>
+struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction<T>> {
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x) {
     const auto input = x.contiguous();
     auto y = torch::empty_like(input);
-    const uint16_t* in = Bf16Data(input);
-    uint16_t* out = Bf16Data(y);
+    const T* in = Data<T>(input);
+    T* out = Data<T>(y);
     at::parallel_for(0, input.numel(), kGrain, [&](int64_t begin, int64_t end) {
       GeluForward(in + begin, out + begin, end - begin);
     });
@@ -119,11 +168,11 @@ struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction> {
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
                                                  torch::autograd::variable_list grads) {
     const auto input = ctx->get_saved_variables()[0];
-    const auto dy = grads[0].to(torch::kBFloat16).contiguous();
+    const auto dy = grads[0].to(input.scalar_type()).contiguous();
     auto dx = torch::empty_like(input);
-    const uint16_t* in = Bf16Data(input);
-    const uint16_t* g = Bf16Data(dy);
-    uint16_t* out = Bf16Data(dx);
+    const T* in = Data<T>(input);
+    const T* g = Data<T>(dy);
+    T* out = Data<T>(dx);
     at::parallel_for(0, input.numel(), kGrain, [&](int64_t begin, int64_t end) {
       GeluBackward(in + begin, g + begin, out + begin, end - begin);
     });
@@ -732,7 +781,14 @@ torch::Tensor GeluTanhBf16(const torch::Tensor& x) {
   if (x.scalar_type() != torch::kBFloat16)
     throw std::invalid_argument("GeluTanhBf16 takes bf16, not " +
                                 std::string(c10::toString(x.scalar_type())));
-  return GeluTanhFunction::apply(x);
+  return GeluTanhFunction<uint16_t>::apply(x);
+}
+
+torch::Tensor GeluTanhFloat32(const torch::Tensor& x) {
+  if (x.scalar_type() != torch::kFloat)
+    throw std::invalid_argument("GeluTanhFloat32 takes float32, not " +
+                                std::string(c10::toString(x.scalar_type())));
+  return GeluTanhFunction<float>::apply(x);
 }
 
 torch::Tensor ModulatedLayerNormBf16(const torch::Tensor& x, const torch::Tensor& scale,

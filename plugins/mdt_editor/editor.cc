@@ -183,8 +183,9 @@ nlohmann::json EditorOptions::ToJson() const {
 }
 
 torch::Tensor GeluTanh(const torch::Tensor& x) {
-  if (x.scalar_type() != torch::kBFloat16) return torch::gelu(x, "tanh");
-  return nn::GeluTanhBf16(x);
+  if (x.scalar_type() == torch::kBFloat16) return nn::GeluTanhBf16(x);
+  if (x.scalar_type() == torch::kFloat) return nn::GeluTanhFloat32(x);
+  return torch::gelu(x, "tanh");
 }
 
 torch::Tensor Modulate(const torch::Tensor& x, const torch::Tensor& scale,

@@ -85,6 +85,49 @@ TEST(Fused, GeluTanhBf16KeepsTheEdgesOfItsDomain) {
   EXPECT_THROW(GeluTanhBf16(torch::ones({3})), std::invalid_argument);
 }
 
+// tanh-GELU of a float32 tensor: within a few float32 roundings of the float64 function and of
+// LibTorch's float32 kernel, no farther from float64 on average than LibTorch's; the gradient as
+// near the float64 derivative as LibTorch's float32 one; the edges of the domain kept.
+TEST(Fused, GeluTanhFloat32IsTheFunction) {
+  torch::manual_seed(12);
+  const auto x = (3 * torch::randn({100003})).requires_grad_();
+  const auto y = GeluTanhFloat32(x);
+  ASSERT_EQ(y.scalar_type(), torch::kFloat);
+  const auto x64 = x.detach().to(torch::kFloat64);
+  const auto exact = ExactGelu(x64);
+  const auto reference = torch::gelu(x.detach(), "tanh");
+  // Relative to the value, with an absolute floor of 1e-6 of the input's scale (GELU passes
+  // through 0, and its far negative tail is tiny).
+  const auto bound = 8 * 1.2e-7 * exact.abs() + 1e-6 * x64.abs();
+  EXPECT_TRUE((y.detach().to(torch::kFloat64) - exact).abs().le(bound).all().item<bool>());
+  EXPECT_TRUE((reference.to(torch::kFloat64) - exact).abs().le(bound).all().item<bool>());
+  const auto error = [&](const torch::Tensor& v) {
+    return (v.to(torch::kFloat64) - exact).abs().mean().item<double>();
+  };
+  EXPECT_LE(error(y.detach()), error(reference) * 1.5);
+
+  const auto dy = torch::randn({100003});
+  const auto dx = torch::autograd::grad({y}, {x}, {dy})[0];
+  const auto x32 = x.detach().requires_grad_();
+  const auto dx32 = torch::autograd::grad({torch::gelu(x32, "tanh")}, {x32}, {dy})[0];
+  const auto dx64 = dy.to(torch::kFloat64) * ExactGeluDerivative(x64);
+  const auto grad_error = [&](const torch::Tensor& v) {
+    return (v.to(torch::kFloat64) - dx64).abs().mean().item<double>();
+  };
+  EXPECT_LE(grad_error(dx), grad_error(dx32) * 1.5);
+  EXPECT_LT((dx.to(torch::kFloat64) - dx64).abs().max().item<double>(),
+            1e-5 * dy.abs().max().item<double>());
+
+  const float inf = std::numeric_limits<float>::infinity();
+  const auto edges = GeluTanhFloat32(torch::tensor({0.0f, 200.0f, -200.0f, inf, std::nanf("")}));
+  EXPECT_EQ(edges[0].item<float>(), 0.0f);
+  EXPECT_EQ(edges[1].item<float>(), 200.0f);
+  EXPECT_LE(std::abs(edges[2].item<float>()), 1e-30f);
+  EXPECT_EQ(edges[3].item<float>(), inf);
+  EXPECT_TRUE(std::isnan(edges[4].item<float>()));
+  EXPECT_THROW(GeluTanhFloat32(torch::ones({3}, torch::kBFloat16)), std::invalid_argument);
+}
+
 // adaLN's modulated LayerNorm against the float64 expression LN(x) (1 + scale) + shift: the output
 // within one bf16 rounding (plus the float32 moments' rounding), the gradients to x as float32's
 // precision allows, to scale and shift (sums over t) within one bf16 rounding; on a stream far
