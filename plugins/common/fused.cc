@@ -574,18 +574,15 @@ MOTIONPIPE_CLONES void MultiplyInto(float* x, const float* y, int64_t n) {
   for (int64_t j = 0; j < n; ++j) x[j] *= y[j];
 }
 
-// The shapes of one call: N examples of H heads, matrices of L x Dh, on the in_proj output
-// qkv [L, N, 3 H Dh] (each token's q, k, v, each of H heads of Dh) and the output [L, N, H Dh].
-// Matrix b = n H + h; its row i of q starts at qkv + i ld_in + n 3 H Dh + h Dh (k H Dh further,
-// v 2 H Dh), of out at out + i ld_out + n H Dh + h Dh.
+// The shapes of one call: N examples of H heads, matrices of L x Dh (matrix b = n H + h), on the
+// in_proj output qkv [L, N, 3 H Dh] (each token's q, k, v, each of H heads of Dh) and the output
+// [L, N, H Dh]; ld_in and ld_out are their row strides (one token).
 struct AttentionShape {
   int64_t n, heads, l, d, l16;  // d = Dh; l16: L rounded up to a multiple of 16 (scratch rows)
   int64_t width() const { return heads * d; }
   int64_t ld_in() const { return n * 3 * width(); }
   int64_t ld_out() const { return n * width(); }
   int64_t matrices() const { return n * heads; }
-  int64_t q_at(int64_t b) const { return (b / heads) * 3 * width() + (b % heads) * d; }
-  int64_t out_at(int64_t b) const { return (b / heads) * width() + (b % heads) * d; }
 };
 
 AttentionShape CheckAttention(const torch::Tensor& qkv, int64_t heads, const torch::Tensor& padding,
@@ -632,29 +629,28 @@ std::pair<std::vector<float>, std::vector<char>> KeptKeys(const torch::Tensor& p
 // products read their operands from the scratch, where they stay in cache, and each row of qkv is
 // touched once per pass. Taking every head apart into [3, N H, L, Dh] first (LibTorch's route, or a
 // pass of our own) moves the 4 MB twice more through memory.
-void GatherExample(const float* qkv, const AttentionShape& s, int64_t n, float scale, float* blk) {
+// kGather: qkv's rows of example n into blk; else blk into them. The scale multiplies q's part
+// on the way either way.
+template <bool kGather>
+void CopyExample(const AttentionShape& s, int64_t n, float scale, float* qkv, float* blk) {
   for (int64_t i = 0; i < s.l; ++i) {
-    const float* row = qkv + i * s.ld_in() + n * 3 * s.width();
+    float* row = qkv + i * s.ld_in() + n * 3 * s.width();
     for (int64_t part = 0; part < 3; ++part)
       for (int64_t h = 0; h < s.heads; ++h) {
-        const float* from = row + part * s.width() + h * s.d;
-        float* to = blk + ((part * s.heads + h) * s.l + i) * s.d;
+        float* wide = row + part * s.width() + h * s.d;
+        float* narrow = blk + ((part * s.heads + h) * s.l + i) * s.d;
+        const float* from = kGather ? wide : narrow;
+        float* to = kGather ? narrow : wide;
         const float f = part == 0 ? scale : 1.0f;
         for (int64_t j = 0; j < s.d; ++j) to[j] = from[j] * f;
       }
   }
 }
+void GatherExample(const float* qkv, const AttentionShape& s, int64_t n, float scale, float* blk) {
+  CopyExample<true>(s, n, scale, const_cast<float*>(qkv), blk);  // qkv only read
+}
 void ScatterExample(const float* blk, const AttentionShape& s, int64_t n, float scale, float* qkv) {
-  for (int64_t i = 0; i < s.l; ++i) {
-    float* row = qkv + i * s.ld_in() + n * 3 * s.width();
-    for (int64_t part = 0; part < 3; ++part)
-      for (int64_t h = 0; h < s.heads; ++h) {
-        const float* from = blk + ((part * s.heads + h) * s.l + i) * s.d;
-        float* to = row + part * s.width() + h * s.d;
-        const float f = part == 0 ? scale : 1.0f;
-        for (int64_t j = 0; j < s.d; ++j) to[j] = from[j] * f;
-      }
-  }
+  CopyExample<false>(s, n, scale, qkv, const_cast<float*>(blk));  // blk only read
 }
 // One example's [H, L, Dh] from and to its rows of a [L, N, H Dh] tensor (the output, its
 // gradient).

@@ -60,7 +60,7 @@ torch::Tensor ApplySequential(torch::nn::Sequential layers, torch::Tensor x) {
 }
 
 SelfAttentionImpl::SelfAttentionImpl(int64_t dim, int64_t heads, double dropout)
-    : dim_(dim), heads_(heads), dropout_(dropout) {
+    : heads_(heads), dropout_(dropout) {
   if (dim % heads != 0)
     throw std::invalid_argument("attention: dim " + std::to_string(dim) +
                                 " is not divisible by heads " + std::to_string(heads));

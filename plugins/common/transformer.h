@@ -50,7 +50,7 @@ class SelfAttentionImpl : public torch::nn::Module {
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& padding);
 
  private:
-  int64_t dim_, heads_;
+  int64_t heads_;
   double dropout_;
   torch::nn::Linear in_proj_{nullptr}, out_proj_{nullptr};
 };
