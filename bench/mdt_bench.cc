@@ -9,8 +9,8 @@
 // does; the fused kernels (plugins/common/fused.h: tanh-GELU, adaLN's modulated LayerNorm and
 // gated residual, clip + AdamW, attention's float32 core) and ATen's linear (nn::ApplyLinear, for a
 // DiT block's four linears) are then timed against the LibTorch route they replace on the same
-// inputs at the training shape, forward and backward, with the share each saves of the step the
-// train stage runs here (bf16, or float32 where the CPU would emulate bf16 products).
+// inputs at the training shape, forward and backward, with the share each saves of the step of its
+// precision (float32; bf16 where this CPU has bf16 products).
 // With --profile N, N steps of the first size, in the precision the train stage runs for bf16 on
 // this CPU (float32 where its bf16 products are emulated), run under LibTorch's profiler and the
 // operators are listed by their own (self) time per step, to show where a step goes besides the
@@ -266,11 +266,15 @@ double PythonReference(const Args& a, const Size& size, EditorNet& net, const Tr
   return json::parse(out.substr(out.rfind('{'))).at("samples_per_second").get<double>();
 }
 
+// Milliseconds of one training step in each precision.
+struct StepMs {
+  double float32 = 0, bf16 = 0;
+};
+
 // One size: our training step's samples/s, the reference's, and our GFLOP/s against the sgemm
 // rate measured here; with `profile`, then where a step's time goes. Returns the milliseconds of
-// the step the train stage runs for bf16 on this CPU (float32 where the bf16 products are
-// emulated).
-double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool profile) {
+// a float32 step and of a step under bf16 autocast (timed as LibTorch runs it on this CPU).
+StepMs BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool profile) {
   torch::manual_seed(1);
   EditorNet net = Build(size);
   const CosineSchedule schedule(300);
@@ -321,7 +325,7 @@ double BenchTraining(const Args& a, const Size& size, const TrainBatch& b, bool 
   const nn::Precision profiled =
       nn::EffectivePrecision(nn::Precision::kBf16, nn::CpuHasNativeBf16());
   if (profile) Profile(a.profile, nn::PrecisionName(profiled), [&] { step(profiled); });
-  return 1e3 * static_cast<double>(batch) / (profiled == nn::Precision::kBf16 ? bf16 : cpp);
+  return {1e3 * static_cast<double>(batch) / cpp, 1e3 * static_cast<double>(batch) / bf16};
 }
 
 // Milliseconds per call of `f`: the best of five rounds of `reps` calls after one warm-up call.
@@ -341,13 +345,12 @@ double MsPerCall(F&& f, int reps) {
 // DiT's tanh-GELU forward and backward over one block's MLP activation in bf16 (batch x (2 frames
 // + 1) tokens x ff; LibTorch's route is the float32 kernel between two conversions, what the MDT
 // ran before; `layers` calls a step), adaLN and the linears under bf16 autocast, clipping + AdamW
-// over the net's parameters (one call), and attention's core in float32. "of a step": what each
-// saves, as a share of the step without it (the step above runs them), for the kernels of the
-// step's precision.
-void BenchFused(const Args& a, const Size& size, double step_ms) {
-  // The step of the table: the one the train stage runs for bf16 on this CPU.
-  const nn::Precision stepped =
-      nn::EffectivePrecision(nn::Precision::kBf16, nn::CpuHasNativeBf16());
+// over the net's parameters (one call), and attention's core and adaLN in float32. "of a step":
+// what each saves, as a share of the step of its precision without the kernels of that precision
+// (the steps above run them): a float32 kernel of the float32 step, a bf16 one of the bf16 step
+// where this CPU has bf16 products (elsewhere the train stage runs bf16 as float32).
+void BenchFused(const Args& a, const Size& size, const StepMs& step_ms) {
+  const bool native_bf16 = nn::CpuHasNativeBf16();
   struct Row {
     std::string name;
     double torch_ms, fused_ms;
@@ -414,6 +417,34 @@ void BenchFused(const Args& a, const Size& size, double step_ms) {
                      MsPerCall([&] { gated(false); }, 20), MsPerCall([&] { gated(true); }, 20),
                      2 * size.layers});
   }
+  {
+    // The same in a float32 step: float32 modulation and sub-layer output.
+    const auto x = torch::randn({tokens, a.batch, size.dim});
+    const auto scale = torch::randn({1, a.batch, size.dim});
+    const auto shift = torch::randn({1, a.batch, size.dim});
+    const auto dy = torch::randn({tokens, a.batch, size.dim});
+    const auto modulate = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      const auto si = scale.detach().requires_grad_(), bi = shift.detach().requires_grad_();
+      const auto y = fused ? nn::ModulatedLayerNormFloat32(xi, si, bi, 1e-6)
+                           : torch::layer_norm(xi, {size.dim}, {}, {}, 1e-6) * (1 + si) + bi;
+      y.backward(dy);
+    };
+    table.push_back(
+        {"adaLN LN(x)(1+scale)+shift, float32 [" + shape + std::to_string(size.dim) + "]",
+         MsPerCall([&] { modulate(false); }, 20), MsPerCall([&] { modulate(true); }, 20),
+         2 * size.layers + 1, false});
+    const auto y = torch::randn({tokens, a.batch, size.dim});
+    const auto gated = [&](bool fused) {
+      const auto xi = x.detach().requires_grad_();
+      const auto gi = scale.detach().requires_grad_(), yi = y.detach().requires_grad_();
+      const auto h = fused ? nn::GatedResidualFloat32(xi, gi, yi) : xi + gi * yi;
+      h.backward(dy);
+    };
+    table.push_back({"adaLN x + gate y, float32 [" + shape + std::to_string(size.dim) + "]",
+                     MsPerCall([&] { gated(false); }, 20), MsPerCall([&] { gated(true); }, 20),
+                     2 * size.layers, false});
+  }
   // A DiT block's four linears under bf16 autocast: torch::nn::Linear::forward (matmul, then the
   // bias in a second pass) against ATen's linear (nn::ApplyLinear: one addmm).
   for (const auto& [in, out, what] :
@@ -473,13 +504,17 @@ void BenchFused(const Args& a, const Size& size, double step_ms) {
                      MsPerCall([&] { attend(false); }, 10), MsPerCall([&] { attend(true); }, 10),
                      size.layers + size.cond_layers, false});
   }
-  const auto counts = [&](const Row& row) {
-    return row.both || row.bf16 == (stepped == nn::Precision::kBf16);
+  // Whether a row runs in the step of a precision (bf16 = true: under bf16 autocast).
+  const auto runs_in = [](const Row& row, bool bf16) { return row.both || row.bf16 == bf16; };
+  const auto saved_in = [&](bool bf16) {
+    double saved = 0;
+    for (const Row& row : table)
+      if (runs_in(row, bf16))
+        saved += static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms);
+    return saved;
   };
-  double saved = 0;
-  for (const Row& row : table)
-    if (counts(row)) saved += static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms);
-  const double unfused = step_ms + saved;
+  const double unfused32 = step_ms.float32 + saved_in(false),
+               unfused16 = step_ms.bf16 + saved_in(true);
   std::printf(
       "\nfused kernels (plugins/common/fused.h) and ATen's linear, %s size, batch %lld, %lld "
       "frames, %lld thread(s): ms per call fwd+bwd, best of 5\n",
@@ -490,16 +525,19 @@ void BenchFused(const Args& a, const Size& size, double step_ms) {
   for (const Row& row : table) {
     std::printf("%-52s %9.3f %9.3f %6.2fx %6lld ", row.name.c_str(), row.torch_ms, row.fused_ms,
                 row.torch_ms / row.fused_ms, static_cast<long long>(row.calls));
-    if (counts(row))
-      std::printf("%10.1f%%\n",
-                  100 * static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms) / unfused);
+    const double saved = static_cast<double>(row.calls) * (row.torch_ms - row.fused_ms);
+    if (!row.bf16 || row.both)
+      std::printf("%10.1f%%%s\n", 100 * saved / unfused32, row.both ? " (f32)" : "");
+    else if (native_bf16)
+      std::printf("%10.1f%%\n", 100 * saved / unfused16);
     else
-      std::printf("%11s\n", row.bf16 ? "(bf16 only)" : "(f32 only)");
+      std::printf("%11s\n", "(bf16: none here)");
   }
-  std::printf(
-      "%s step (the train stage's here) %.1f ms with these; %.1f ms without (estimated): "
-      "%.1f%% saved\n",
-      nn::PrecisionName(stepped), step_ms, unfused, 100 * saved / unfused);
+  std::printf("float32 step %.1f ms with these; %.1f ms without (estimated): %.1f%% saved\n",
+              step_ms.float32, unfused32, 100 * saved_in(false) / unfused32);
+  if (native_bf16)
+    std::printf("bf16 step %.1f ms with these; %.1f ms without (estimated): %.1f%% saved\n",
+                step_ms.bf16, unfused16, 100 * saved_in(true) / unfused16);
   std::fflush(stdout);
 }
 
@@ -578,7 +616,7 @@ int main(int argc, char** argv) {
               "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
               "bf16/f32");
   const TrainBatch batch = MakeTrainBatch(*args);
-  std::vector<std::pair<Size, double>> step_ms;
+  std::vector<std::pair<Size, StepMs>> step_ms;
   for (const Size& size : all) {
     if (args->sizes.find(size.name) != std::string::npos) {
       const bool profile = args->profile > 0 && step_ms.empty();

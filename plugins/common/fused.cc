@@ -181,18 +181,18 @@ struct GeluTanhFunction : torch::autograd::Function<GeluTanhFunction<T>> {
 };
 
 // adaLN-Zero's modulated LayerNorm over rows of d: for rows [begin, end) of x ([T*N, d], row
-// r = t N + n), y = (x - mean) rstd (1 + scale[n]) + shift[n] rounded to bf16; keeps each row's
-// mean and 1/sqrt(var + eps) for the backward pass. Two passes over the row for the moments (the
-// variance from the centred values).
-MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const uint16_t* scale,
-                                            const uint16_t* shift, uint16_t* y, float* mean,
-                                            float* rstd, int64_t begin, int64_t end, int64_t n,
-                                            int64_t d, float eps) {
+// r = t N + n), y = (x - mean) rstd (1 + scale[n]) + shift[n] (T: rounded to bf16 once, or kept
+// float32); keeps each row's mean and 1/sqrt(var + eps) for the backward pass. Two passes over the
+// row for the moments (the variance from the centred values).
+template <typename T>
+__attribute__((always_inline)) inline void ModulatedNormForwardLoop(
+    const float* x, const T* scale, const T* shift, T* y, float* mean, float* rstd, int64_t begin,
+    int64_t end, int64_t n, int64_t d, float eps) {
   for (int64_t r = begin; r < end; ++r) {
     const float* row = x + r * d;
-    const uint16_t* s = scale + (r % n) * d;
-    const uint16_t* b = shift + (r % n) * d;
-    uint16_t* out = y + r * d;
+    const T* s = scale + (r % n) * d;
+    const T* b = shift + (r % n) * d;
+    T* out = y + r * d;
     float sum = 0;
 #pragma omp simd reduction(+ : sum)
     for (int64_t k = 0; k < d; ++k) sum += row[k];
@@ -203,7 +203,7 @@ MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const uint16_t* scal
     const float inv = 1.0f / std::sqrt(squares / static_cast<float>(d) + eps);
 #pragma omp simd
     for (int64_t k = 0; k < d; ++k)
-      out[k] = FloatToBf16((row[k] - mu) * inv * (1.0f + Bf16ToFloat(s[k])) + Bf16ToFloat(b[k]));
+      out[k] = Store<T>((row[k] - mu) * inv * (1.0f + Load(s[k])) + Load(b[k]));
     mean[r] = mu;
     rstd[r] = inv;
   }
@@ -212,26 +212,25 @@ MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const uint16_t* scal
 // Its gradient over rows [begin, end), in memory order: with xhat = (x - mean) rstd and
 // g = dy (1 + scale), dx = rstd (g - mean(g) - xhat mean(g xhat)); each row's dy xhat and dy are
 // added to its batch element's float32 sums (sum_scale, sum_shift: [N, d]) for dscale and dshift.
-MOTIONPIPE_CLONES void ModulatedNormBackward(const float* x, const uint16_t* scale,
-                                             const uint16_t* dy, const float* mean,
-                                             const float* rstd, float* dx, float* sum_scale,
-                                             float* sum_shift, int64_t begin, int64_t end,
-                                             int64_t n, int64_t d) {
+template <typename T>
+__attribute__((always_inline)) inline void ModulatedNormBackwardLoop(
+    const float* x, const T* scale, const T* dy, const float* mean, const float* rstd, float* dx,
+    float* sum_scale, float* sum_shift, int64_t begin, int64_t end, int64_t n, int64_t d) {
   for (int64_t r = begin; r < end; ++r) {
     const int64_t e = r % n;
-    const uint16_t* s = scale + e * d;
+    const T* s = scale + e * d;
     float* ss = sum_scale + e * d;
     float* sb = sum_shift + e * d;
     const float* row = x + r * d;
-    const uint16_t* g_row = dy + r * d;
+    const T* g_row = dy + r * d;
     float* out = dx + r * d;
     const float mu = mean[r], inv = rstd[r];
     float g_sum = 0, gx_sum = 0;
 #pragma omp simd reduction(+ : g_sum, gx_sum)
     for (int64_t k = 0; k < d; ++k) {
-      const float g = Bf16ToFloat(g_row[k]);
+      const float g = Load(g_row[k]);
       const float xhat = (row[k] - mu) * inv;
-      const float gs = g * (1.0f + Bf16ToFloat(s[k]));
+      const float gs = g * (1.0f + Load(s[k]));
       g_sum += gs;
       gx_sum += gs * xhat;
       ss[k] += g * xhat;
@@ -241,39 +240,90 @@ MOTIONPIPE_CLONES void ModulatedNormBackward(const float* x, const uint16_t* sca
 #pragma omp simd
     for (int64_t k = 0; k < d; ++k) {
       const float xhat = (row[k] - mu) * inv;
-      out[k] = inv * (Bf16ToFloat(g_row[k]) * (1.0f + Bf16ToFloat(s[k])) - a - xhat * c);
+      out[k] = inv * (Load(g_row[k]) * (1.0f + Load(s[k])) - a - xhat * c);
     }
   }
 }
 
 // h = x + gate[n] y over rows [begin, end).
-MOTIONPIPE_CLONES void GatedResidualForward(const float* x, const uint16_t* gate, const uint16_t* y,
-                                            float* h, int64_t begin, int64_t end, int64_t n,
-                                            int64_t d) {
+template <typename T>
+__attribute__((always_inline)) inline void GatedResidualForwardLoop(const float* x, const T* gate,
+                                                                    const T* y, float* h,
+                                                                    int64_t begin, int64_t end,
+                                                                    int64_t n, int64_t d) {
   for (int64_t r = begin; r < end; ++r) {
-    const uint16_t* g = gate + (r % n) * d;
+    const T* g = gate + (r % n) * d;
 #pragma omp simd
-    for (int64_t k = 0; k < d; ++k)
-      h[r * d + k] = x[r * d + k] + Bf16ToFloat(g[k]) * Bf16ToFloat(y[r * d + k]);
+    for (int64_t k = 0; k < d; ++k) h[r * d + k] = x[r * d + k] + Load(g[k]) * Load(y[r * d + k]);
   }
 }
 
-// Its gradient over rows [begin, end), in memory order: dy = dh gate (rounded); each row's dh y is
-// added to its batch element's float32 sum ([N, d]) for dgate; dx is dh itself.
-MOTIONPIPE_CLONES void GatedResidualBackward(const float* dh, const uint16_t* gate,
-                                             const uint16_t* y, uint16_t* dy, float* sum,
-                                             int64_t begin, int64_t end, int64_t n, int64_t d) {
+// Its gradient over rows [begin, end), in memory order: dy = dh gate (T: rounded to bf16, or
+// float32); each row's dh y is added to its batch element's float32 sum ([N, d]) for dgate; dx is
+// dh itself.
+template <typename T>
+__attribute__((always_inline)) inline void GatedResidualBackwardLoop(const float* dh, const T* gate,
+                                                                     const T* y, T* dy, float* sum,
+                                                                     int64_t begin, int64_t end,
+                                                                     int64_t n, int64_t d) {
   for (int64_t r = begin; r < end; ++r) {
-    const uint16_t* g = gate + (r % n) * d;
+    const T* g = gate + (r % n) * d;
     float* acc = sum + (r % n) * d;
     const int64_t o = r * d;
 #pragma omp simd
     for (int64_t k = 0; k < d; ++k) {
       const float v = dh[o + k];
-      acc[k] += v * Bf16ToFloat(y[o + k]);
-      dy[o + k] = FloatToBf16(v * Bf16ToFloat(g[k]));
+      acc[k] += v * Load(y[o + k]);
+      dy[o + k] = Store<T>(v * Load(g[k]));
     }
   }
+}
+
+// The loops above for bf16 (raw 16-bit words) and float32 modulation, each compiled for every
+// target of MOTIONPIPE_CLONES.
+MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const uint16_t* scale,
+                                            const uint16_t* shift, uint16_t* y, float* mean,
+                                            float* rstd, int64_t begin, int64_t end, int64_t n,
+                                            int64_t d, float eps) {
+  ModulatedNormForwardLoop(x, scale, shift, y, mean, rstd, begin, end, n, d, eps);
+}
+MOTIONPIPE_CLONES void ModulatedNormBackward(const float* x, const uint16_t* scale,
+                                             const uint16_t* dy, const float* mean,
+                                             const float* rstd, float* dx, float* sum_scale,
+                                             float* sum_shift, int64_t begin, int64_t end,
+                                             int64_t n, int64_t d) {
+  ModulatedNormBackwardLoop(x, scale, dy, mean, rstd, dx, sum_scale, sum_shift, begin, end, n, d);
+}
+MOTIONPIPE_CLONES void GatedResidualForward(const float* x, const uint16_t* gate, const uint16_t* y,
+                                            float* h, int64_t begin, int64_t end, int64_t n,
+                                            int64_t d) {
+  GatedResidualForwardLoop(x, gate, y, h, begin, end, n, d);
+}
+MOTIONPIPE_CLONES void GatedResidualBackward(const float* dh, const uint16_t* gate,
+                                             const uint16_t* y, uint16_t* dy, float* sum,
+                                             int64_t begin, int64_t end, int64_t n, int64_t d) {
+  GatedResidualBackwardLoop(dh, gate, y, dy, sum, begin, end, n, d);
+}
+MOTIONPIPE_CLONES void ModulatedNormForward(const float* x, const float* scale, const float* shift,
+                                            float* y, float* mean, float* rstd, int64_t begin,
+                                            int64_t end, int64_t n, int64_t d, float eps) {
+  ModulatedNormForwardLoop(x, scale, shift, y, mean, rstd, begin, end, n, d, eps);
+}
+MOTIONPIPE_CLONES void ModulatedNormBackward(const float* x, const float* scale, const float* dy,
+                                             const float* mean, const float* rstd, float* dx,
+                                             float* sum_scale, float* sum_shift, int64_t begin,
+                                             int64_t end, int64_t n, int64_t d) {
+  ModulatedNormBackwardLoop(x, scale, dy, mean, rstd, dx, sum_scale, sum_shift, begin, end, n, d);
+}
+MOTIONPIPE_CLONES void GatedResidualForward(const float* x, const float* gate, const float* y,
+                                            float* h, int64_t begin, int64_t end, int64_t n,
+                                            int64_t d) {
+  GatedResidualForwardLoop(x, gate, y, h, begin, end, n, d);
+}
+MOTIONPIPE_CLONES void GatedResidualBackward(const float* dh, const float* gate, const float* y,
+                                             float* dy, float* sum, int64_t begin, int64_t end,
+                                             int64_t n, int64_t d) {
+  GatedResidualBackwardLoop(dh, gate, y, dy, sum, begin, end, n, d);
 }
 
 // Runs `rows_kernel(begin, end, sums)` over the rows of [T, N, d] in at most one chunk of whole
@@ -295,10 +345,16 @@ std::vector<float> RowsWithSums(int64_t t_count, int64_t n, int64_t width, F&& r
   return sums;
 }
 
-MOTIONPIPE_CLONES void RoundToBf16(const float* in, uint16_t* out, int64_t count) {
+// float32 sums into a tensor's storage: rounded to bf16 or copied.
+MOTIONPIPE_CLONES void StoreSums(const float* in, uint16_t* out, int64_t count) {
 #pragma omp simd
   for (int64_t k = 0; k < count; ++k) out[k] = FloatToBf16(in[k]);
 }
+void StoreSums(const float* in, float* out, int64_t count) { std::copy(in, in + count, out); }
+
+// The tensor dtype of a kernel element type: bf16 for raw 16-bit words, else float32.
+template <typename T>
+constexpr torch::ScalarType kDtype = std::is_same_v<T, uint16_t> ? torch::kBFloat16 : torch::kFloat;
 
 // adaLN's stream x must be [T, N, d] float32.
 void CheckStream(const char* what, const torch::Tensor& x) {
@@ -307,33 +363,40 @@ void CheckStream(const char* what, const torch::Tensor& x) {
                                 std::string(c10::toString(x.scalar_type())) + " of " +
                                 std::to_string(x.dim()) + " dimensions");
 }
-// A per-element operand (scale, shift, gate) must be bf16 of [N, d] or [1, N, d]; returned as a
-// contiguous [N, d].
+// A per-element operand (scale, shift, gate) must be of `dtype` and [N, d] or [1, N, d];
+// returned as a contiguous [N, d].
 torch::Tensor PerElement(const char* what, const char* name, const torch::Tensor& v,
-                         const torch::Tensor& x) {
+                         const torch::Tensor& x, torch::ScalarType dtype) {
   const int64_t n = x.size(1), d = x.size(2);
   const bool shape_ok = (v.dim() == 2 && v.size(0) == n && v.size(1) == d) ||
                         (v.dim() == 3 && v.size(0) == 1 && v.size(1) == n && v.size(2) == d);
-  if (!shape_ok || v.scalar_type() != torch::kBFloat16)
-    throw std::invalid_argument(std::string(what) + ": " + name +
-                                " must be bf16 of [N, d] or [1, N, d] = [" + std::to_string(n) +
-                                ", " + std::to_string(d) + "]");
+  if (!shape_ok || v.scalar_type() != dtype)
+    throw std::invalid_argument(std::string(what) + ": " + name + " must be " +
+                                (dtype == torch::kBFloat16 ? "bf16" : "float32") +
+                                " of [N, d] or [1, N, d] = [" + std::to_string(n) + ", " +
+                                std::to_string(d) + "]");
   return v.reshape({n, d}).contiguous();
 }
 
-struct ModulatedLayerNormFunction : torch::autograd::Function<ModulatedLayerNormFunction> {
+// T: uint16_t for bf16 modulation and output, float for float32 ones.
+template <typename T>
+struct ModulatedLayerNormFunction : torch::autograd::Function<ModulatedLayerNormFunction<T>> {
+  static constexpr const char* kName =
+      std::is_same_v<T, uint16_t> ? "ModulatedLayerNormBf16" : "ModulatedLayerNormFloat32";
+
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x_in,
                                const torch::Tensor& scale_in, const torch::Tensor& shift_in,
                                double eps) {
+    CheckStream(kName, x_in);
     const auto x = x_in.contiguous();
-    const auto scale = PerElement("ModulatedLayerNormBf16", "scale", scale_in, x);
-    const auto shift = PerElement("ModulatedLayerNormBf16", "shift", shift_in, x);
+    const auto scale = PerElement(kName, "scale", scale_in, x, kDtype<T>);
+    const auto shift = PerElement(kName, "shift", shift_in, x, kDtype<T>);
     const int64_t rows = x.size(0) * x.size(1), n = x.size(1), d = x.size(2);
-    auto y = torch::empty(x.sizes(), x.options().dtype(torch::kBFloat16));
+    auto y = torch::empty(x.sizes(), x.options().dtype(kDtype<T>));
     auto mean = torch::empty({rows}, x.options());
     auto rstd = torch::empty({rows}, x.options());
     at::parallel_for(0, rows, std::max<int64_t>(1, kGrain / d), [&](int64_t begin, int64_t end) {
-      ModulatedNormForward(x.data_ptr<float>(), Bf16Data(scale), Bf16Data(shift), Bf16Data(y),
+      ModulatedNormForward(x.data_ptr<float>(), Data<T>(scale), Data<T>(shift), Data<T>(y),
                            mean.data_ptr<float>(), rstd.data_ptr<float>(), begin, end, n, d,
                            static_cast<float>(eps));
     });
@@ -347,36 +410,44 @@ struct ModulatedLayerNormFunction : torch::autograd::Function<ModulatedLayerNorm
                                                  torch::autograd::variable_list grads) {
     const auto saved = ctx->get_saved_variables();
     const auto &x = saved[0], &scale = saved[1], &mean = saved[2], &rstd = saved[3];
-    const auto dy = grads[0].to(torch::kBFloat16).contiguous();
+    const auto dy = grads[0].to(kDtype<T>).contiguous();
     const int64_t t_count = x.size(0), n = x.size(1), d = x.size(2);
     auto dx = torch::empty_like(x);
-    auto dscale = torch::empty({n, d}, x.options().dtype(torch::kBFloat16));
-    auto dshift = torch::empty({n, d}, x.options().dtype(torch::kBFloat16));
+    auto dscale = torch::empty({n, d}, x.options().dtype(kDtype<T>));
+    auto dshift = torch::empty({n, d}, x.options().dtype(kDtype<T>));
     const auto sums =
         RowsWithSums(t_count, n, 2 * n * d, [&](int64_t begin, int64_t end, float* acc) {
-          ModulatedNormBackward(x.data_ptr<float>(), Bf16Data(scale), Bf16Data(dy),
+          ModulatedNormBackward(x.data_ptr<float>(), Data<T>(scale), Data<T>(dy),
                                 mean.data_ptr<float>(), rstd.data_ptr<float>(),
                                 dx.data_ptr<float>(), acc, acc + n * d, begin, end, n, d);
         });
-    RoundToBf16(sums.data(), Bf16Data(dscale), n * d);
-    RoundToBf16(sums.data() + n * d, Bf16Data(dshift), n * d);
+    StoreSums(sums.data(), Data<T>(dscale), n * d);
+    StoreSums(sums.data() + n * d, Data<T>(dshift), n * d);
     return {dx, dscale.view(ctx->saved_data["scale_sizes"].toIntVector()),
             dshift.view(ctx->saved_data["shift_sizes"].toIntVector()), torch::Tensor()};
   }
 };
 
-struct GatedResidualFunction : torch::autograd::Function<GatedResidualFunction> {
+// T: uint16_t for bf16 gate and branch, float for float32 ones.
+template <typename T>
+struct GatedResidualFunction : torch::autograd::Function<GatedResidualFunction<T>> {
+  static constexpr const char* kName =
+      std::is_same_v<T, uint16_t> ? "GatedResidualBf16" : "GatedResidualFloat32";
+
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x_in,
                                const torch::Tensor& gate_in, const torch::Tensor& y_in) {
+    CheckStream(kName, x_in);
     const auto x = x_in.contiguous();
-    const auto gate = PerElement("GatedResidualBf16", "gate", gate_in, x);
-    if (y_in.sizes() != x.sizes() || y_in.scalar_type() != torch::kBFloat16)
-      throw std::invalid_argument("GatedResidualBf16: y must be bf16 of x's shape");
+    const auto gate = PerElement(kName, "gate", gate_in, x, kDtype<T>);
+    if (y_in.sizes() != x.sizes() || y_in.scalar_type() != kDtype<T>)
+      throw std::invalid_argument(std::string(kName) + ": y must be " +
+                                  (std::is_same_v<T, uint16_t> ? "bf16" : "float32") +
+                                  " of x's shape");
     const auto y = y_in.contiguous();
     const int64_t rows = x.size(0) * x.size(1), n = x.size(1), d = x.size(2);
     auto h = torch::empty_like(x);
     at::parallel_for(0, rows, std::max<int64_t>(1, kGrain / d), [&](int64_t begin, int64_t end) {
-      GatedResidualForward(x.data_ptr<float>(), Bf16Data(gate), Bf16Data(y), h.data_ptr<float>(),
+      GatedResidualForward(x.data_ptr<float>(), Data<T>(gate), Data<T>(y), h.data_ptr<float>(),
                            begin, end, n, d);
     });
     ctx->save_for_backward({gate, y});
@@ -393,10 +464,10 @@ struct GatedResidualFunction : torch::autograd::Function<GatedResidualFunction> 
     auto dy = torch::empty_like(y);
     auto dgate = torch::empty({n, d}, y.options());
     const auto sum = RowsWithSums(t_count, n, n * d, [&](int64_t begin, int64_t end, float* acc) {
-      GatedResidualBackward(dh.data_ptr<float>(), Bf16Data(gate), Bf16Data(y), Bf16Data(dy), acc,
+      GatedResidualBackward(dh.data_ptr<float>(), Data<T>(gate), Data<T>(y), Data<T>(dy), acc,
                             begin, end, n, d);
     });
-    RoundToBf16(sum.data(), Bf16Data(dgate), n * d);
+    StoreSums(sum.data(), Data<T>(dgate), n * d);
     return {dh, dgate.view(ctx->saved_data["gate_sizes"].toIntVector()), dy};
   }
 };
@@ -789,14 +860,22 @@ torch::Tensor GeluTanhFloat32(const torch::Tensor& x) {
 
 torch::Tensor ModulatedLayerNormBf16(const torch::Tensor& x, const torch::Tensor& scale,
                                      const torch::Tensor& shift, double eps) {
-  CheckStream("ModulatedLayerNormBf16", x);
-  return ModulatedLayerNormFunction::apply(x, scale, shift, eps);
+  return ModulatedLayerNormFunction<uint16_t>::apply(x, scale, shift, eps);
+}
+
+torch::Tensor ModulatedLayerNormFloat32(const torch::Tensor& x, const torch::Tensor& scale,
+                                        const torch::Tensor& shift, double eps) {
+  return ModulatedLayerNormFunction<float>::apply(x, scale, shift, eps);
 }
 
 torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gate,
                                 const torch::Tensor& y) {
-  CheckStream("GatedResidualBf16", x);
-  return GatedResidualFunction::apply(x, gate, y);
+  return GatedResidualFunction<uint16_t>::apply(x, gate, y);
+}
+
+torch::Tensor GatedResidualFloat32(const torch::Tensor& x, const torch::Tensor& gate,
+                                   const torch::Tensor& y) {
+  return GatedResidualFunction<float>::apply(x, gate, y);
 }
 
 torch::Tensor SelfAttentionFloat32(const torch::Tensor& qkv, int64_t heads,

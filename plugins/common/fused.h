@@ -9,6 +9,8 @@
 //    bf16 modulation under autocast, forward and backward in one pass each. LibTorch's route makes
 //    a pass per operator (LayerNorm, add, mul, add, the cast to bf16 for the next linear), and in
 //    backward as many again plus the sums over frames for the modulation's gradients.
+//    ModulatedLayerNormFloat32 and GatedResidualFloat32: the same passes where the modulation and
+//    the branch are float32 (a float32 step: a CPU without bf16 products).
 //  - SelfAttentionFloat32: multi-head attention's core (scores, key mask, softmax, dropout,
 //    weighted values) in float32, forward and backward, per (example, head) matrix in one pass
 //    through cache-resident buffers with a register-tiled GEMM, reading q, k, v from in_proj's
@@ -54,6 +56,18 @@ torch::Tensor ModulatedLayerNormBf16(const torch::Tensor& x, const torch::Tensor
 // dtypes or shapes are an error (std::invalid_argument).
 torch::Tensor GatedResidualBf16(const torch::Tensor& x, const torch::Tensor& gate,
                                 const torch::Tensor& y);
+
+// ModulatedLayerNormBf16's pass for float32 scale, shift and output (nothing rounded; the sums over
+// t of the modulation's gradients in float32, as LibTorch's route makes them); the same values as
+// LibTorch's LayerNorm, mul and add to float32 rounding. Other dtypes or shapes are an error
+// (std::invalid_argument).
+torch::Tensor ModulatedLayerNormFloat32(const torch::Tensor& x, const torch::Tensor& scale,
+                                        const torch::Tensor& shift, double eps);
+
+// GatedResidualBf16's pass for float32 gate and y: h = x + gate y, its gradient to x, gate (summed
+// over t) and y, all float32. Other dtypes or shapes are an error (std::invalid_argument).
+torch::Tensor GatedResidualFloat32(const torch::Tensor& x, const torch::Tensor& gate,
+                                   const torch::Tensor& y);
 
 // Multi-head self-attention's core, softmax(q k^T / sqrt(Dh) + mask) v per (example, head), on
 // in_proj's output as it is: qkv [L, N, 3 H Dh] float32 (each token's q, k, v, each of H heads of

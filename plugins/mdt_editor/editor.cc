@@ -193,6 +193,9 @@ torch::Tensor Modulate(const torch::Tensor& x, const torch::Tensor& scale,
   if (x.scalar_type() == torch::kFloat && scale.scalar_type() == torch::kBFloat16 &&
       shift.scalar_type() == torch::kBFloat16)
     return nn::ModulatedLayerNormBf16(x, scale, shift, 1e-6);
+  if (x.scalar_type() == torch::kFloat && scale.scalar_type() == torch::kFloat &&
+      shift.scalar_type() == torch::kFloat)
+    return nn::ModulatedLayerNormFloat32(x, scale, shift, 1e-6);
   return torch::layer_norm(x, {x.size(-1)}, {}, {}, 1e-6) * (1 + scale) + shift;
 }
 
@@ -201,6 +204,9 @@ torch::Tensor GatedResidual(const torch::Tensor& x, const torch::Tensor& gate,
   if (x.scalar_type() == torch::kFloat && gate.scalar_type() == torch::kBFloat16 &&
       y.scalar_type() == torch::kBFloat16)
     return nn::GatedResidualBf16(x, gate, y);
+  if (x.scalar_type() == torch::kFloat && gate.scalar_type() == torch::kFloat &&
+      y.scalar_type() == torch::kFloat)
+    return nn::GatedResidualFloat32(x, gate, y);
   return x + gate * y;
 }
 

@@ -305,9 +305,9 @@ TEST(Editor, Bf16TanhGeluIsTheFloat32FunctionRoundedOnce) {
 }
 
 // adaLN-Zero under bf16 autocast (a float32 stream, bf16 modulation and sub-layer output) takes the
-// fused kernels, whose own tests compare them with float64; the float32 model keeps LibTorch's
-// operators; both routes agree to bf16's precision.
-TEST(Editor, AdaLnUnderBf16TakesTheFusedKernels) {
+// bf16 fused kernels, the float32 model the float32 ones (their own tests compare them with
+// float64), other dtypes LibTorch's operators; the routes agree to bf16's precision.
+TEST(Editor, AdaLnTakesTheFusedKernelsOfItsPrecision) {
   torch::manual_seed(6);
   const auto x = torch::randn({7, 3, 16});
   const auto scale = 0.3 * torch::randn({1, 3, 16}), shift = 0.3 * torch::randn({1, 3, 16});
@@ -318,7 +318,14 @@ TEST(Editor, AdaLnUnderBf16TakesTheFusedKernels) {
   EXPECT_EQ(modulated.scalar_type(), torch::kBFloat16);
   EXPECT_TRUE(torch::equal(modulated, nn::ModulatedLayerNormBf16(x, s16, b16, 1e-6)));
   const auto plain = Modulate(x, scale, shift);
-  EXPECT_TRUE(torch::equal(plain, torch::layer_norm(x, {16}, {}, {}, 1e-6) * (1 + scale) + shift));
+  EXPECT_EQ(plain.scalar_type(), torch::kFloat32);
+  EXPECT_TRUE(torch::equal(plain, nn::ModulatedLayerNormFloat32(x, scale, shift, 1e-6)));
+  EXPECT_TRUE(torch::allclose(plain, torch::layer_norm(x, {16}, {}, {}, 1e-6) * (1 + scale) + shift,
+                              1e-5, 1e-5));
+  const auto x64 = x.to(torch::kFloat64), scale64 = scale.to(torch::kFloat64),
+             shift64 = shift.to(torch::kFloat64);
+  EXPECT_TRUE(torch::equal(Modulate(x64, scale64, shift64),
+                           torch::layer_norm(x64, {16}, {}, {}, 1e-6) * (1 + scale64) + shift64));
   const auto same = torch::layer_norm(x, {16}, {}, {}, 1e-6) * (1 + s16.to(torch::kFloat)) +
                     b16.to(torch::kFloat);
   EXPECT_LT((modulated.to(torch::kFloat) - same).abs().max().item<double>(),
@@ -327,7 +334,10 @@ TEST(Editor, AdaLnUnderBf16TakesTheFusedKernels) {
   const auto gated = GatedResidual(x, s16, y16);
   EXPECT_EQ(gated.scalar_type(), torch::kFloat32);
   EXPECT_TRUE(torch::equal(gated, nn::GatedResidualBf16(x, s16, y16)));
-  EXPECT_TRUE(torch::equal(GatedResidual(x, scale, y), x + scale * y));
+  EXPECT_TRUE(torch::equal(GatedResidual(x, scale, y), nn::GatedResidualFloat32(x, scale, y)));
+  EXPECT_TRUE(torch::allclose(GatedResidual(x, scale, y), x + scale * y, 1e-6, 1e-6));
+  const auto y64 = y.to(torch::kFloat64);
+  EXPECT_TRUE(torch::equal(GatedResidual(x64, scale64, y64), x64 + scale64 * y64));
   EXPECT_TRUE(
       torch::allclose(gated, x + s16.to(torch::kFloat) * y16.to(torch::kFloat), 1e-6, 1e-6));
 }

@@ -217,6 +217,73 @@ TEST(Fused, GatedResidualBf16IsTheFloat32Expression) {
                std::invalid_argument);
 }
 
+// The float32 adaLN kernels against float64 and LibTorch's float32 route, forward and backward, on
+// the shapes of the bf16 tests: the output, dx and the modulation's gradients (sums over t) within
+// a few float32 roundings of the float64 values and no farther from them than LibTorch's; the
+// [N, d] operand the same as [1, N, d]; other dtypes refused by name.
+TEST(Fused, AdaLnFloat32KernelsAreTheExpressionsInFloat32) {
+  torch::manual_seed(14);
+  const int64_t t = 9, n = 33, d = 129;
+  const auto x = (3 + 2 * torch::randn({t, n, d})).requires_grad_();
+  const auto scale = (0.5 * torch::randn({1, n, d})).requires_grad_();
+  const auto shift = (0.5 * torch::randn({1, n, d})).requires_grad_();
+  const auto dy = torch::randn({t, n, d});
+  const auto y = ModulatedLayerNormFloat32(x, scale, shift, 1e-6);
+  ASSERT_EQ(y.scalar_type(), torch::kFloat32);
+  const auto grads = torch::autograd::grad({y}, {x, scale, shift}, {dy});
+  const auto ours = std::vector<torch::Tensor>{y.detach(), grads[0], grads[1], grads[2]};
+
+  const auto x32 = x.detach().requires_grad_(), s32 = scale.detach().requires_grad_(),
+             b32 = shift.detach().requires_grad_();
+  const auto y32 = torch::layer_norm(x32, {d}, {}, {}, 1e-6) * (1 + s32) + b32;
+  const auto grads32 = torch::autograd::grad({y32}, {x32, s32, b32}, {dy});
+  const auto torch32 = std::vector<torch::Tensor>{y32.detach(), grads32[0], grads32[1], grads32[2]};
+
+  const auto x64 = x.detach().to(torch::kFloat64).requires_grad_();
+  const auto s64 = scale.detach().to(torch::kFloat64).requires_grad_();
+  const auto b64 = shift.detach().to(torch::kFloat64).requires_grad_();
+  const auto y64 = torch::layer_norm(x64, {d}, {}, {}, 1e-6) * (1 + s64) + b64;
+  const auto grads64 = torch::autograd::grad({y64}, {x64, s64, b64}, {dy.to(torch::kFloat64)});
+  const auto exact = std::vector<torch::Tensor>{y64.detach(), grads64[0], grads64[1], grads64[2]};
+  for (size_t k = 0; k < exact.size(); ++k) {
+    ASSERT_EQ(ours[k].sizes(), exact[k].sizes()) << k;
+    ASSERT_EQ(ours[k].scalar_type(), torch::kFloat32) << k;
+    const double top = exact[k].abs().max().item<double>();
+    const auto gap = [&](const torch::Tensor& v) {
+      return (v.to(torch::kFloat64) - exact[k]).abs().max().item<double>();
+    };
+    EXPECT_LT(gap(ours[k]), 1e-5 * top) << k;
+    EXPECT_LE(gap(ours[k]), 4 * gap(torch32[k]) + 1e-6 * top) << k;
+  }
+  EXPECT_TRUE(torch::equal(
+      y, ModulatedLayerNormFloat32(x.detach(), scale.detach()[0], shift.detach()[0], 1e-6)));
+
+  const auto gate = torch::randn({1, n, d}).requires_grad_();
+  const auto branch = torch::randn({t, n, d}).requires_grad_();
+  const auto stream = torch::randn({t, n, d}).requires_grad_();
+  const auto h = GatedResidualFloat32(stream, gate, branch);
+  ASSERT_EQ(h.scalar_type(), torch::kFloat32);
+  EXPECT_TRUE(torch::allclose(h, stream + gate * branch, 1e-6, 1e-6));
+  const auto dh = torch::randn({t, n, d});
+  const auto gated = torch::autograd::grad({h}, {stream, gate, branch}, {dh});
+  const auto g64 = gate.detach().to(torch::kFloat64), v64 = branch.detach().to(torch::kFloat64);
+  const auto dh64 = dh.to(torch::kFloat64);
+  EXPECT_TRUE(torch::equal(gated[0], dh));
+  EXPECT_LT((gated[1].to(torch::kFloat64) - (dh64 * v64).sum(0, true)).abs().max().item<double>(),
+            1e-5 * (dh64 * v64).abs().sum(0).max().item<double>());
+  EXPECT_LT((gated[2].to(torch::kFloat64) - dh64 * g64).abs().max().item<double>(), 1e-6);
+
+  EXPECT_THROW(ModulatedLayerNormFloat32(x.detach(), scale.detach().to(torch::kBFloat16),
+                                         shift.detach(), 1e-6),
+               std::invalid_argument);
+  EXPECT_THROW(
+      GatedResidualFloat32(stream.detach(), gate.detach(), branch.detach().to(torch::kBFloat16)),
+      std::invalid_argument);
+  EXPECT_THROW(
+      GatedResidualFloat32(stream.detach().to(torch::kFloat64), gate.detach(), branch.detach()),
+      std::invalid_argument);
+}
+
 // Clipping by the global norm and AdamW's step in one pass: the same parameters, moments and step
 // counts as torch::nn::utils::clip_grad_norm_ followed by torch::optim::AdamW::step, over steps
 // that clip and steps that do not, with decoupled weight decay; a parameter without a gradient is
