@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "../plugins/common/fused.h"
+#include "../plugins/common/precision.h"
 #include "../plugins/common/threads.h"
 #include "../plugins/common/train_order.h"
 #include "../plugins/temos_sinc/sinc_data.h"
@@ -300,8 +301,11 @@ void BenchTimeToQuality(const QualityArgs& a) {
   SaveNpy(a.dir + "/frames.npy", NpyArray::Int64({n}, s.frames));
   SaveNpy(a.dir + "/token_length.npy", NpyArray::Int64({n}, s.token_length));
 
-  // Our trainer: the train stage's step (float32 here; plugins/train Step) on the same stream,
-  // timed without the test encodings.
+  // Our trainer: the train stage's step (plugins/train Step: the forward pass under the step's
+  // precision) on the same stream, timed without the test encodings.
+  const nn::Precision precision = nn::EffectivePrecision(
+      a.bf16 ? nn::Precision::kBf16 : nn::Precision::kFloat32, nn::CpuHasNativeBf16());
+  const bool bf16 = precision == nn::Precision::kBf16;
   std::vector<torch::Tensor> params;
   for (auto& p : net->parameters())
     if (p.requires_grad()) params.push_back(p);
@@ -324,9 +328,12 @@ void BenchTimeToQuality(const QualityArgs& a) {
     const StepBatch sb = stream.Of(step);
     const auto started = Clock::now();
     torch::manual_seed(MixSeed(a.seed, static_cast<uint64_t>(step)));
-    const auto losses =
-        net->Losses(sb.groups, sb.batch.tensors.at("features"), sb.batch.tensors.at("padding"),
-                    sb.batch.tensors.at("example_seed"));
+    std::map<std::string, torch::Tensor> losses;
+    {
+      const nn::MixedPrecision autocast(precision);
+      losses = net->Losses(sb.groups, sb.batch.tensors.at("features"),
+                           sb.batch.tensors.at("padding"), sb.batch.tensors.at("example_seed"));
+    }
     optimizer.zero_grad();
     losses.at("loss").backward();
     for (auto& group : optimizer.param_groups())
@@ -348,7 +355,7 @@ void BenchTimeToQuality(const QualityArgs& a) {
             << a.dir << " --latent " << latent << " --layers " << size.layers << " --heads "
             << size.heads << " --ff " << size.ff << " --text-layers " << size.text_layers
             << " --vocab " << vocab << " --steps " << n << " --every " << a.every << " --threads "
-            << a.threads << " 2>&1";
+            << a.threads << (bf16 ? " --bf16" : "") << " 2>&1";
     const std::string out = Run(command.str());
     const json result = json::parse(out.substr(out.rfind("\n{") + 1));
     python_eval_loss = result.at("first_eval_loss").get<double>();
@@ -364,12 +371,12 @@ void BenchTimeToQuality(const QualityArgs& a) {
   std::printf(
       "\ntime to quality: the demo's TMR evaluator (10 fps, batch 32, lr 5e-4 on the 3,600-step "
       "schedule) at %s size (latent %lld, %lld layers, feed-forward %lld, %lld text layer(s)), "
-      "seed %llu, float32, %lld thread(s), %lld test singles; text-to-motion R@1 in batches of "
+      "seed %llu, %s, %lld thread(s), %lld test singles; text-to-motion R@1 in batches of "
       "32\n",
       size.name.c_str(), static_cast<long long>(size.latent), static_cast<long long>(size.layers),
       static_cast<long long>(size.ff), static_cast<long long>(size.text_layers),
-      static_cast<unsigned long long>(a.seed), static_cast<long long>(a.threads),
-      static_cast<long long>(test.features.size(1)));
+      static_cast<unsigned long long>(a.seed), nn::PrecisionName(precision),
+      static_cast<long long>(a.threads), static_cast<long long>(test.features.size(1)));
   std::printf(
       "same model: the first batch's loss, dropout off, initial weights: C++ %.6f, Python %.6f; "
       "C++ first training loss %.6f\n",

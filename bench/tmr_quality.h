@@ -32,6 +32,8 @@ struct QualityArgs {
   int64_t steps = 400, every = 50, threads = 1;
   uint64_t seed = 101;  // the training's (initial weights, batch order, draws): the demo's
   double bar = 40;
+  bool bf16 = false;  // both trainers' forward passes under bf16 autocast (where the CPU has bf16
+                      // products; elsewhere float32, as the train stage runs it)
   bool reference = true;
   std::string dir = "/tmp/motionpipe_tmr_quality";
 };

@@ -8,11 +8,12 @@
 // threads, measured in the same run. With --quality, only the time to a retrieval quality
 // (tmr_quality.h): the demo's TMR evaluator trained by us and by the PyTorch-Python reference on
 // the same stream, checked for test singles' text-to-motion R@1 40 (about 6 min; at the paper's
-// size, --quality-size paper, about an hour for 500 steps on one thread).
+// size, --quality-size paper, about an hour for 500 steps on one thread; --quality-precision bf16:
+// both trainers' forward passes under bf16 autocast, where the CPU has bf16 products).
 //   train_bench [--sizes demo,paper] [--steps K] [--threads T] [--batch N] [--frames F]
 //               [--no-reference] [--no-scaling] [--no-bf16]
 //   train_bench --quality [--spans SPANS.npz] [--quality-size demo|paper (default demo)]
-//               [--quality-steps S] [--every E] [--threads T]
+//               [--quality-steps S] [--every E] [--threads T] [--quality-precision float32|bf16]
 //               [--no-reference] [--seed S (default 101, the demo's)]
 //               [--dir DIR (default /tmp/motionpipe_tmr_quality)]
 #include <sys/wait.h>
@@ -104,6 +105,9 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       a.time_to_quality.spans = argv[++k];
     else if (!std::strcmp(argv[k], "--quality-size") && k + 1 < argc)
       a.time_to_quality.size = argv[++k];
+    else if (!std::strcmp(argv[k], "--quality-precision") && k + 1 < argc &&
+             (!std::strcmp(argv[k + 1], "float32") || !std::strcmp(argv[k + 1], "bf16")))
+      a.time_to_quality.bf16 = !std::strcmp(argv[++k], "bf16");
     else if (!std::strcmp(argv[k], "--quality-steps") && k + 1 < argc)
       a.time_to_quality.steps = std::atoll(argv[++k]);
     else if (!std::strcmp(argv[k], "--every") && k + 1 < argc)
@@ -286,7 +290,8 @@ int main(int argc, char** argv) {
                  "[--frames F] [--no-reference] [--no-scaling] [--no-bf16]\n"
                  "       train_bench --quality [--spans SPANS.npz] [--quality-size demo|paper] "
                  "[--quality-steps S] "
-                 "[--every E] [--threads T] [--no-reference] [--seed S] [--dir DIR]\n");
+                 "[--every E] [--threads T] [--quality-precision float32|bf16] [--no-reference] "
+                 "[--seed S] [--dir DIR]\n");
     return 2;
   }
   if (args->quality) {

@@ -7,7 +7,8 @@ the stream it writes into --dir: its initial weights (init/*.npy, C++ names), ev
 AdamW (betas 0.9/0.999, weight decay 0.01) after clipping the gradients' norm to 1, as the train
 stage. Before training and every --every steps the test singles' text and motion means go to
 python_<step>_text.npy / python_<step>_motion.npy for the C++ side to score; the training seconds
-exclude those encodings.
+exclude those encodings. --bf16: each step's forward pass under CPU bf16 autocast (the C++ side's
+--quality-precision bf16); the test means are encoded in float32 either way.
 
   /usr/bin/python3 bench/reference/tmr_ref.py --dir DIR --steps 400 --every 50 --threads 1
 prints one JSON line: {"first_eval_loss": ..., "checkpoints": [{"step": ..., "seconds": ...}], ...}
@@ -81,6 +82,7 @@ def main():
     add_model_arguments(p, vocab=800)
     p.add_argument("--steps", type=int, default=400)
     p.add_argument("--every", type=int, default=50)
+    p.add_argument("--bf16", action="store_true", help="each forward pass under CPU bf16 autocast")
     a = p.parse_args()
     torch.set_num_threads(a.threads)
     torch.manual_seed(1)
@@ -124,7 +126,8 @@ def main():
     for step in range(a.steps):
         inputs = batch(step)
         started = time.perf_counter()
-        loss = model.tmr_loss(*inputs)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=a.bf16):
+            loss = model.tmr_loss(*inputs)
         optimizer.zero_grad()
         loss.backward()
         for group in optimizer.param_groups:

@@ -92,6 +92,23 @@ class TmrReference(unittest.TestCase):
                 self.assertTrue(0 <= r1 <= 100, self.out)
         self.assertRegex(self.out, r"minutes of training to R@1 40: C\+\+ .*, Python ")
 
+    def test_bf16_trains_both_sides_under_autocast_where_the_cpu_has_bf16_products(self):
+        out = run([TRAIN_BENCH, "--quality", "--quality-precision", "bf16", "--spans", self.spans,
+                   "--quality-steps", "2", "--every", "2", "--dir", os.path.join(self.tmp, "bf16")]).stdout
+        precision = re.search(r"seed \d+, (float32|bf16), \d+ thread", out)
+        self.assertIsNotNone(precision, out)
+        with open("/proc/cpuinfo") as f:
+            flags = f.read()
+        native = "avx512_bf16" in flags or "amx_bf16" in flags
+        self.assertEqual(precision.group(1), "bf16" if native else "float32", out)
+        self.assert_same_loss(out)  # the eval-mode loss is float32 on both sides
+        rows = re.findall(r"^\s+(\d+)\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)\s+([0-9.]+)$", out, re.M)
+        self.assertEqual([int(r[0]) for r in rows], [0, 2], out)
+        bad = run([TRAIN_BENCH, "--quality", "--quality-precision", "fp8", "--spans", self.spans],
+                  expect_ok=False)
+        self.assertEqual(bad.returncode, 2)
+        self.assertIn("--quality-precision float32|bf16", bad.stderr)
+
     def test_a_missing_initial_weight_is_named(self):
         damaged = os.path.join(self.tmp, "damaged")
         shutil.copytree(self.dir, damaged)
