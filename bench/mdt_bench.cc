@@ -387,63 +387,39 @@ void BenchFused(const Args& a, const Size& size, const StepMs& step_ms) {
          MsPerCall([&] { gelu(false); }, 20), MsPerCall([&] { gelu(true); }, 20), size.layers,
          false});
   }
-  {
-    // adaLN around a sub-layer: float32 stream, bf16 modulation [1, N, d]; LibTorch's route ends
-    // in the cast to bf16 that the next linear makes under autocast.
+  for (const bool bf16 : {true, false}) {
+    // adaLN around a sub-layer: a float32 stream, the modulation and the sub-layer's output [1, N,
+    // d] in bf16 (a bf16 step; LibTorch's route ends in the cast to bf16 that the next linear makes
+    // under autocast) or in float32 (a float32 step).
+    const auto dtype = bf16 ? torch::kBFloat16 : torch::kFloat;
+    const std::string what = (bf16 ? " [" : ", float32 [") + shape + std::to_string(size.dim) + "]";
     const auto x = torch::randn({tokens, a.batch, size.dim});
-    const auto scale = torch::randn({1, a.batch, size.dim}).to(torch::kBFloat16);
-    const auto shift = torch::randn({1, a.batch, size.dim}).to(torch::kBFloat16);
-    const auto dy = torch::randn({tokens, a.batch, size.dim}).to(torch::kBFloat16);
+    const auto scale = torch::randn({1, a.batch, size.dim}).to(dtype);
+    const auto shift = torch::randn({1, a.batch, size.dim}).to(dtype);
+    const auto dy = torch::randn({tokens, a.batch, size.dim}).to(dtype);
     const auto modulate = [&](bool fused) {
       const auto xi = x.detach().requires_grad_();
       const auto si = scale.detach().requires_grad_(), bi = shift.detach().requires_grad_();
-      const auto y = fused ? nn::ModulatedLayerNormBf16(xi, si, bi, 1e-6)
-                           : (torch::layer_norm(xi, {size.dim}, {}, {}, 1e-6) * (1 + si) + bi)
-                                 .to(torch::kBFloat16);
+      const auto y =
+          !fused ? (torch::layer_norm(xi, {size.dim}, {}, {}, 1e-6) * (1 + si) + bi).to(dtype)
+          : bf16 ? nn::ModulatedLayerNormBf16(xi, si, bi, 1e-6)
+                 : nn::ModulatedLayerNormFloat32(xi, si, bi, 1e-6);
       y.backward(dy);
     };
-    table.push_back({"adaLN LN(x)(1+scale)+shift [" + shape + std::to_string(size.dim) + "]",
-                     MsPerCall([&] { modulate(false); }, 20),
-                     MsPerCall([&] { modulate(true); }, 20), 2 * size.layers + 1});
-    const auto y = torch::randn({tokens, a.batch, size.dim}).to(torch::kBFloat16);
+    table.push_back({"adaLN LN(x)(1+scale)+shift" + what, MsPerCall([&] { modulate(false); }, 20),
+                     MsPerCall([&] { modulate(true); }, 20), 2 * size.layers + 1, bf16});
+    const auto y = torch::randn({tokens, a.batch, size.dim}).to(dtype);
     const auto dh = torch::randn({tokens, a.batch, size.dim});
     const auto gated = [&](bool fused) {
       const auto xi = x.detach().requires_grad_();
       const auto gi = scale.detach().requires_grad_(), yi = y.detach().requires_grad_();
-      const auto h = fused ? nn::GatedResidualBf16(xi, gi, yi) : xi + gi * yi;
+      const auto h = !fused ? xi + gi * yi
+                     : bf16 ? nn::GatedResidualBf16(xi, gi, yi)
+                            : nn::GatedResidualFloat32(xi, gi, yi);
       h.backward(dh);
     };
-    table.push_back({"adaLN x + gate y [" + shape + std::to_string(size.dim) + "]",
-                     MsPerCall([&] { gated(false); }, 20), MsPerCall([&] { gated(true); }, 20),
-                     2 * size.layers});
-  }
-  {
-    // The same in a float32 step: float32 modulation and sub-layer output.
-    const auto x = torch::randn({tokens, a.batch, size.dim});
-    const auto scale = torch::randn({1, a.batch, size.dim});
-    const auto shift = torch::randn({1, a.batch, size.dim});
-    const auto dy = torch::randn({tokens, a.batch, size.dim});
-    const auto modulate = [&](bool fused) {
-      const auto xi = x.detach().requires_grad_();
-      const auto si = scale.detach().requires_grad_(), bi = shift.detach().requires_grad_();
-      const auto y = fused ? nn::ModulatedLayerNormFloat32(xi, si, bi, 1e-6)
-                           : torch::layer_norm(xi, {size.dim}, {}, {}, 1e-6) * (1 + si) + bi;
-      y.backward(dy);
-    };
-    table.push_back(
-        {"adaLN LN(x)(1+scale)+shift, float32 [" + shape + std::to_string(size.dim) + "]",
-         MsPerCall([&] { modulate(false); }, 20), MsPerCall([&] { modulate(true); }, 20),
-         2 * size.layers + 1, false});
-    const auto y = torch::randn({tokens, a.batch, size.dim});
-    const auto gated = [&](bool fused) {
-      const auto xi = x.detach().requires_grad_();
-      const auto gi = scale.detach().requires_grad_(), yi = y.detach().requires_grad_();
-      const auto h = fused ? nn::GatedResidualFloat32(xi, gi, yi) : xi + gi * yi;
-      h.backward(dy);
-    };
-    table.push_back({"adaLN x + gate y, float32 [" + shape + std::to_string(size.dim) + "]",
-                     MsPerCall([&] { gated(false); }, 20), MsPerCall([&] { gated(true); }, 20),
-                     2 * size.layers, false});
+    table.push_back({"adaLN x + gate y" + what, MsPerCall([&] { gated(false); }, 20),
+                     MsPerCall([&] { gated(true); }, 20), 2 * size.layers, bf16});
   }
   // A DiT block's four linears under bf16 autocast: torch::nn::Linear::forward (matmul, then the
   // bias in a second pass) against ATen's linear (nn::ApplyLinear: one addmm).
