@@ -18,6 +18,17 @@ GARBAGE = os.environ.get("MOTIONPIPE_GARBAGE", "motionpipe_garbage")
 _HANDED_OUT = set()
 
 
+def torch_load(path):
+    """Loads a state dict with Debian's python3-torch in a subprocess; returns {name: ndarray}."""
+    import numpy as np  # only the tests that read checkpoints need it
+    code = ("import sys, torch, numpy as np; d = torch.load(sys.argv[1]); "
+            "np.savez(sys.argv[2], **{k: v.numpy() for k, v in d.items()})")
+    out = path + ".npz"
+    subprocess.run(["/usr/bin/python3", "-c", code, path, out], check=True, timeout=120)
+    with np.load(out) as z:
+        return {k: z[k] for k in z.files}
+
+
 def free_port(host="127.0.0.1"):
     """A port free now and not handed out before by this process: the kernel can give a port just
     closed to the next bind, and a test that asks for two ports (a coordinator's worker socket and a

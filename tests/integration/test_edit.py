@@ -1,7 +1,9 @@
 """The mdt_editor plugin through real workers: the MDT (with its similarity task on the filter's
 classes) and MDM train on filtered corpus triplets, the `edit` stage edits the test split across
-workers, and `motionpipe edit` edits a real CMU clip, deterministically under a seed."""
+workers, and `motionpipe edit` edits a real CMU clip, deterministically under a seed; an editor
+trained twice under one seed, on two workers at once, is the same model."""
 import base64
+import csv
 import glob
 import html.parser
 import http.server
@@ -18,7 +20,7 @@ import unittest
 
 import numpy as np
 
-from harness import MOTIONPIPE, EngineTest, free_port
+from harness import MOTIONPIPE, EngineTest, free_port, torch_load
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 # Rodrigues, the NumPy reference's (one copy in the repository; tools/root_stats.py reads it too).
@@ -162,6 +164,40 @@ stages:
     params: {evaluator: evaluator_b, edits: locked, batch: 2}
 """
 
+
+# One editor trained twice under one seed, on two workers at once, and once under another: a claims
+# run started again on the same machine trains the same editors (README "Claims runs").
+SEEDED = """
+name: seeded
+output_root: OUT
+seed: 1
+stages:
+  corpus: {kind: corpus, params: {clips: 60, triplets: 60, shard_size: 30}}
+  filter: {kind: filter, inputs: [corpus], shards: 1, params: {preset: paper}}
+  mdt_a:
+    kind: train
+    inputs: [filter]
+    params: &train
+      model: mdt_editor
+      config:
+        variant: mdt
+        model: {dim: 32, cond_layers: 1, layers: 2, heads: 4, ff: 64, sim_hidden: 32, dropout: 0.1, text_encoder: {layers: 1, vocab: 200}}
+        aux: {mode: classes, classes: 3}
+        fps: 10
+      data: {max_frames: 20}
+      steps: 6
+      batch_size: 4
+      warmup: 2
+      validate_every: 3
+      keep: best
+      seed: 3
+  mdt_b: {kind: train, inputs: [filter], params: *train}
+  mdt_c:
+    kind: train
+    inputs: [filter]
+    params: {model: mdt_editor, config: {variant: mdt, model: {dim: 32, cond_layers: 1, layers: 2, heads: 4, ff: 64, sim_hidden: 32, dropout: 0.1, text_encoder: {layers: 1, vocab: 200}}, aux: {mode: classes, classes: 3}, fps: 10},
+             data: {max_frames: 20}, steps: 6, batch_size: 4, warmup: 2, validate_every: 3, keep: best, seed: 4}
+"""
 
 class ReportParser(html.parser.HTMLParser):
     """Collects a report's tables (caption and rows of cell texts) and its images' data URIs."""
@@ -468,6 +504,32 @@ class EditTest(EngineTest):
         refused = self.cli("edit", "--model", model, "--body-parts", "--source", CMU, "--text", "x", "--out", bp, check=False)
         self.assertEqual(refused.returncode, 1)
         self.assertIn("body_parts (MDM-BP) runs mdm checkpoints", refused.stderr)
+
+
+class SeededTrainingTest(EngineTest):
+    def test_an_editor_trained_twice_under_one_seed_is_the_same_model(self):
+        pipeline = self.write_pipeline("seeded.yaml", SEEDED.replace("OUT", self.path("out")))
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "2", "--threads", "1"],
+                                capture_output=True, text=True, timeout=600)
+        self.assertEqual(result.returncode, 0, result.stdout[-3000:] + result.stderr[-3000:])
+        job = glob.glob(self.path("out", "seeded-*"))[0]
+
+        def logged(stage):  # the training log, and the validation log without its wall-clock column
+            task = os.path.join(job, stage, "task-00000")
+            with open(os.path.join(task, "losses.csv")) as f, open(os.path.join(task, "val_losses.csv")) as g:
+                validation = [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(g)]
+                return f.read(), validation
+
+        a, b, c = logged("mdt_a"), logged("mdt_b"), logged("mdt_c")
+        self.assertEqual(len(a[0].splitlines()), 7)  # the header and 6 steps
+        self.assertEqual([row["step"] for row in a[1]], ["2", "5"])
+        self.assertEqual(a, b)  # every step's losses and every validation, to the printed digit
+        self.assertNotEqual(a[0], c[0])  # another seed: other batches, noise and dropout
+        weights_a = torch_load(os.path.join(job, "mdt_a", "task-00000", "state_dict.pt"))
+        weights_b = torch_load(os.path.join(job, "mdt_b", "task-00000", "state_dict.pt"))
+        self.assertEqual(sorted(weights_a), sorted(weights_b))
+        for name in weights_a:
+            self.assertTrue(np.array_equal(weights_a[name], weights_b[name]), name)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ import zipfile
 
 import numpy as np
 
-from harness import MOTIONPIPE, EngineTest
+from harness import MOTIONPIPE, EngineTest, torch_load
 
 PIPELINE = """
 name: train_test
@@ -107,16 +107,6 @@ def write_spans(path, spans):
             pad += 64 if 0 < pad < 4 else 0
             info.extra = struct.pack("<HH", 0xCAFE, pad - 4) + bytes(pad - 4) if pad else b""
             z.writestr(info, data)
-
-
-def torch_load(path):
-    """Loads a state dict with Debian's python3-torch in a subprocess; returns {name: ndarray}."""
-    code = ("import sys, torch, numpy as np; d = torch.load(sys.argv[1]); "
-            "np.savez(sys.argv[2], **{k: v.numpy() for k, v in d.items()})")
-    out = path + ".npz"
-    subprocess.run(["/usr/bin/python3", "-c", code, path, out], check=True, timeout=120)
-    with np.load(out) as z:
-        return {k: z[k] for k in z.files}
 
 
 def losses(job_dir, name="losses.csv"):
