@@ -3,7 +3,10 @@
 // against target and source in the normalised feature space, with their roughness; and the foot
 // skate of the decoded estimates, with what columns of the t = 0 estimate it comes from.
 //   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
-//             [--guidance g_m,g_t] [--no-sample] [--write DIR]
+//             [--guidance g_m,g_t] [--no-sample] [--write DIR] [--filter none] [--limit N]
+// --filter none reads every triplet of the corpus directories (the filter's kept ones otherwise);
+// --limit N takes the n triplets from the split's first N only (the training data's `limit`: the
+// triplets a model was fitted to).
 // --write DIR also writes, as edit stages eval_edit can score (DIR/NAME/task-00000/edited.npz, at
 // the targets' lengths and rates), the targets through the feature and the network's frame rate
 // (target_roundtrip) and the x0 estimates from each target noised to step t (estimate_tT): what
@@ -54,8 +57,8 @@ torch::Tensor Roughness(const torch::Tensor& x, const torch::Tensor& padding) {
 
 struct Args {
   std::vector<std::string> dirs;  // the checkpoint, then the filter/corpus directories
-  std::string split = "test";
-  int64_t n = 64, ddim = 20;
+  std::string split = "test", filter = "input";
+  int64_t n = 64, ddim = 20, limit = 0;
   bool sample = true;
   double g_m = -1, g_t = -1;
   std::string write;  // a directory for the decoded estimates, or empty
@@ -69,6 +72,10 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       args.split = argv[++i];
     else if (a == "--n" && i + 1 < argc)
       args.n = std::stoll(argv[++i]);
+    else if (a == "--filter" && i + 1 < argc)
+      args.filter = argv[++i];
+    else if (a == "--limit" && i + 1 < argc)
+      args.limit = std::stoll(argv[++i]);
     else if (a == "--ddim" && i + 1 < argc)
       args.ddim = std::stoll(argv[++i]);
     else if (a == "--no-sample")
@@ -111,6 +118,8 @@ Result<Probe> LoadProbe(const Args& a) {
   probe.net->eval();
   EditDataOptions data;
   data.split = a.split;
+  data.filter = a.filter;
+  data.limit = a.limit;
   // Written estimates are whole motions; the probe's figures keep the first 120 network frames.
   data.max_frames = a.write.empty() ? 120 : 100000;
   data.fps = probe.options.fps;  // the checkpoint's network rate
@@ -380,7 +389,7 @@ int main(int argc, char** argv) {
   if (!args) {
     std::fprintf(stderr,
                  "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
-                 "[--guidance gm,gt] [--no-sample] [--write DIR]\n");
+                 "[--guidance gm,gt] [--no-sample] [--write DIR] [--filter none] [--limit N]\n");
     return 2;
   }
   nn::SetTorchThreads(1);

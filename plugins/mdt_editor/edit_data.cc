@@ -24,6 +24,8 @@ EditDataOptions EditDataOptions::FromContext(const plugin::DataContext& context)
       context.split == "val" ? j.value("val_split", std::string("val")) : j.value("split", o.split);
   o.max_frames = j.value("max_frames", o.max_frames);
   if (o.max_frames < 2) throw std::invalid_argument("data.max_frames must be at least 2");
+  o.limit = j.value("limit", o.limit);
+  if (o.limit < 0) throw std::invalid_argument("data.limit must be >= 0");
   return o;
 }
 
@@ -106,6 +108,8 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
       items_.push_back({file_index.at(key.first),
                         key.second - files_[file_index.at(key.first)].first_row, curve_of.at(key)});
   }
+  if (options_.limit > 0 && static_cast<int64_t>(items_.size()) > options_.limit)
+    items_.resize(static_cast<size_t>(options_.limit));
   for (const Item& item : items_) {
     const auto& c = files_[item.file];
     if (c.source.joints != kNumJoints || c.target.joints != kNumJoints) {

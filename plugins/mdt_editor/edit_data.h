@@ -4,7 +4,7 @@
 // features on the fly (mean/std over the training split, 2 sigma as MotionFix), cropped to
 // max_frames, padded by repeating the last frame.
 //
-// params.data: {filter: input | none, split: train, max_frames: 200}
+// params.data: {filter: input | none, split: train, max_frames: 200, limit: 0}
 #pragma once
 
 #include <torch/torch.h>
@@ -24,7 +24,11 @@ struct EditDataOptions {
   std::string filter = "input";
   std::string split = "train";
   int64_t max_frames = 200;  // in the network's frames
-  double fps = 0;            // the network's frame rate (the model's); 0: the data's
+  // The first `limit` triplets of the split (0: all): in file and row order with filter: none,
+  // the triplets an `edit` stage with the same split and limit edits (issue 15's fitting
+  // diagnostic); in the filter's order with filter: input.
+  int64_t limit = 0;
+  double fps = 0;  // the network's frame rate (the model's); 0: the data's
   int classes = 3;
   bool regression = false;
   static EditDataOptions FromContext(const plugin::DataContext& context);

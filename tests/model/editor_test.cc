@@ -816,6 +816,47 @@ TEST(Editor, ConstantFeatureColumnsKeepUnitScale) {
   }
 }
 
+// Issue 15's fitting diagnostic: data.limit keeps the split's first triplets in file and row order
+// (with filter: none), the ones an `edit` stage with the same split and limit edits; validation
+// (val_split: train) reads the same ones.
+TEST(Editor, DataLimitKeepsTheSplitsFirstTripletsInFileAndRowOrder) {
+  const std::string dir = ::testing::TempDir() + "/data_limit";
+  std::filesystem::create_directories(dir + "/motionfix");
+  for (int file = 0; file < 2; ++file) {
+    std::vector<Triplet> triplets;
+    for (int r = 0; r < 3; ++r) {
+      Triplet t;
+      t.id = "f" + std::to_string(file) + "r" + std::to_string(r);
+      t.text = "walk";
+      t.split = r == 1 ? "test" : "train";
+      t.source = t.target = Motion::Rest(30, 30, 0.9);
+      triplets.push_back(std::move(t));
+    }
+    // Written second-file-first: the order is the files' names, not the order they came.
+    ASSERT_TRUE(WriteTriplets(dir + "/motionfix/triplets-0000" + std::to_string(1 - file) + ".npz",
+                              triplets)
+                    .ok());
+  }
+  plugin::DataContext context;
+  context.input_dirs = {dir};
+  context.config = {{"filter", "none"}, {"limit", 3}, {"val_split", "train"}};
+  for (const std::string split : {"train", "val"}) {
+    context.split = split;
+    const EditDataset data(EditDataOptions::FromContext(context), context.input_dirs);
+    ASSERT_EQ(data.size(), 3) << split;
+    EXPECT_EQ(data.Id(0), "f1r0");  // triplets-00000 holds the second file written
+    EXPECT_EQ(data.Id(1), "f1r2");
+    EXPECT_EQ(data.Id(2), "f0r0");
+  }
+  context.split = "train";
+  context.config["limit"] = 9;  // more than there are: all four training triplets
+  EXPECT_EQ(EditDataset(EditDataOptions::FromContext(context), context.input_dirs).size(), 4);
+  context.config["limit"] = 0;  // the default: all
+  EXPECT_EQ(EditDataset(EditDataOptions::FromContext(context), context.input_dirs).size(), 4);
+  context.config["limit"] = -1;
+  EXPECT_THROW(EditDataOptions::FromContext(context), std::invalid_argument);
+}
+
 // Issue 15: the network's frame rate (EditorOptions::fps). Training motions and edit sources come
 // to it by keeping every k-th frame (with their stored joints), edits go back to the rate and the
 // length asked for.
