@@ -22,6 +22,11 @@ row is followed by one for the ground truth of the same span ids (the singles st
 
     /usr/bin/python3 tools/root_stats.py out/demo-1/edit_mdt_untrained out/demo-1/edit_mdt
     /usr/bin/python3 tools/root_stats.py --truth out/demo-1/singles out/demo-1/gen_sinc
+    /usr/bin/python3 tools/root_stats.py --against PROBE_DIR/target_roundtrip PROBE_DIR/estimate_t0
+
+With --against STAGE_DIR, each stage's hips, knees and ankles are also compared with those of the
+motions of the same ids in STAGE_DIR: the mean and median geodesic angle between their local
+rotations, over joints and frames.
 """
 import argparse
 import glob
@@ -106,6 +111,27 @@ def knee_swing(rotations, fps):
     return angle.std(axis=0).mean(), np.abs(np.diff(angle, axis=0)).mean() * fps
 
 
+def leg_angle_error(stage_dir, stage_motions, against_dir):
+    """Mean and median geodesic angle (degrees) between the hips', knees' and ankles' local rotations
+    of each motion and those of the motion with the same id in against_dir, frame by frame (the
+    shorter's frames): how far an estimate's legs are from the answer's (issue 15)."""
+    ids = {i for i, *_ in stage_motions}
+    if None in ids:
+        sys.exit(f"{stage_dir}: its motions carry no ids (--against matches motions by id)")
+    reference = {i: rotations for i, _, rotations, _ in motions(stage_files(against_dir), only_ids=ids)}
+    absent = ids - set(reference)
+    if absent:
+        sys.exit(f"{against_dir}: no motion {sorted(absent)[0]} (of {len(absent)} ids of {stage_dir} not found)")
+    joints = [joint for leg in LEGS for joint in leg[:3]]
+    angles = []
+    for i, _, rotations, _ in stage_motions:
+        frames = min(len(rotations), len(reference[i]))
+        relative = np.einsum("tjab,tjab->tj", rotations[:frames, joints], reference[i][:frames, joints])
+        angles.append(np.degrees(np.arccos(np.clip((relative - 1) / 2, -1.0, 1.0))).ravel())
+    angles = np.concatenate(angles)
+    return angles.mean(), np.median(angles)
+
+
 def stage_files(stage_dir):
     """The stage's task-*/edited.npz (an edit or foot_lock stage) or task-*/generated.npz (a generate stage)."""
     files = sorted(glob.glob(os.path.join(stage_dir, "task-*", "edited.npz")) or
@@ -179,6 +205,9 @@ def main():
     parser.add_argument("stages", nargs="+", help="edit, generate or foot_lock stage output directories (out/JOB/STAGE)")
     parser.add_argument("--truth", metavar="SINGLES_DIR",
                         help="after each generate stage, its spans' ground truth from this singles stage")
+    parser.add_argument("--against", metavar="STAGE_DIR",
+                        help="also the leg joints' angle to the motions of the same ids in this stage "
+                             "(e.g. mdt_probe --write's target_roundtrip)")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
@@ -196,6 +225,11 @@ def main():
         print(f"{name:<40} {n:>7} {drift:>12.3f} {spread:>9.3f} {vertical:>10.3f} {accel:>15.2f} {tilt:>13.3f} "
               f"{skating:>6.3f} {grounded:>14.3f} {feet_speed:>19.3f} {pelvis_speed:>6.3f} {relative:>19.3f} "
               f"{knee_sd:>13.2f} {knee_speed:>18.1f}")
+    if args.against:
+        print(f"{'stage':<40} leg joints' angle to {args.against} (deg): mean, median")
+        for stage in args.stages:
+            mean, median = leg_angle_error(stage, list(motions(stage_files(stage))), args.against)
+            print(f"{stage:<40} {mean:>7.2f} {median:>7.2f}")
 
 
 if __name__ == "__main__":

@@ -42,6 +42,27 @@ class RootStatsTest(unittest.TestCase):
     def path(self, name):
         return os.path.join(self.tmp.name, name)
 
+    def test_against_gives_the_leg_joints_angle_to_the_same_ids(self):
+        # Both knees bent 12 degrees more than the reference's, in every frame; hips and ankles equal:
+        # 2 of the 6 leg joints off by 12 degrees, so the mean is 4 and the median 0. Ids are matched,
+        # not places: the reference stores them in the other order.
+        # (Matched by place, a's 42 degrees against b's 50 and b's 62 against a's 30 would give 6.67.)
+        still = np.zeros((4, 3))
+        a_knee, b_knee = np.full(4, np.radians(30.0)), np.full(4, np.radians(50.0))
+        write_edits(self.path("estimate"), [still, still],
+                    knees=np.concatenate([a_knee, b_knee]) + np.radians(12.0), ids=["a", "b"])
+        write_edits(self.path("answer"), [still, still], knees=np.concatenate([b_knee, a_knee]), ids=["b", "a"])
+        result = run("--against", self.path("answer"), self.path("estimate"))
+        self.assertEqual(result.returncode, 0, result.stderr)
+        mean, median = map(float, result.stdout.splitlines()[-1].split()[1:3])
+        self.assertAlmostEqual(mean, 4.0, places=3)
+        self.assertAlmostEqual(median, 0.0, places=3)
+        # An id the reference lacks is named.
+        write_edits(self.path("other"), [still], ids=["c"])
+        result = run("--against", self.path("other"), self.path("estimate"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("no motion a", result.stderr)
+
     def test_figures_of_known_trajectories(self):
         rising = np.zeros((5, 3))
         rising[:, 2] = [1.0, 1.1, 1.2, 1.3, 1.4]  # drift 0.4, sd 0.1414, |vz| 0.1 m a frame
