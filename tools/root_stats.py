@@ -104,10 +104,14 @@ def tilt_height(trans, pelvis):
     return abs(sum((previous[:, 2, k] * velocity[:, k]).sum() for k in range(3) if k != up))
 
 
+def angle_of_trace(trace):
+    """The angle (degrees) of rotations with these traces."""
+    return np.degrees(np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0)))
+
+
 def knee_swing(rotations, fps):
     """(sd of the flexion angle, mean |angular speed|) in degrees and degrees/s, over both knees."""
-    trace = np.trace(rotations[:, list(KNEES)], axis1=-2, axis2=-1)  # [T, 2]
-    angle = np.degrees(np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0)))
+    angle = angle_of_trace(np.trace(rotations[:, list(KNEES)], axis1=-2, axis2=-1))  # [T, 2]
     return angle.std(axis=0).mean(), np.abs(np.diff(angle, axis=0)).mean() * fps
 
 
@@ -115,19 +119,15 @@ def leg_angle_error(stage_dir, stage_motions, against_dir):
     """Mean and median geodesic angle (degrees) between the hips', knees' and ankles' local rotations
     of each motion and those of the motion with the same id in against_dir, frame by frame (the
     shorter's frames): how far an estimate's legs are from the answer's (issue 15)."""
-    ids = {i for i, *_ in stage_motions}
-    if None in ids:
-        sys.exit(f"{stage_dir}: its motions carry no ids (--against matches motions by id)")
-    reference = {i: rotations for i, _, rotations, _ in motions(stage_files(against_dir), only_ids=ids)}
-    absent = ids - set(reference)
-    if absent:
-        sys.exit(f"{against_dir}: no motion {sorted(absent)[0]} (of {len(absent)} ids of {stage_dir} not found)")
+    found = same_ids(stage_dir, stage_motions, against_dir, stage_files(against_dir),
+                     "--against matches motions by id", "motion")
+    reference = {i: rotations for i, _, rotations, _ in found}
     joints = [joint for leg in LEGS for joint in leg[:3]]
     angles = []
     for i, _, rotations, _ in stage_motions:
         frames = min(len(rotations), len(reference[i]))
         relative = np.einsum("tjab,tjab->tj", rotations[:frames, joints], reference[i][:frames, joints])
-        angles.append(np.degrees(np.arccos(np.clip((relative - 1) / 2, -1.0, 1.0))).ravel())
+        angles.append(angle_of_trace(relative).ravel())
     angles = np.concatenate(angles)
     return angles.mean(), np.median(angles)
 
@@ -159,19 +159,27 @@ def motions(files, only_ids=None):
             yield ids[i], trans[frames], rotations, float(fps[i])
 
 
-def truth_of(stage_dir, stage_motions, singles_dir):
-    """The ground truth (singles_dir's spans.npz) of the span ids of a generate stage's motions."""
+def same_ids(stage_dir, stage_motions, other_dir, other_files, why, noun):
+    """The motions of other_files (other_dir's) with the ids of stage_dir's motions; every id must be
+    there (`why` says why ids are needed, `noun` names a motion of other_dir in the error)."""
     ids = {i for i, *_ in stage_motions}
     if None in ids:
+        sys.exit(f"{stage_dir}: its motions carry no ids ({why})")
+    found = list(motions(other_files, only_ids=ids))
+    absent = ids - {i for i, *_ in found}
+    if absent:
+        sys.exit(f"{other_dir}: no {noun} {sorted(absent)[0]} (of {len(absent)} ids of {stage_dir} not found)")
+    return found
+
+
+def truth_of(stage_dir, stage_motions, singles_dir):
+    """The ground truth (singles_dir's spans.npz) of the span ids of a generate stage's motions."""
+    if None in {i for i, *_ in stage_motions}:
         sys.exit(f"{stage_dir}: its motions carry no ids (--truth needs a generate stage)")
     files = sorted(glob.glob(os.path.join(singles_dir, "task-*", "spans.npz")))
     if not files:
         sys.exit(f"{singles_dir}: no task-*/spans.npz (is it a singles stage's output directory?)")
-    found = list(motions(files, only_ids=ids))
-    absent = ids - {i for i, *_ in found}
-    if absent:
-        sys.exit(f"{singles_dir}: no span {sorted(absent)[0]} (of {len(absent)} ids of {stage_dir} not found)")
-    return found
+    return same_ids(stage_dir, stage_motions, singles_dir, files, "--truth needs a generate stage", "span")
 
 
 def row(stage_dir, motion_list):
@@ -213,9 +221,9 @@ def main():
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
           f"{'contact speed: feet':>19} {'pelvis':>6} {'feet - pelvis (m/s)':>19} {'knee sd (deg)':>13} "
           f"{'knee speed (deg/s)':>18}")
-    rows = []
+    rows, loaded = [], {}
     for stage in args.stages:
-        stage_motions = list(motions(stage_files(stage)))
+        stage_motions = loaded[stage] = list(motions(stage_files(stage)))
         rows.append((stage, stage_motions))
         if args.truth:
             rows.append((stage + " (truth)", truth_of(stage, stage_motions, args.truth)))
@@ -228,7 +236,7 @@ def main():
     if args.against:
         print(f"{'stage':<40} leg joints' angle to {args.against} (deg): mean, median")
         for stage in args.stages:
-            mean, median = leg_angle_error(stage, list(motions(stage_files(stage))), args.against)
+            mean, median = leg_angle_error(stage, loaded[stage], args.against)
             print(f"{stage:<40} {mean:>7.2f} {median:>7.2f}")
 
 
