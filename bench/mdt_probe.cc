@@ -1,7 +1,9 @@
 // Where a trained editor's error comes from (issue 15): a checkpoint's x0 error by diffusion step,
 // beside what copying the source and predicting the mean would score, and its sampled edits' error
 // against target and source in the normalised feature space, with their roughness; and the foot
-// skate of the decoded estimates, with what columns of the t = 0 estimate it comes from.
+// skate of the decoded estimates, with what columns of the t = 0 estimate it comes from; along each
+// DDIM trajectory (guidance 1/1 and the model's), every step's x0 estimate's error, roughness and
+// skate: whether the sample's skate is laid out at the noisy steps or made at the clean ones.
 //   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
 //             [--guidance g_m,g_t] [--no-sample] [--write DIR] [--filter none] [--limit N]
 // --filter none reads every triplet of the corpus directories (the filter's kept ones otherwise);
@@ -301,18 +303,19 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
       return GuideThreeWay(parts[0], parts[1], parts[2], gm, gt);
     };
     // The x0 estimate along the trajectory: where does the sample leave the source?
-    const bool trace = gm == 1 && gt == 1;
-    if (trace)
-      std::printf(
-          "DDIM-%lld trajectory, guidance 1/1: step t, x0 estimate -> target MSE, -> source MSE\n",
-          static_cast<long long>(ddim));
+    const bool trace = true;
+    std::printf(
+        "DDIM-%lld trajectory, guidance %.1f/%.1f: step t, x0 estimate -> target MSE, -> source "
+        "MSE, roughness, foot skate (grounded)\n",
+        static_cast<long long>(ddim), gm, gt);
     const Denoise traced = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = denoise(xt, t);
       if (trace) {
         const auto frame = p.net->Decode(x0);
-        std::printf("  t %3lld: %.4f %.4f\n", static_cast<long long>(t),
+        std::printf("  t %3lld: %.4f %.4f %.5f %.3f\n", static_cast<long long>(t),
                     Mse(frame, target, padding).mean().item<double>(),
-                    Mse(frame, source, padding).mean().item<double>());
+                    Mse(frame, source, padding).mean().item<double>(),
+                    Roughness(frame, padding).mean().item<double>(), GroundedSkate(p, frame));
       }
       return x0;
     };

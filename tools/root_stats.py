@@ -26,7 +26,11 @@ row is followed by one for the ground truth of the same span ids (the singles st
 
 With --against STAGE_DIR, each stage's hips, knees and ankles are also compared with those of the
 motions of the same ids in STAGE_DIR: the mean and median geodesic angle between their local
-rotations, over joints and frames.
+rotations, over joints and frames. Then which part of each stage's error makes the feet skate: the
+error (per frame, the leg joints' local rotations relative to the reference's, and the pelvis's
+orientation and translation) is put back on the reference's motions whole, for the legs alone and
+the pelvis alone, and split in time by a Gaussian of 0.1, 0.33 and 1 s into its slower part (the
+smoothed error) and its faster part (the rest); the skate (as the evaluation's) of each.
 """
 import argparse
 import glob
@@ -115,13 +119,18 @@ def knee_swing(rotations, fps):
     return angle.std(axis=0).mean(), np.abs(np.diff(angle, axis=0)).mean() * fps
 
 
-def leg_angle_error(stage_dir, stage_motions, against_dir):
-    """Mean and median geodesic angle (degrees) between the hips', knees' and ankles' local rotations
-    of each motion and those of the motion with the same id in against_dir, frame by frame (the
-    shorter's frames): how far an estimate's legs are from the answer's (issue 15)."""
+def against_motions(stage_dir, stage_motions, against_dir):
+    """{id: (trans, rotations, fps)} of against_dir's motions with the ids of the stage's."""
     found = same_ids(stage_dir, stage_motions, against_dir, stage_files(against_dir),
                      "--against matches motions by id", "motion")
-    reference = {i: rotations for i, _, rotations, _ in found}
+    return {i: (trans, rotations, fps) for i, trans, rotations, fps in found}
+
+
+def leg_angle_error(stage_motions, reference):
+    """Mean and median geodesic angle (degrees) between the hips', knees' and ankles' local rotations
+    of each motion and those of the reference motion with the same id (against_motions), frame by
+    frame (the shorter's frames): how far an estimate's legs are from the answer's (issue 15)."""
+    reference = {i: rotations for i, (_, rotations, _) in reference.items()}
     joints = [joint for leg in LEGS for joint in leg[:3]]
     angles = []
     for i, _, rotations, _ in stage_motions:
@@ -130,6 +139,57 @@ def leg_angle_error(stage_dir, stage_motions, against_dir):
         angles.append(angle_of_trace(relative).ravel())
     angles = np.concatenate(angles)
     return angles.mean(), np.median(angles)
+
+
+LEG_ERROR_JOINTS = [joint for leg in LEGS for joint in leg]  # hips, knees, ankles, feet
+BAND_SECONDS = (0.1, 0.33, 1.0)
+
+
+def log_rotation(rotations):
+    """Rotation vectors [..., 3] of rotation matrices [..., 3, 3] (angles below pi)."""
+    angle = np.arccos(np.clip((np.trace(rotations, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
+    axis = np.stack([rotations[..., 2, 1] - rotations[..., 1, 2], rotations[..., 0, 2] - rotations[..., 2, 0],
+                     rotations[..., 1, 0] - rotations[..., 0, 1]], axis=-1)
+    sine = np.sin(angle)[..., None]
+    return axis * np.where(sine > 1e-8, angle[..., None] / (2 * np.maximum(sine, 1e-8)), 0.5)
+
+
+def smoothed(x, sigma):
+    """x [T, ...] filtered along time by a Gaussian of sigma frames (the ends repeated)."""
+    radius = int(np.ceil(3 * sigma))
+    kernel = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    padded = np.concatenate([np.repeat(x[:1], radius, axis=0), x, np.repeat(x[-1:], radius, axis=0)])
+    return sum(w * padded[k:k + len(x)] for k, w in enumerate(kernel / kernel.sum()))
+
+
+def error_band_skates(stage_dir, stage_motions, reference):
+    """The skate of the reference's motions carrying this stage's error: whole, legs alone, pelvis
+    alone, then the slower and the faster part for each of BAND_SECONDS (means over the motions)."""
+    offsets, columns = leg_offsets(), []
+    for i, trans, rotations, fps in stage_motions:
+        ref_trans, ref_rotations, ref_fps = reference[i]
+        if fps != ref_fps:
+            sys.exit(f"{stage_dir}: motion {i} at {fps:g} fps, the reference's at {ref_fps:g}")
+        frames = min(len(trans), len(ref_trans))
+        ref_trans, ref_rotations = ref_trans[:frames], ref_rotations[:frames]
+        # R = R_ref exp(e): the error e of the pelvis (joint 0) and the leg joints, and of the translation.
+        joints = [0] + LEG_ERROR_JOINTS
+        error = log_rotation(np.einsum("tjba,tjbc->tjac", ref_rotations[:, joints], rotations[:frames, joints]))
+        shift = trans[:frames] - ref_trans
+
+        def skate_with(e, d):
+            carried = ref_rotations.copy()
+            carried[:, joints] = ref_rotations[:, joints] @ rotation_matrices(e.reshape(-1, 3)).reshape(e.shape + (3,))
+            return skate(feet(ref_trans + d, carried, offsets), fps, grounded=False)
+
+        legs, pelvis = error.copy(), np.zeros_like(error)
+        legs[:, 0], pelvis[:, 0] = 0, error[:, 0]
+        row = [skate_with(error, shift), skate_with(legs, 0 * shift), skate_with(pelvis, shift)]
+        for seconds in BAND_SECONDS:
+            slow_error, slow_shift = smoothed(error, seconds * fps), smoothed(shift, seconds * fps)
+            row += [skate_with(slow_error, slow_shift), skate_with(error - slow_error, shift - slow_shift)]
+        columns.append(row)
+    return np.mean(columns, axis=0)
 
 
 def stage_files(stage_dir):
@@ -234,10 +294,17 @@ def main():
               f"{skating:>6.3f} {grounded:>14.3f} {feet_speed:>19.3f} {pelvis_speed:>6.3f} {relative:>19.3f} "
               f"{knee_sd:>13.2f} {knee_speed:>18.1f}")
     if args.against:
+        references = {stage: against_motions(stage, loaded[stage], args.against) for stage in args.stages}
         print(f"{'stage':<40} leg joints' angle to {args.against} (deg): mean, median")
         for stage in args.stages:
-            mean, median = leg_angle_error(stage, loaded[stage], args.against)
+            mean, median = leg_angle_error(loaded[stage], references[stage])
             print(f"{stage:<40} {mean:>7.2f} {median:>7.2f}")
+        bands = " ".join(f"slower/faster than {seconds:g} s" for seconds in BAND_SECONDS)
+        print(f"{'stage':<40} skate of {args.against}'s motions with the stage's error: whole, legs, "
+              f"pelvis, {bands}")
+        for stage in args.stages:
+            figures = error_band_skates(stage, loaded[stage], references[stage])
+            print(f"{stage:<40} " + " ".join(f"{x:>6.3f}" for x in figures))
 
 
 if __name__ == "__main__":

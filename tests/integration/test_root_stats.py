@@ -54,7 +54,9 @@ class RootStatsTest(unittest.TestCase):
         write_edits(self.path("answer"), [still, still], knees=np.concatenate([b_knee, a_knee]), ids=["b", "a"])
         result = run("--against", self.path("answer"), self.path("estimate"))
         self.assertEqual(result.returncode, 0, result.stderr)
-        mean, median = map(float, result.stdout.splitlines()[-1].split()[1:3])
+        lines = result.stdout.splitlines()
+        header = next(k for k, line in enumerate(lines) if "leg joints' angle" in line)
+        mean, median = map(float, lines[header + 1].split()[1:3])
         self.assertAlmostEqual(mean, 4.0, places=3)
         self.assertAlmostEqual(median, 0.0, places=3)
         # An id the reference lacks is named.
@@ -62,6 +64,40 @@ class RootStatsTest(unittest.TestCase):
         result = run("--against", self.path("other"), self.path("estimate"))
         self.assertNotEqual(result.returncode, 0)
         self.assertIn("no motion a", result.stderr)
+
+    def test_against_splits_the_error_that_skates_by_its_speed(self):
+        # A body standing upright on the floor for 3 s at 30 fps (as in the skate test below) is the
+        # reference. One estimate sways its pelvis slowly along x (0.3 m at a 4 s period: up to 0.47
+        # m/s), the other jitters it by +-1 cm a frame (0.6 m/s every frame). The slow error skates
+        # smoothed by 0.1 s as it does whole, its faster part not at all; the jitter skates on every
+        # contact frame whole and as its faster part, smoothed not at all. Neither turns a leg joint
+        # or the pelvis, so the legs alone never skate and the pelvis alone skates as the whole.
+        legs, frames, fps = 0.3936 + 0.4324, 90, 30.0
+        stand = np.zeros((frames, 3))
+        stand[:, 2] = legs + 0.01
+        sway, jitter = stand.copy(), stand.copy()
+        sway[:, 0] = 0.3 * np.sin(2 * np.pi * np.arange(frames) / fps / 4.0)
+        jitter[:, 0] = 0.01 * (-1.0) ** np.arange(frames)
+        upright = [np.pi / 2, 0.0, 0.0]
+        write_edits(self.path("stand"), [stand, stand], fps=fps, pelvis=upright, ids=["sway", "jitter"])
+        write_edits(self.path("estimate"), [sway, jitter], fps=fps, pelvis=upright, ids=["sway", "jitter"])
+        write_edits(self.path("sway"), [sway], fps=fps, pelvis=upright, ids=["sway"])
+        write_edits(self.path("jitter"), [jitter], fps=fps, pelvis=upright, ids=["jitter"])
+        result = run("--against", self.path("stand"), self.path("sway"), self.path("jitter"))
+        self.assertEqual(result.returncode, 0, result.stderr)
+        sway_row, jitter_row = ([float(x) for x in line.split()[1:]] for line in result.stdout.splitlines()[-2:])
+        whole, legs_alone, pelvis_alone, slow, fast = sway_row[:5]
+        self.assertGreater(whole, 0.5)
+        self.assertEqual((legs_alone, pelvis_alone), (0.0, whole))
+        self.assertAlmostEqual(slow, whole, delta=0.05)
+        self.assertLess(fast, 0.02)  # the ends, where the smoothing repeats the first and last frames
+        self.assertEqual(jitter_row[:3], [1.0, 0.0, 1.0])
+        self.assertEqual(jitter_row[3:], [0.0, 1.0] * 3)
+        # Motions of another rate than the reference's are refused, naming the motion.
+        write_edits(self.path("slow_rate"), [sway], fps=10.0, pelvis=upright, ids=["sway"])
+        result = run("--against", self.path("stand"), self.path("slow_rate"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("motion sway at 10 fps, the reference's at 30", result.stderr)
 
     def test_figures_of_known_trajectories(self):
         rising = np.zeros((5, 3))
