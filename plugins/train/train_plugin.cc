@@ -14,7 +14,10 @@
 //   127.0.0.1), store (tcp | file; default tcp), collective_timeout (seconds, default 120),
 //   precision (float32 | bf16: the forward pass under bf16 autocast, plugins/common/precision.h;
 //   weights, gradients and optimiser state stay float32; on a CPU without native bf16 products,
-//   bf16 runs as float32 with a warning, and rank-R.json says which ran)
+//   bf16 runs as float32 with a warning, and rank-R.json says which ran), ema (decay of an
+//   exponential moving average of the weights, as DDPM, DiT and EDM sample from; 0, the default:
+//   none. Rank 0 keeps it, validates it and writes it as the model; a step's decay is
+//   min(ema, (1 + step) / (10 + step)), so the first steps' weights do not dominate it)
 //
 // Rank r of W takes every W-th example of each global batch, and the gradients are averaged over
 // the ranks (all-reduce of one flattened buffer), so W ranks take the same step as one rank on the
@@ -68,6 +71,7 @@ struct Options {
   int64_t validate_every = 0, val_batches = 4;
   std::string keep = "last";
   double lr = 3e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.999, min_lr = 0, clip_grad = 1.0;
+  double ema = 0;
   std::string schedule = "cosine";
   nn::Precision requested_precision = nn::Precision::kFloat32;  // params.precision
   nn::Precision precision = nn::Precision::kFloat32;            // what this CPU runs
@@ -105,6 +109,9 @@ struct Options {
     o.min_lr = p.value("min_lr", o.min_lr);
     o.clip_grad = p.value("clip_grad", o.clip_grad);
     o.schedule = p.value("schedule", o.schedule);
+    o.ema = p.value("ema", o.ema);
+    if (!(o.ema >= 0 && o.ema < 1))
+      throw plugin::BadInput("params.ema must be in [0, 1) (0: no moving average of the weights)");
     try {
       o.requested_precision =
           nn::ParsePrecision(p.value("precision", std::string("float32")), "params.precision");
@@ -139,6 +146,7 @@ struct Options {
             {"precision_run", nn::PrecisionName(precision)},
             {"min_lr", min_lr},
             {"clip_grad", clip_grad},
+            {"ema", ema},
             {"checkpoint_every", checkpoint_every},
             {"seed", seed},
             {"validate_every", validate_every},
@@ -341,6 +349,8 @@ class Trainer {
                                                            .betas({options_.beta1, options_.beta2})
                                                            .weight_decay(options_.weight_decay));
     const int64_t start = Resume();
+    if (options_.ema > 0 && rank_ == 0 && ema_.empty())
+      for (const auto& p : params_) ema_.push_back(p.detach().clone());
     JoinGang();
     started_ = std::chrono::steady_clock::now();
     model().Module().train();
@@ -421,6 +431,12 @@ class Trainer {
     }
     LoadModule(model().Module(), layout::ModelWeightsFile(latest->dir));
     torch::load(*optimizer_, latest->dir + "/optimizer.pt");
+    if (options_.ema > 0 && rank_ == 0) {
+      if (!fs::exists(latest->dir + "/ema.pt"))
+        throw plugin::BadInput(latest->dir +
+                               ": no ema.pt (the checkpoint was written without params.ema)");
+      torch::load(ema_, latest->dir + "/ema.pt");
+    }
     const int64_t start = latest->step;
     seconds_before_ = latest->seconds;
     task_.Log(MP_LOG_INFO,
@@ -519,10 +535,34 @@ class Trainer {
     // Clipping and AdamW in one pass per parameter (LibTorch's clip_grad_norm_ and AdamW::step
     // make about ten over each; plugins/common/fused.h).
     nn::AdamWStep(*optimizer_, options_.clip_grad);
+    if (!ema_.empty()) {
+      const double decay = std::min(
+          options_.ema, (1.0 + static_cast<double>(step)) / (10.0 + static_cast<double>(step)));
+      torch::NoGradGuard no_grad;
+      for (size_t k = 0; k < ema_.size(); ++k) ema_[k].lerp_(params_[k].detach(), 1.0 - decay);
+    }
     last_loss_ = averaged[static_cast<int64_t>(std::find(names.begin(), names.end(), "loss") -
                                                names.begin())]
                      .item<double>();
     if (rank_ == 0) LogStep(step, lr, names, averaged);
+  }
+
+  // Runs `f` with the moving average's weights in the model (params.ema), then puts the trained
+  // weights back; without it, `f` on the trained weights.
+  template <class F>
+  void WithAveragedWeights(F f) {
+    if (ema_.empty()) return f();
+    std::vector<torch::Tensor> trained;
+    {
+      torch::NoGradGuard no_grad;
+      for (size_t k = 0; k < ema_.size(); ++k) {
+        trained.push_back(params_[k].detach().clone());
+        params_[k].detach().copy_(ema_[k]);
+      }
+    }
+    f();
+    torch::NoGradGuard no_grad;
+    for (size_t k = 0; k < ema_.size(); ++k) params_[k].detach().copy_(trained[k]);
   }
 
   // Rank 0: a row of losses.csv per step, flushed (and the live metrics set) every log_every.
@@ -559,8 +599,13 @@ class Trainer {
 
   // Rank 0: the held-out loss after `step`, logged with the training seconds so far and the
   // model's other terms on the same batches (val_<term>: the time to a validation quality, e.g. a
-  // TMR's retrieval); a new lowest loss writes best/ (atomically).
+  // TMR's retrieval); a new lowest loss writes best/ (atomically). With params.ema, of the moving
+  // average's weights.
   void ValidateAndKeepBest(int64_t step) {
+    WithAveragedWeights([&] { ValidateAndKeepBestOfTheModel(step); });
+  }
+
+  void ValidateAndKeepBestOfTheModel(int64_t step) {
     const std::map<std::string, double> terms = Validate(model(), *val_dataset_, options_);
     const double val_loss = terms.at("loss");
     const bool fresh = !fs::exists(val_csv_);
@@ -599,6 +644,7 @@ class Trainer {
     fs::create_directories(tmp);
     SaveModule(model().Module(), layout::ModelWeightsFile(tmp));
     torch::save(*optimizer_, tmp + "/optimizer.pt");
+    if (!ema_.empty()) torch::save(ema_, tmp + "/ema.pt");
     const Status s = WriteFileAtomic(tmp + "/trainer.json", json({{"step", step + 1},
                                                                   {"epoch", step / per_epoch},
                                                                   {"world_size", world_},
@@ -621,14 +667,18 @@ class Trainer {
       fs::remove_all(state_dir_ + "/" + all[k]);
   }
 
-  // Rank 0: the output model (with keep: best, the lowest validation loss's), state_dict.pt and
-  // the loss curves.
+  // Rank 0: the output model (with keep: best, the lowest validation loss's; with params.ema, the
+  // moving average's weights), state_dict.pt and the loss curves.
   void WriteOutputs() {
     model().Module().eval();
     if (options_.keep == "best" && best_step_ >= 0 && best_step_ < options_.steps) {
       LoadModule(model().Module(), layout::ModelWeightsFile(best_dir_));
       WriteModelDir(model(), options_, best_step_, layout::CheckpointDir(out_dir_));
     } else {
+      if (!ema_.empty()) {
+        torch::NoGradGuard no_grad;
+        for (size_t k = 0; k < ema_.size(); ++k) params_[k].detach().copy_(ema_[k]);
+      }
       WriteModelDir(model(), options_, options_.steps, layout::CheckpointDir(out_dir_));
     }
     ExportStateDict(model().Module(), out_dir_ + "/state_dict.pt");
@@ -670,6 +720,7 @@ class Trainer {
   std::unique_ptr<plugin::Dataset> dataset_, val_dataset_;
   std::vector<torch::Tensor> params_;
   std::unique_ptr<torch::optim::AdamW> optimizer_;
+  std::vector<torch::Tensor> ema_;  // rank 0, params.ema: the moving average of params_
   c10::intrusive_ptr<c10d::ProcessGroupGloo> group_;
   std::optional<nn::EpochOrder> order_;  // made with the training dataset
   std::ofstream log_;
