@@ -303,20 +303,17 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
       return GuideThreeWay(parts[0], parts[1], parts[2], gm, gt);
     };
     // The x0 estimate along the trajectory: where does the sample leave the source?
-    const bool trace = true;
     std::printf(
         "DDIM-%lld trajectory, guidance %.1f/%.1f: step t, x0 estimate -> target MSE, -> source "
         "MSE, roughness, foot skate (grounded)\n",
         static_cast<long long>(ddim), gm, gt);
     const Denoise traced = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = denoise(xt, t);
-      if (trace) {
-        const auto frame = p.net->Decode(x0);
-        std::printf("  t %3lld: %.4f %.4f %.5f %.3f\n", static_cast<long long>(t),
-                    Mse(frame, target, padding).mean().item<double>(),
-                    Mse(frame, source, padding).mean().item<double>(),
-                    Roughness(frame, padding).mean().item<double>(), GroundedSkate(p, frame));
-      }
+      const auto frame = p.net->Decode(x0);
+      std::printf("  t %3lld: %.4f %.4f %.5f %.3f\n", static_cast<long long>(t),
+                  Mse(frame, target, padding).mean().item<double>(),
+                  Mse(frame, source, padding).mean().item<double>(),
+                  Roughness(frame, padding).mean().item<double>(), GroundedSkate(p, frame));
       return x0;
     };
     auto generator = at::make_generator<at::CPUGeneratorImpl>(7);
