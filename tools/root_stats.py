@@ -47,6 +47,8 @@ from similarity_ref import rotation_matrices  # noqa: E402
 SKELETON = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "skeleton", "smpl22.json")
 LEGS = ((1, 4, 7, 10), (2, 5, 8, 11))  # hip, knee, ankle, foot (SMPL-22); the feet are 7, 10, 8, 11
 KNEES = tuple(leg[1] for leg in LEGS)
+# The joints whose rotations move the feet (a foot joint's own rotation moves no joint feet() places).
+LEG_JOINTS = [joint for leg in LEGS for joint in leg[:3]]  # hips, knees, ankles
 CONTACT_HEIGHT, SKATE_SPEED = 0.05, 0.15  # core's PlausibilityOptions
 
 
@@ -131,23 +133,21 @@ def leg_angle_error(stage_motions, reference):
     of each motion and those of the reference motion with the same id (against_motions), frame by
     frame (the shorter's frames): how far an estimate's legs are from the answer's (issue 15)."""
     reference = {i: rotations for i, (_, rotations, _) in reference.items()}
-    joints = [joint for leg in LEGS for joint in leg[:3]]
     angles = []
     for i, _, rotations, _ in stage_motions:
         frames = min(len(rotations), len(reference[i]))
-        relative = np.einsum("tjab,tjab->tj", rotations[:frames, joints], reference[i][:frames, joints])
+        relative = np.einsum("tjab,tjab->tj", rotations[:frames, LEG_JOINTS], reference[i][:frames, LEG_JOINTS])
         angles.append(angle_of_trace(relative).ravel())
     angles = np.concatenate(angles)
     return angles.mean(), np.median(angles)
 
 
-LEG_ERROR_JOINTS = [joint for leg in LEGS for joint in leg]  # hips, knees, ankles, feet
 BAND_SECONDS = (0.1, 0.33, 1.0)
 
 
 def log_rotation(rotations):
     """Rotation vectors [..., 3] of rotation matrices [..., 3, 3] (angles below pi)."""
-    angle = np.arccos(np.clip((np.trace(rotations, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
+    angle = np.radians(angle_of_trace(np.trace(rotations, axis1=-2, axis2=-1)))
     axis = np.stack([rotations[..., 2, 1] - rotations[..., 1, 2], rotations[..., 0, 2] - rotations[..., 2, 0],
                      rotations[..., 1, 0] - rotations[..., 0, 1]], axis=-1)
     sine = np.sin(angle)[..., None]
@@ -165,7 +165,7 @@ def smoothed(x, sigma):
 def error_band_skates(stage_dir, stage_motions, reference):
     """The skate of the reference's motions carrying this stage's error: whole, legs alone, pelvis
     alone, then the slower and the faster part for each of BAND_SECONDS (means over the motions)."""
-    offsets, columns = leg_offsets(), []
+    offsets, columns, joints = leg_offsets(), [], [0] + LEG_JOINTS
     for i, trans, rotations, fps in stage_motions:
         ref_trans, ref_rotations, ref_fps = reference[i]
         if fps != ref_fps:
@@ -173,7 +173,6 @@ def error_band_skates(stage_dir, stage_motions, reference):
         frames = min(len(trans), len(ref_trans))
         ref_trans, ref_rotations = ref_trans[:frames], ref_rotations[:frames]
         # R = R_ref exp(e): the error e of the pelvis (joint 0) and the leg joints, and of the translation.
-        joints = [0] + LEG_ERROR_JOINTS
         error = log_rotation(np.einsum("tjba,tjbc->tjac", ref_rotations[:, joints], rotations[:frames, joints]))
         shift = trans[:frames] - ref_trans
 
@@ -275,7 +274,8 @@ def main():
                         help="after each generate stage, its spans' ground truth from this singles stage")
     parser.add_argument("--against", metavar="STAGE_DIR",
                         help="also the leg joints' angle to the motions of the same ids in this stage "
-                             "(e.g. mdt_probe --write's target_roundtrip)")
+                             "(e.g. mdt_probe --write's target_roundtrip), and the skate of those "
+                             "motions carrying each stage's error, by body part and by speed")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "

@@ -553,16 +553,15 @@ class Trainer {
   void WithAveragedWeights(F f) {
     if (ema_.empty()) return f();
     std::vector<torch::Tensor> trained;
-    {
-      torch::NoGradGuard no_grad;
-      for (size_t k = 0; k < ema_.size(); ++k) {
-        trained.push_back(params_[k].detach().clone());
-        params_[k].detach().copy_(ema_[k]);
-      }
-    }
+    for (const auto& p : params_) trained.push_back(p.detach().clone());
+    CopyIntoParameters(ema_);
     f();
+    CopyIntoParameters(trained);
+  }
+
+  void CopyIntoParameters(const std::vector<torch::Tensor>& weights) {
     torch::NoGradGuard no_grad;
-    for (size_t k = 0; k < ema_.size(); ++k) params_[k].detach().copy_(trained[k]);
+    for (size_t k = 0; k < weights.size(); ++k) params_[k].detach().copy_(weights[k]);
   }
 
   // Rank 0: a row of losses.csv per step, flushed (and the live metrics set) every log_every.
@@ -675,10 +674,7 @@ class Trainer {
       LoadModule(model().Module(), layout::ModelWeightsFile(best_dir_));
       WriteModelDir(model(), options_, best_step_, layout::CheckpointDir(out_dir_));
     } else {
-      if (!ema_.empty()) {
-        torch::NoGradGuard no_grad;
-        for (size_t k = 0; k < ema_.size(); ++k) params_[k].detach().copy_(ema_[k]);
-      }
+      CopyIntoParameters(ema_);  // the moving average's weights, when params.ema keeps one
       WriteModelDir(model(), options_, options_.steps, layout::CheckpointDir(out_dir_));
     }
     ExportStateDict(model().Module(), out_dir_ + "/state_dict.pt");
