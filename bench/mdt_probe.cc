@@ -3,7 +3,9 @@
 // against target and source in the normalised feature space, with their roughness; and the foot
 // skate of the decoded estimates, with what columns of the t = 0 estimate it comes from; along each
 // DDIM trajectory (guidance 1/1 and the model's), every step's x0 estimate's error, roughness and
-// skate: whether the sample's skate is laid out at the noisy steps or made at the clean ones.
+// skate: whether the sample's skate is laid out at the noisy steps or made at the clean ones. A
+// checkpoint with a contact head (loss.contacts) also has the head's calls scored against the
+// target's own still feet (ContactLabels) by step.
 //   mdt_probe <checkpoint dir> <filter/corpus dir>... [--split test] [--n 64] [--ddim 20]
 //             [--guidance g_m,g_t] [--no-sample] [--write DIR] [--filter none] [--limit N]
 // --filter none reads every triplet of the corpus directories (the filter's kept ones otherwise);
@@ -15,6 +17,7 @@
 // the judges make of the network's own reconstruction of the answer.
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -27,6 +30,7 @@
 #include "../plugins/common/threads.h"
 #include "../plugins/mdt_editor/edit_data.h"
 #include "../plugins/mdt_editor/editor.h"
+#include "../plugins/mdt_editor/foot_contact.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/anchor.h"
@@ -222,6 +226,33 @@ void PrintSkateSources(const Probe& p, const torch::Tensor& estimate) {
   }
 }
 
+// The contact head's calls (probability above 1/2) on the target noised to step t against the
+// target's still feet: the share of real foot-joint frames it gets right, and of the still ones
+// it calls (recall) and of its calls that are still (precision), beside the share that is still.
+void PrintContactHead(Probe& p, const CosineSchedule& schedule) {
+  const auto& target = p.batch.tensors.at("target");
+  const auto& padding = p.batch.tensors.at("target_padding");
+  const double fps = p.options.fps > 0 ? p.options.fps : 30.0;
+  const auto labels = ContactLabels(target * (2.0 * (p.stddev + 1e-5)) + p.mean, fps,
+                                    PlausibilityOptions{}.skate_speed)
+                          .to(torch::kBool);
+  const auto real = padding.logical_not().t().unsqueeze(2).expand_as(labels);
+  const auto count = [](const torch::Tensor& x) { return x.sum().item<double>(); };
+  std::printf("contact head: t, right, recall, precision, still (of %.0f foot-joint frames)\n",
+              count(real));
+  for (int64_t t : {0L, 30L, 100L, 200L, 299L}) {
+    if (t >= p.options.diffusion_steps) continue;
+    const auto steps = torch::full({p.n}, t, torch::kInt64);
+    const auto xt = schedule.QSample(p.net->Encode(target), steps, torch::randn(target.sizes()));
+    const auto called = p.net->forward(xt, steps, padding, p.c).contacts.gt(0.0);
+    const double still = count(labels & real), calls = count(called & real);
+    const double hits = count(called & labels & real);
+    std::printf("  t %3lld: %.3f %.3f %.3f %.3f\n", static_cast<long long>(t),
+                count((called == labels) & real) / count(real), hits / std::max(still, 1.0),
+                hits / std::max(calls, 1.0), still / count(real));
+  }
+}
+
 // The x0 estimate's error by diffusion step, with and without text or source, beside x_t scaled.
 void PrintX0ByStep(Probe& p, const CosineSchedule& schedule) {
   const auto& target = p.batch.tensors.at("target");
@@ -407,6 +438,7 @@ int main(int argc, char** argv) {
       static_cast<long long>(probe->options.diffusion_steps));
   PrintYardsticks(*probe);
   PrintX0ByStep(*probe, schedule);
+  if (probe->options.contacts_weight > 0) PrintContactHead(*probe, schedule);
   if (args->sample) PrintSampledEdits(*probe, schedule, args->ddim, g_m, g_t);
   if (!args->write.empty()) {
     const Status written = WriteEstimates(*probe, schedule, args->write);

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "../common/fused.h"
+#include "foot_contact.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -41,7 +42,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
   RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.",
-                   {"velocity", "foot_contact", "foot_velocity"});
+                   {"velocity", "foot_contact", "foot_velocity", "contacts"});
   RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
                    {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
                     "guidance_text", "preconditioning", "sigma_data", "snr_shift",
@@ -106,6 +107,9 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
       j.value("loss", nlohmann::json::object()).value("foot_velocity", o.foot_velocity_weight);
   if (!(o.foot_velocity_weight >= 0))
     throw std::invalid_argument("loss.foot_velocity must be >= 0");
+  o.contacts_weight =
+      j.value("loss", nlohmann::json::object()).value("contacts", o.contacts_weight);
+  if (!(o.contacts_weight >= 0)) throw std::invalid_argument("loss.contacts must be >= 0");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
@@ -164,7 +168,8 @@ nlohmann::json EditorOptions::ToJson() const {
           {"loss",
            {{"velocity", velocity_weight},
             {"foot_contact", foot_contact_weight},
-            {"foot_velocity", foot_velocity_weight}}},
+            {"foot_velocity", foot_velocity_weight},
+            {"contacts", contacts_weight}}},
           {"diffusion",
            {{"steps", diffusion_steps},
             {"drop_text", drop_text},
@@ -240,6 +245,8 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
   }
   target_in_ = register_module("target_in", torch::nn::Linear(diffusion_dim(), o.dim));
   out_ = register_module("out", torch::nn::Linear(o.dim, diffusion_dim()));
+  if (o.contacts_weight > 0)
+    contact_out_ = register_module("contact_out", torch::nn::Linear(o.dim, kContactJoints));
   time_mlp_ = register_module(
       "time_mlp", torch::nn::Sequential(torch::nn::Linear(256, o.dim), torch::nn::SiLU(),
                                         torch::nn::Linear(o.dim, o.dim)));
@@ -451,6 +458,7 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   const auto m = nn::ApplyLinear(final_modulation_, silu_cond).unsqueeze(0).chunk(2, 2);
   x = Modulate(x.narrow(0, ts + 1, tt), m[1], m[0]);
   p.x0 = nn::ApplyLinear(out_, x);
+  if (contact_out_) p.contacts = nn::ApplyLinear(contact_out_, x);
   return p;
 }
 
@@ -476,8 +484,10 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
   parts.push_back(Place(nn::ApplyLinear(target_in_, xt), kTarget));
   masks.push_back(target_padding);
   auto x = torch::cat(parts, 0);
-  x = encoder_->forward(x, torch::cat(masks, 1));
-  return {nn::ApplyLinear(out_, x.narrow(0, prefix, tt)), {}};
+  x = encoder_->forward(x, torch::cat(masks, 1)).narrow(0, prefix, tt);
+  Prediction p{nn::ApplyLinear(out_, x), {}, {}};
+  if (contact_out_) p.contacts = nn::ApplyLinear(contact_out_, x);
+  return p;
 }
 
 torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,

@@ -46,6 +46,13 @@ struct EditorOptions {
   // MDM's L_vel on the feet through forward kinematics (FootVelocityLoss) in (m/s)^2, added with
   // this weight; 0 (the reference) leaves it out. The frames' rate as for foot_contact.
   double foot_velocity_weight = 0;
+  // > 0: a contact head (one Linear on the target tokens' last hidden states) predicts, per frame,
+  // which of the four foot joints (left ankle, left toe, right ankle, right toe) the target holds
+  // still (ContactLabels), trained by binary cross-entropy with this weight. The edit option
+  // `foot_lock: {contacts: predicted}` then plants the feet where the edit's own head says they
+  // stand, where the post-process can only guess from height and speed (issue 15: the edits'
+  // sliding stance feet move too fast for its speed test). 0 (the reference): no head.
+  double contacts_weight = 0;
   double snr_shift =
       1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
   // The training steps' density, proportional to t^k (SampleTrainingStep); 0: uniform (the
@@ -146,6 +153,7 @@ torch::Tensor GatedResidual(const torch::Tensor& x, const torch::Tensor& gate,
 struct Prediction {
   torch::Tensor x0;          // [Tt, N, diffusion_dim()]: 207 columns or `components` coordinates
   torch::Tensor similarity;  // mdt: [N, Ts, K] logits (or [N, Ts] regression); else undefined
+  torch::Tensor contacts;    // loss.contacts > 0: [Tt, N, 4] logits (ContactLabels' order)
 };
 
 // A DiT block with adaLN-Zero: shift/scale/gate for attention and MLP from SiLU -> Linear(d, 6d),
@@ -208,6 +216,7 @@ class EditorNetImpl : public torch::nn::Module {
   torch::Tensor basis_, basis_scale_;  // components > 0: [207, k] orthonormal, [k] spreads / sd
   nn::TextEncoder text_encoder_{nullptr};
   torch::nn::Linear text_proj_{nullptr}, source_in_{nullptr}, target_in_{nullptr}, out_{nullptr};
+  torch::nn::Linear contact_out_{nullptr};  // loss.contacts > 0: the contact head
   torch::nn::Sequential time_mlp_{nullptr}, sim_head_{nullptr};
   nn::Encoder condition_{nullptr}, encoder_{nullptr};
   torch::nn::ModuleList blocks_{nullptr};

@@ -1,6 +1,9 @@
 #include "foot_contact.h"
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <stdexcept>
 
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -96,6 +99,50 @@ torch::Tensor FootVelocityLoss(const torch::Tensor& prediction, const torch::Ten
   const auto squared =
       ((FootDisplacements(prediction) - FootDisplacements(target).detach()) * fps).pow(2).sum(-1);
   return (squared * real).sum() / (real.sum() * 4).clamp_min(1.0);
+}
+
+torch::Tensor ContactLabels(const torch::Tensor& features, double fps, double still_speed) {
+  const int64_t frames = features.size(0);
+  if (frames < 2) return torch::zeros({frames, features.size(1), kContactJoints}, torch::kFloat32);
+  const auto pair = (FootDisplacements(features).detach() * fps).norm(2, -1);  // [T - 1, N, 4]
+  // Frame i's speed: the mean of its pairs (i - 1, i) and (i, i + 1), the one it has at an end.
+  auto speed = torch::empty({frames, pair.size(1), kContactJoints}, torch::kFloat32);
+  speed[0] = pair[0];
+  speed[frames - 1] = pair[frames - 2];
+  if (frames > 2)
+    speed.narrow(0, 1, frames - 2)
+        .copy_(0.5 * (pair.narrow(0, 0, frames - 2) + pair.narrow(0, 1, frames - 2)));
+  return speed.lt(still_speed).to(torch::kFloat32);
+}
+
+torch::Tensor ContactLoss(const torch::Tensor& logits, const torch::Tensor& labels,
+                          const torch::Tensor& padding) {
+  const auto real = padding.logical_not().t().unsqueeze(-1).to(torch::kFloat32);  // [T, N, 1]
+  const auto each = torch::binary_cross_entropy_with_logits(logits.to(torch::kFloat32), labels, {},
+                                                            {}, at::Reduction::None);
+  return (each * real).sum() / (real.sum() * kContactJoints).clamp_min(1.0);
+}
+
+std::vector<uint8_t> ContactsAtRate(const torch::Tensor& stands, double fps, double rate,
+                                    int64_t frames) {
+  const auto p = stands.to(torch::kFloat32).contiguous();
+  const int64_t have = p.size(0);
+  if (p.dim() != 2 || p.size(1) != kContactJoints || have < 1)
+    throw std::invalid_argument("ContactsAtRate: stands must be [T >= 1, 4]");
+  const auto a = p.accessor<float, 2>();
+  std::vector<uint8_t> held(static_cast<size_t>(frames * kContactJoints));
+  for (int64_t j = 0; j < frames; ++j) {
+    const double at =
+        std::clamp(fps > 0 ? static_cast<double>(j) * fps / rate : static_cast<double>(j), 0.0,
+                   static_cast<double>(have - 1));
+    const auto lo = static_cast<int64_t>(std::floor(at));
+    const int64_t hi = std::min(lo + 1, have - 1);
+    const double w = at - static_cast<double>(lo);
+    for (int64_t q = 0; q < kContactJoints; ++q)
+      held[static_cast<size_t>(j * kContactJoints + q)] =
+          (1 - w) * a[lo][q] + w * a[hi][q] > 0.5 ? 1 : 0;
+  }
+  return held;
 }
 
 }  // namespace motionpipe::mdt

@@ -12,7 +12,13 @@
 
 #include <torch/torch.h>
 
+#include <cstdint>
+#include <vector>
+
 namespace motionpipe::mdt {
+
+// The foot joints FootDisplacements moves and the contact head predicts, in this order.
+inline constexpr int64_t kContactJoints = 4;
 
 // The four foot joints (left ankle, left foot, right ankle, right foot: SMPL-22 joints 7, 10, 8,
 // 11), displaced between frames i - 1 and i, in metres, in the heading frame of frame i - 1:
@@ -41,5 +47,25 @@ torch::Tensor FootContactLoss(const torch::Tensor& prediction, const torch::Tens
 // rotations and pelvis velocity put back, the demo MDT's one-step estimate stops skating).
 torch::Tensor FootVelocityLoss(const torch::Tensor& prediction, const torch::Tensor& target,
                                const torch::Tensor& padding, double fps);
+
+// Which foot joints a motion holds still, per frame: 1 where the joint's speed is below
+// `still_speed` m/s, the speed being its displacements (FootDisplacements) to the previous and the
+// next frame averaged (one-sided at the ends, as foot_lock's test), else 0. On the floor a still
+// foot is a contact; the features carry no height, so a foot held still in the air counts too,
+// which a lock that holds it still leaves as it is. `features`: unnormalised [T, N, 207] at `fps`;
+// returns [T, N, 4] float32 (all 0 for a one-frame motion).
+torch::Tensor ContactLabels(const torch::Tensor& features, double fps, double still_speed);
+
+// The contact head's loss: binary cross-entropy of `logits` [T, N, 4] against `labels`
+// (ContactLabels) averaged over the real frames (padding [N, T], true = padded) and the four
+// joints.
+torch::Tensor ContactLoss(const torch::Tensor& logits, const torch::Tensor& labels,
+                          const torch::Tensor& padding);
+
+// The contact head's probabilities `stands` [T, 4] for frames at `fps` (<= 0: at `rate` already),
+// brought to `frames` frames at `rate` (linear in time, the last frame held past the end) and
+// thresholded at 1/2: LockFeet's contacts ([frames * 4], 1 = stands).
+std::vector<uint8_t> ContactsAtRate(const torch::Tensor& stands, double fps, double rate,
+                                    int64_t frames);
 
 }  // namespace motionpipe::mdt

@@ -133,12 +133,18 @@ class EditorModel : public plugin::Model {
       out["velocity"] = VelocityMse(p.x0, target, batch.tensors.at("target_padding"));
       loss = loss + options_.velocity_weight * out["velocity"];
     }
-    if (options_.foot_contact_weight > 0 || options_.foot_velocity_weight > 0) {
+    if (options_.foot_contact_weight > 0 || options_.foot_velocity_weight > 0 ||
+        p.contacts.defined()) {
       // The geometric losses read metres: the features' normalisation undone (REFERENCE.md 2).
       const auto scale = 2.0 * (std_ + 1e-5);
       const auto predicted = p.x0 * scale + mean_, actual = target * scale + mean_;
       const auto& padding = batch.tensors.at("target_padding");
       const double fps = options_.fps > 0 ? options_.fps : 30.0;
+      if (p.contacts.defined()) {
+        out["contacts"] = ContactLoss(
+            p.contacts, ContactLabels(actual, fps, PlausibilityOptions{}.skate_speed), padding);
+        loss = loss + options_.contacts_weight * out["contacts"];
+      }
       if (options_.foot_contact_weight > 0) {
         out["foot_contact"] =
             FootContactLoss(predicted, actual, padding, fps, PlausibilityOptions{}.skate_speed);
@@ -221,8 +227,14 @@ class EditorGenerator : public plugin::Generator {
     // on planted feet. plant: false does the decoding and encoding only (the control). The other
     // keys are foot_lock's (FootLockOptionsFromJson; an unknown key is an error), applied at the
     // network's frame rate.
+    //
+    // foot_lock: {contacts: predicted, ...}: the edit, decoded at the rate asked for, has its feet
+    // planted (LockFeet) where the checkpoint's contact head (loss.contacts) says they stand in
+    // the last estimate, instead of where the post-process's height and speed test guesses
+    // (issue 15; not in the paper). contacts: test (the default) is that test.
     const nlohmann::json lock = options.value("foot_lock", nlohmann::json::object());
-    auto lock_options = FootLockOptionsFromJson(lock, "foot_lock", {"below_step", "plant"});
+    auto lock_options =
+        FootLockOptionsFromJson(lock, "foot_lock", {"below_step", "plant", "contacts"});
     if (!lock_options.ok()) throw std::invalid_argument(lock_options.status().message());
     foot_lock_ = *lock_options;
     foot_lock_below_step_ = lock.value("below_step", int64_t{0});
@@ -230,6 +242,19 @@ class EditorGenerator : public plugin::Generator {
     if (foot_lock_below_step_ < 0 || foot_lock_below_step_ > model_->schedule().steps())
       throw std::invalid_argument("foot_lock.below_step must be in [0, " +
                                   std::to_string(model_->schedule().steps()) + "]");
+    const std::string contacts = lock.value("contacts", std::string("test"));
+    if (contacts != "test" && contacts != "predicted")
+      throw std::invalid_argument("foot_lock.contacts must be test or predicted (got '" + contacts +
+                                  "')");
+    lock_predicted_ = contacts == "predicted";
+    if (lock_predicted_ && !(model_->options().contacts_weight > 0))
+      throw std::invalid_argument(
+          "foot_lock.contacts predicted needs a checkpoint trained with a contact head "
+          "(loss.contacts > 0)");
+    if (lock_predicted_ && foot_lock_below_step_ > 0)
+      throw std::invalid_argument(
+          "foot_lock: contacts predicted plants the edit once; below_step plants the estimates "
+          "inside the sampler: one or the other");
   }
 
   std::string Name() const override {
@@ -444,6 +469,14 @@ class EditorGenerator : public plugin::Generator {
     } else {
       return InvalidArgument("sampler must be ddpm or ddim (got '" + r0.sampler + "')");
     }
+    torch::Tensor stands;  // [tt, n, 4]: the contact head's probabilities on the last estimate
+    if (lock_predicted_) {
+      // The fully conditional branch's head, reading the edit itself as a clean x_t (t = 0).
+      const auto p = model_->net()->forward(
+          x.repeat({1, branches, 1}), torch::zeros({branches * n}, torch::kInt64), padding, c);
+      stands =
+          torch::sigmoid(p.contacts.chunk(branches, 1).back().to(torch::kFloat32)).contiguous();
+    }
     x = (model_->net()->Decode(x) * scale + model_->mean()).contiguous();
     std::vector<Motion> out;
     for (int64_t i = 0; i < n; ++i) {
@@ -462,6 +495,11 @@ class EditorGenerator : public plugin::Generator {
       for (float v : m.poses) {
         if (!std::isfinite(v)) return Internal("edit: the model produced NaN");
       }
+      if (stands.defined()) {
+        const auto held =
+            ContactsAtRate(stands.select(1, i).narrow(0, 0, frames), o.fps, rate, m.num_frames());
+        m = LockFeet(Skeleton::Smpl22(), m, foot_lock_, nullptr, &held);
+      }
       out.push_back(std::move(m));
     }
     return out;
@@ -474,6 +512,7 @@ class EditorGenerator : public plugin::Generator {
   FootLockOptions foot_lock_;
   int64_t foot_lock_below_step_ = 0;
   bool plant_feet_ = true;
+  bool lock_predicted_ = false;
   std::string labeler_;
   double guidance_motion_ = 2, guidance_text_ = 2;
 };

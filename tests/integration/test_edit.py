@@ -158,6 +158,30 @@ stages:
   locked:
     kind: foot_lock
     params: {motions: "JOBS/edit_mdt", max_speed: 5}
+  filter: {kind: filter, inputs: [corpus], shards: 1, params: {preset: paper}}
+  mdt_contacts:        # with the contact head (loss.contacts)
+    kind: train
+    inputs: [filter]
+    params:
+      model: mdt_editor
+      config:
+        variant: mdt
+        model: {dim: 32, cond_layers: 1, layers: 2, heads: 4, ff: 64, sim_hidden: 32, text_encoder: {layers: 1, vocab: 200}}
+        aux: {mode: classes, classes: 3}
+        loss: {contacts: 1}
+        fps: 10
+      data: {max_frames: 20}
+      steps: 4
+      batch_size: 4
+      warmup: 0
+  contacts_raw:
+    kind: edit
+    inputs: [mdt_contacts, corpus]
+    params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2}
+  contacts_locked:
+    kind: edit
+    inputs: [mdt_contacts, corpus]
+    params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {contacts: predicted}}}
   eval_locked:
     kind: eval_edit
     inputs: [evaluator_b, locked, corpus]
@@ -447,19 +471,39 @@ class EditTest(EngineTest):
         self.assertTrue(np.isfinite(edits("planted")).all())
         # foot_lock: the same edits with only the legs' rotations changed (hips, knees, ankles),
         # scored as a row of their own, never skating more than the raw edits.
-        raw, locked = {}, {}
-        for pattern, into in ((os.path.join(job, "edit_mdt"), raw), (self.path("judges", "judges-*", "locked"), locked)):
+        def by_clip(pattern):
+            into = {}
             for path in glob.glob(os.path.join(pattern, "task-*", "edited.npz")):
                 with np.load(path) as z:
                     for i, clip in enumerate(z["ids"]):
                         a, b = z["offsets"][i], z["offsets"][i + 1]
                         into[str(clip)] = (z["poses"][a:b].copy(), z["trans"][a:b].copy())
-        self.assertEqual(sorted(locked), sorted(raw))
+            return into
         legs = [1, 2, 4, 5, 7, 8]
         others = [j for j in range(22) if j not in legs]
-        for clip, (poses, trans) in locked.items():
-            self.assertTrue(np.array_equal(trans, raw[clip][1]), clip)
-            self.assertLess(np.abs(rotation_matrices(poses[:, others]) - rotation_matrices(raw[clip][0][:, others])).max(), 1e-5)
+        def only_legs_changed(raw, locked):
+            self.assertEqual(sorted(locked), sorted(raw))
+            for clip, (poses, trans) in locked.items():
+                self.assertTrue(np.array_equal(trans, raw[clip][1]), clip)
+                self.assertLess(np.abs(rotation_matrices(poses[:, others]) - rotation_matrices(raw[clip][0][:, others])).max(), 1e-5)
+        raw, locked = by_clip(os.path.join(job, "edit_mdt")), by_clip(self.path("judges", "judges-*", "locked"))
+        only_legs_changed(raw, locked)
+        # The contact head: trained beside the x0 loss (its term in the log), it plants the edits'
+        # feet where it says they stand, changing the legs and nothing else.
+        with open(glob.glob(self.path("judges", "judges-*", "mdt_contacts", "task-00000", "losses.csv"))[0]) as f:
+            logged = list(csv.DictReader(f))
+        self.assertEqual(len(logged), 4)
+        self.assertTrue(all(0 < float(row["contacts"]) < 5 for row in logged), logged)
+        only_legs_changed(by_clip(self.path("judges", "judges-*", "contacts_raw")),
+                          by_clip(self.path("judges", "judges-*", "contacts_locked")))
+        # Only a checkpoint with the head can say where its feet stand.
+        headless = judges.replace("model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options",
+                                  'model: "%s", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options'
+                                  % os.path.join(job, "mdt", "task-00000", "model"))
+        result = subprocess.run([MOTIONPIPE, "run", self.write_pipeline("headless.yaml", headless.replace("name: judges", "name: headless")),
+                                 "--workers", "1", "--threads", "1"], capture_output=True, text=True, timeout=600)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("foot_lock.contacts predicted needs a checkpoint trained with a contact head", result.stdout + result.stderr)
         scored = judged["eval_locked"]
         self.assertEqual(scored["method"], "mdt_editor/mdt + foot lock")
         self.assertEqual(scored["motions"], 3)

@@ -1101,6 +1101,93 @@ TEST(Editor, FootVelocityLossComparesTheFeetsVelocitiesOnEveryRealFramePair) {
   EXPECT_FALSE(target.grad().defined() && target.grad().abs().sum().item<double>() > 0);
 }
 
+// Issue 15: the contact head's labels are the target's feet that stand still (slower than the
+// speed), per frame from the displacements to both neighbours, at the frames' own rate.
+TEST(Editor, ContactLabelsMarkTheFeetThatStandStill) {
+  const int64_t frames = 16;
+  const auto [stand, slide] = StandingAndSliding(frames);  // 0 and 0.5 m/s at 30 fps
+  const auto still = ContactLabels(stand, 30, 0.15);
+  ASSERT_EQ(still.sizes(), (std::vector<int64_t>{frames, 1, kContactJoints}));
+  EXPECT_EQ(still.sum().item<double>(), static_cast<double>(frames * kContactJoints));
+  EXPECT_EQ(ContactLabels(slide, 30, 0.15).sum().item<double>(), 0.0);
+  // Read as 10-fps frames each step is 0.17 m/s; at 0.2 m/s the feet count as still.
+  EXPECT_EQ(ContactLabels(slide, 10, 0.15).sum().item<double>(), 0.0);
+  EXPECT_EQ(ContactLabels(slide, 10, 0.2).sum().item<double>(),
+            static_cast<double>(frames * kContactJoints));
+  // Standing for frames 0-7, then sliding: frame 7 averages a still pair and a sliding one
+  // (0.25 m/s), so it moves; the last frame takes its one pair.
+  auto both = stand.clone();  // the two differ in the pelvis velocity only
+  both.narrow(0, 8, frames - 8).copy_(slide.narrow(0, 8, frames - 8));
+  const auto mixed = ContactLabels(both, 30, 0.15).select(1, 0);  // [T, 4]
+  for (int64_t f = 0; f < frames; ++f)
+    for (int64_t q = 0; q < kContactJoints; ++q)
+      EXPECT_EQ(mixed[f][q].item<float>(), f < 7 ? 1.0F : 0.0F) << "frame " << f << " joint " << q;
+  EXPECT_EQ(ContactLabels(stand.narrow(0, 0, 1), 30, 0.15).sum().item<double>(), 0.0);
+}
+
+// The head's loss is the binary cross-entropy over real frames: ln 2 for logits 0, near 0 for
+// confident right answers, and padded frames do not count; only a checkpoint with loss.contacts
+// has the head.
+TEST(Editor, TheContactHeadIsTrainedOnRealFramesOnly) {
+  const auto labels = torch::ones({6, 2, kContactJoints});
+  const auto none = torch::zeros({2, 6}, torch::kBool);
+  EXPECT_NEAR(ContactLoss(torch::zeros({6, 2, kContactJoints}), labels, none).item<double>(),
+              std::log(2.0), 1e-6);
+  auto logits = torch::full({6, 2, kContactJoints}, 20.0);
+  EXPECT_NEAR(ContactLoss(logits, labels, none).item<double>(), 0.0, 1e-6);
+  auto padding = none.clone();
+  padding[1].narrow(0, 3, 3).fill_(true);
+  logits.select(1, 1).narrow(0, 3, 3).fill_(-20.0);  // wrong, but padded
+  EXPECT_NEAR(ContactLoss(logits, labels, padding).item<double>(), 0.0, 1e-6);
+  EXPECT_GT(ContactLoss(logits, labels, none).item<double>(), 1.0);
+
+  const TinyTriplets data;
+  const auto t = torch::full({3}, 10, torch::kInt64);
+  const Condition c{data.texts, data.source, data.source_padding, {}, {}};
+  for (const std::string variant : {"mdt", "tmed"}) {
+    EditorOptions o = Tiny(variant, "none");
+    EditorNet plain(o);
+    plain->text_encoder()->Fit(data.texts);
+    EXPECT_FALSE(plain->forward(data.target, t, data.target_padding, c).contacts.defined());
+    o.contacts_weight = 1;
+    EditorNet headed(o);
+    headed->text_encoder()->Fit(data.texts);
+    const auto p = headed->forward(data.target, t, data.target_padding, c);
+    ASSERT_TRUE(p.contacts.defined()) << variant;
+    EXPECT_EQ(p.contacts.sizes(), (std::vector<int64_t>{data.target.size(0), 3, kContactJoints}))
+        << variant;
+  }
+  EXPECT_EQ(EditorOptions::FromJson({{"loss", {{"contacts", 0.5}}}}).ToJson()["loss"]["contacts"],
+            0.5);
+  EXPECT_THROW(EditorOptions::FromJson({{"loss", {{"contacts", -1}}}}), std::invalid_argument);
+}
+
+// The head's probabilities at the network's 10 fps, brought to 30 fps: linear in time, thresholded
+// at 1/2, the last frame held past the end.
+TEST(Editor, ContactsAtRateInterpolatesThenThresholds) {
+  auto stands = torch::zeros({3, kContactJoints});
+  stands[0][0] = 1;    // left ankle stands at 0 s, not at 0.1 s: it stands until 0.05 s
+  stands[2][3] = 0.8;  // right toe stands from 0.2 s on, leaning in from 0.1 s
+  const auto held = ContactsAtRate(stands, 10, 30, 9);
+  ASSERT_EQ(held.size(), 9u * kContactJoints);
+  const auto at = [&](int frame, int joint) {
+    return held[static_cast<size_t>(frame * 4 + joint)];
+  };
+  EXPECT_EQ(at(0, 0), 1);
+  EXPECT_EQ(at(1, 0), 1);  // 0.033 s: 2/3 of the way still
+  EXPECT_EQ(at(2, 0), 0);  // 0.067 s: 1/3
+  EXPECT_EQ(at(4, 3), 0);  // 0.133 s: 0.8/3
+  EXPECT_EQ(at(5, 3), 1);  // 0.167 s: 0.8 * 2/3
+  for (int frame = 6; frame < 9; ++frame) EXPECT_EQ(at(frame, 3), 1);  // past the end: held
+  for (int frame = 0; frame < 9; ++frame) EXPECT_EQ(at(frame, 1) + at(frame, 2), 0);
+  // At the network's own rate (fps 0) the frames map one to one.
+  const auto same = ContactsAtRate(stands, 0, 30, 3);
+  EXPECT_EQ(same[0], 1);
+  EXPECT_EQ(same[4], 0);
+  EXPECT_EQ(same[2 * 4 + 3], 1);
+  EXPECT_THROW(ContactsAtRate(torch::zeros({3, 2}), 10, 30, 9), std::invalid_argument);
+}
+
 TEST(Editor, RegressionModePredictsTheNormalizedCurve) {
   EditorOptions o = Tiny("mdt", "regression");
   EXPECT_EQ(o.sim_outputs(), 1);

@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
+#include <stdexcept>
 
 #include "motionpipe/motion/plausibility.h"
 #include "motionpipe/motion/pose_solver.h"
@@ -125,6 +127,48 @@ TEST(FootLock, ASwingingFootIsLeftAloneAwayFromItsContacts) {
   const std::vector<float> after = ComputeJoints(skeleton, locked);
   for (int frame : {0, 5, 25, 29})
     EXPECT_LT(Norm(JointAt(after, frame, kLeftAnkle) - JointAt(before, frame, kLeftAnkle)), 1e-4);
+}
+
+// Issue 15: contacts given by a model (the MDT's contact head) replace the height and speed test:
+// a foot dragged faster than max_speed, which the test takes for a swing, is held where they say
+// it stands, and nothing is held where they say no foot stands.
+TEST(FootLock, GivenContactsReplaceTheHeightAndSpeedTest) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  // The left ankle is dragged over the floor at 1.5 m/s for frames 0-9, then stands.
+  const Motion dragged = Standing([](int frame) {
+    return Vec3{-0.2 + 0.05 * std::min(frame, 9), 0.1, 0.03};
+  });
+  const std::vector<float> before = ComputeJoints(skeleton, dragged);
+  // The test leaves the drag alone (too fast for a contact).
+  const Motion tested = LockFeet(skeleton, dragged);
+  const std::vector<float> tested_joints = ComputeJoints(skeleton, tested);
+  for (int frame = 0; frame < 6; ++frame)
+    EXPECT_LT(Norm(JointAt(tested_joints, frame, kLeftAnkle) - JointAt(before, frame, kLeftAnkle)),
+              1e-6)
+        << frame;
+  // Given: the left ankle stands in frames 0-9, nothing else anywhere.
+  std::vector<uint8_t> contacts(static_cast<size_t>(dragged.num_frames()) * 4, 0);
+  for (int frame = 0; frame < 10; ++frame) contacts[static_cast<size_t>(frame) * 4] = 1;
+  FootLockReport report;
+  const Motion locked = LockFeet(skeleton, dragged, {}, &report, &contacts);
+  EXPECT_EQ(report.runs, 1);
+  EXPECT_EQ(report.held, 10);
+  const std::vector<float> joints = ComputeJoints(skeleton, locked);
+  Vec3 place{0, 0, 0};
+  for (int frame = 0; frame < 10; ++frame) place = place + 0.1 * JointAt(before, frame, kLeftAnkle);
+  for (int frame = 0; frame < 10; ++frame) {
+    EXPECT_NEAR(JointAt(joints, frame, kLeftAnkle).x, place.x, 1e-6) << frame;
+    EXPECT_NEAR(JointAt(joints, frame, kLeftAnkle).y, place.y, 1e-6) << frame;
+  }
+  // The right foot, which the test would hold, is left as it is.
+  for (int frame = 0; frame < locked.num_frames(); ++frame)
+    EXPECT_EQ(locked.LocalRotation(frame, kRightAnkle).m,
+              dragged.LocalRotation(frame, kRightAnkle).m);
+  // No contacts given: nothing moves.
+  const std::vector<uint8_t> none(contacts.size(), 0);
+  EXPECT_EQ(LockFeet(skeleton, dragged, {}, nullptr, &none).poses, dragged.poses);
+  const std::vector<uint8_t> short_list(4, 1);
+  EXPECT_THROW(LockFeet(skeleton, dragged, {}, nullptr, &short_list), std::invalid_argument);
 }
 
 TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {

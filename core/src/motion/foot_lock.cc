@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <stdexcept>
 #include <vector>
 
 namespace motionpipe {
@@ -16,12 +17,13 @@ struct Hold {
   std::vector<Vec3> place;  // z unused: a held joint keeps its own height
 };
 
+// `given` (optional): the frames in contact, replacing the height and speed test.
 Hold FindHold(const std::vector<Vec3>& path, double fps, const FootLockOptions& options,
-              FootLockReport* report) {
+              const std::vector<char>* given, FootLockReport* report) {
   const int64_t frames = static_cast<int64_t>(path.size());
   Hold hold{std::vector<double>(path.size(), 0.0), std::vector<Vec3>(path.size())};
-  std::vector<char> contact(path.size(), 0);
-  for (int64_t f = 0; f < frames; ++f) {
+  std::vector<char> contact = given ? *given : std::vector<char>(path.size(), 0);
+  for (int64_t f = 0; f < (given ? 0 : frames); ++f) {
     // Central difference (one-sided at the ends): a single jittery frame does not split a run.
     const int64_t a = std::max<int64_t>(0, f - 1), b = std::min(frames - 1, f + 1);
     const Vec3 step = path[static_cast<size_t>(b)] - path[static_cast<size_t>(a)];
@@ -119,9 +121,11 @@ void FootLockReport::Add(const FootLockReport& other) {
 }
 
 Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options,
-                FootLockReport* report) {
+                FootLockReport* report, const std::vector<uint8_t>* contacts) {
   Motion out = motion;
   const int64_t frames = motion.num_frames();
+  if (contacts && static_cast<int64_t>(contacts->size()) != frames * 4)
+    throw std::invalid_argument("LockFeet: contacts must have 4 entries per frame");
   if (frames < 2) return out;
   const auto& parents = skeleton.parents();
   const std::array<std::array<int, 2>, 2> feet = {skeleton.left_foot_joints(),
@@ -137,7 +141,8 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
                            position[static_cast<size_t>(f)].data());
   }
   FootLockReport counts;
-  for (const auto& foot : feet) {
+  for (size_t side = 0; side < feet.size(); ++side) {
+    const auto& foot = feet[side];
     const int ankle = foot[0], toe = foot[1];
     const int knee = parents[static_cast<size_t>(ankle)];
     const int hip = parents[static_cast<size_t>(knee)];
@@ -148,7 +153,15 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       for (int64_t f = 0; f < frames; ++f)
         path[static_cast<size_t>(f)] =
             position[static_cast<size_t>(f)][static_cast<size_t>(foot[k])];
-      holds[static_cast<size_t>(k)] = FindHold(path, motion.fps, options, &counts);
+      std::vector<char> given;
+      if (contacts) {
+        given.resize(static_cast<size_t>(frames));
+        for (int64_t f = 0; f < frames; ++f)
+          given[static_cast<size_t>(f)] =
+              (*contacts)[static_cast<size_t>(f * 4) + side * 2 + static_cast<size_t>(k)] != 0;
+      }
+      holds[static_cast<size_t>(k)] =
+          FindHold(path, motion.fps, options, contacts ? &given : nullptr, &counts);
     }
     for (int64_t f = 0; f < frames; ++f) {
       const double w_ankle = holds[0].weight[static_cast<size_t>(f)];

@@ -54,8 +54,12 @@ Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& params,
                                                 const std::vector<std::string>& other_keys = {});
 
 // The motion with its feet held (frames, fps, translation and every other joint unchanged).
-// `report` (optional) receives the counts above.
+// `report` (optional) receives the counts above. `contacts` (optional, [frames * 4]: per frame the
+// left ankle, left toe, right ankle and right toe, non-zero where that joint stands) replaces the
+// contact-height and speed test: a model that predicts its own contacts (the MDT's contact head)
+// says which frames to hold; min_frames and the blend still apply. std::invalid_argument when its
+// size is not 4 per frame.
 Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options = {},
-                FootLockReport* report = nullptr);
+                FootLockReport* report = nullptr, const std::vector<uint8_t>* contacts = nullptr);
 
 }  // namespace motionpipe
