@@ -2,6 +2,7 @@
 // motionpipe binary) for its output, exiting with its output when it fails, and writing arrays.
 #pragma once
 
+#include <dlfcn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -12,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "motionpipe/base/blas_kernels.h"
 #include "motionpipe/formats/npy.h"
 
 namespace motionpipe::bench {
@@ -30,6 +32,27 @@ double ExamplesPerSecond(Step&& step, int64_t steps, int64_t batch) {
   const auto started = Clock::now();
   for (int64_t k = 0; k < steps; ++k) step();
   return static_cast<double>(steps * batch) / Since(started);
+}
+
+// For a benchmark linked with LibTorch, whose OpenBLAS chose its kernels before main: when that
+// choice is generic on a CPU with AVX2 or AVX-512 (motionpipe/base/blas_kernels.h) and the user set
+// no OPENBLAS_CORETYPE, runs this program again with the one the worker would ask for, so that the
+// figures are those of the kernels the pipeline uses (the references it starts inherit it). Returns
+// the kernels in use, for the header of a table.
+inline std::string UseNativeBlasKernels(char** argv) {
+  using CoreName = char* (*)();
+  auto* name = reinterpret_cast<CoreName>(::dlsym(RTLD_DEFAULT, "openblas_get_corename"));
+  const std::string core = name ? name() : "";
+  const char* set = std::getenv("OPENBLAS_CORETYPE");
+  if (set && *set) return core;
+  const std::string ask = BlasKernelsToAsk(core, DetectCpuVectorUnits());
+  if (!name || ask.empty()) return core;
+  std::fprintf(stderr,
+               "OpenBLAS chose its generic %s kernels: running again with OPENBLAS_CORETYPE=%s\n",
+               core.c_str(), ask.c_str());
+  ::setenv("OPENBLAS_CORETYPE", ask.c_str(), 1);
+  ::execv("/proc/self/exe", argv);
+  return core;  // exec failed: keep going with the kernels at hand
 }
 
 // Starts `args` (args[0] a path) as a child process; its pid (the child exits 127 if exec fails).

@@ -31,6 +31,7 @@
 #include "../plugins/mdt_editor/edit_data.h"
 #include "../plugins/mdt_editor/editor.h"
 #include "../plugins/mdt_editor/foot_contact.h"
+#include "bench_util.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/anchor.h"
@@ -416,6 +417,7 @@ Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::strin
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::UseNativeBlasKernels(argv);
   const std::optional<Args> args = ParseArgs(argc, argv);
   if (!args) {
     std::fprintf(stderr,

@@ -1,0 +1,93 @@
+#include "motionpipe/base/blas_kernels.h"
+
+#include <cpuid.h>
+#include <dlfcn.h>
+#include <strings.h>
+
+#include <cstdlib>
+
+#include "motionpipe/base/log.h"
+
+namespace motionpipe {
+
+namespace {
+
+constexpr char kOpenBlas[] = "libopenblas.so.0";
+
+}  // namespace
+
+CpuVectorUnits DetectCpuVectorUnits() {
+  CpuVectorUnits units;
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  if (!__get_cpuid_count(1, 0, &a, &b, &c, &d)) return units;
+  const bool fma = c & (1u << 12), osxsave = c & (1u << 27), avx = c & (1u << 28);
+  if (!osxsave || !avx) return units;
+  unsigned xcr0_lo = 0, xcr0_hi = 0;
+  __asm__("xgetbv" : "=a"(xcr0_lo), "=d"(xcr0_hi) : "c"(0));
+  const bool ymm_saved = (xcr0_lo & 0x6u) == 0x6u;    // SSE and AVX state
+  const bool zmm_saved = (xcr0_lo & 0xe6u) == 0xe6u;  // and opmask, ZMM0-15 upper, ZMM16-31
+  if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return units;
+  const bool avx2 = b & (1u << 5);
+  units.avx2_fma = ymm_saved && avx2 && fma;
+  const unsigned avx512_fcdbwdqvl = (1u << 16) | (1u << 17) | (1u << 28) | (1u << 30) | (1u << 31);
+  units.avx512 = units.avx2_fma && zmm_saved && (b & avx512_fcdbwdqvl) == avx512_fcdbwdqvl;
+  return units;
+}
+
+std::string BlasKernelsToAsk(const std::string& corename, const CpuVectorUnits& units) {
+  // OpenBLAS's x86-64 cores whose kernels use AVX2 and FMA (its dynamic.c names).
+  static const char* const kAvx2Cores[] = {"Haswell",        "Zen",      "SkylakeX", "Cooperlake",
+                                           "SapphireRapids", "Excavator"};
+  for (const char* core : kAvx2Cores) {
+    if (!strcasecmp(corename.c_str(), core)) return "";
+  }
+  if (units.avx512) return "SkylakeX";
+  if (units.avx2_fma) return "Haswell";
+  return "";
+}
+
+BlasKernelChoice PreferNativeBlasKernels() {
+  static const BlasKernelChoice choice = [] {
+    BlasKernelChoice out;
+    if (const char* set = std::getenv("OPENBLAS_CORETYPE"); set && *set) {
+      out.asked = set;
+      out.note = "OPENBLAS_CORETYPE is set";
+      return out;
+    }
+    if (void* loaded = ::dlopen(kOpenBlas, RTLD_LAZY | RTLD_NOLOAD)) {
+      ::dlclose(loaded);
+      out.note = "OpenBLAS was already loaded";
+      return out;
+    }
+    void* blas = ::dlopen(kOpenBlas, RTLD_LAZY | RTLD_LOCAL);
+    if (!blas) {
+      out.note = "no OpenBLAS on this machine";
+      return out;
+    }
+    using CoreName = char* (*)();
+    if (auto* name = reinterpret_cast<CoreName>(::dlsym(blas, "openblas_get_corename")))
+      out.detected = name();
+    ::dlclose(blas);
+    const std::string ask = BlasKernelsToAsk(out.detected, DetectCpuVectorUnits());
+    if (ask.empty()) return out;
+    if (void* still = ::dlopen(kOpenBlas, RTLD_LAZY | RTLD_NOLOAD)) {
+      ::dlclose(still);
+      out.note = "OpenBLAS stayed loaded after its probe";
+      MP_LOG(kWarn, "blas")
+          << "OpenBLAS chose its " << out.detected
+          << " kernels for this CPU and could not be reloaded: set OPENBLAS_CORETYPE=" << ask
+          << " for float32 matrix products several times as fast";
+      return out;
+    }
+    ::setenv("OPENBLAS_CORETYPE", ask.c_str(), 0);
+    out.asked = ask;
+    MP_LOG(kInfo, "blas") << "OpenBLAS chose its generic " << out.detected
+                          << " kernels for this CPU, which has "
+                          << (ask == "SkylakeX" ? "AVX-512" : "AVX2") << ": asking for " << ask
+                          << " (OPENBLAS_CORETYPE)";
+    return out;
+  }();
+  return choice;
+}
+
+}  // namespace motionpipe
