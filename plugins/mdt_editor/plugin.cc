@@ -471,11 +471,19 @@ class EditorGenerator : public plugin::Generator {
     }
     torch::Tensor stands;  // [tt, n, 4]: the contact head's probabilities on the last estimate
     if (lock_predicted_) {
-      // The fully conditional branch's head, reading the edit itself as a clean x_t (t = 0).
-      const auto p = model_->net()->forward(
-          x.repeat({1, branches, 1}), torch::zeros({branches * n}, torch::kInt64), padding, c);
-      stands =
-          torch::sigmoid(p.contacts.chunk(branches, 1).back().to(torch::kFloat32)).contiguous();
+      // The head of the fully conditional branch alone (text and source kept), reading the edit
+      // itself as a clean x_t (t = 0).
+      Condition full;
+      full.texts = texts;
+      full.drop_text = torch::zeros({n}, torch::kBool);
+      if (o.uses_source()) {
+        full.source = source;
+        full.source_padding = source_padding;
+        full.drop_source = torch::zeros({n}, torch::kBool);
+      }
+      const auto p =
+          model_->net()->forward(x, torch::zeros({n}, torch::kInt64), target_padding, full);
+      stands = torch::sigmoid(p.contacts.to(torch::kFloat32)).contiguous();
     }
     x = (model_->net()->Decode(x) * scale + model_->mean()).contiguous();
     std::vector<Motion> out;
