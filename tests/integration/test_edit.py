@@ -29,6 +29,9 @@ from similarity_ref import rotation_matrices  # noqa: E402
 
 CMU = os.path.join(HERE, "..", "..", "data", "mocap", "cmu", "131_01.bvh")
 
+# The tiny MDT that PIPELINE and JUDGES train (their own YAML documents: put in where TINY_MDT stands).
+TINY_MDT = "{dim: 32, cond_layers: 1, layers: 2, heads: 4, ff: 64, sim_hidden: 32, text_encoder: {layers: 1, vocab: 200}}"
+
 PIPELINE = """
 name: edit_test
 output_root: OUT
@@ -43,7 +46,7 @@ stages:
       model: mdt_editor
       config:
         variant: mdt
-        model: &model {dim: 32, cond_layers: 1, layers: 2, heads: 4, ff: 64, sim_hidden: 32, text_encoder: {layers: 1, vocab: 200}}
+        model: &model TINY_MDT
         aux: {mode: classes, classes: 3}
       data: {max_frames: 60}
       steps: 4
@@ -82,7 +85,7 @@ stages:
     kind: report
     inputs: [eval_mdt, showcase]
     params: {history: HISTORY, panel_size: 96}
-"""
+""".replace("TINY_MDT", TINY_MDT)
 
 
 NIGHTLY = """
@@ -166,7 +169,7 @@ stages:
       model: mdt_editor
       config:
         variant: mdt
-        model: {dim: 32, cond_layers: 1, layers: 2, heads: 4, ff: 64, sim_hidden: 32, text_encoder: {layers: 1, vocab: 200}}
+        model: TINY_MDT
         aux: {mode: classes, classes: 3}
         loss: {contacts: 1}
         fps: 10
@@ -186,7 +189,7 @@ stages:
     kind: eval_edit
     inputs: [evaluator_b, locked, corpus]
     params: {evaluator: evaluator_b, edits: locked, batch: 2}
-"""
+""".replace("TINY_MDT", TINY_MDT)
 
 
 # One editor trained twice under one seed, on two workers at once, and once under another: a claims
