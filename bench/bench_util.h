@@ -40,13 +40,12 @@ double ExamplesPerSecond(Step&& step, int64_t steps, int64_t batch) {
 // figures are those of the kernels the pipeline uses (the references it starts inherit it). Returns
 // the kernels in use, for the header of a table.
 inline std::string UseNativeBlasKernels(char** argv) {
-  using CoreName = char* (*)();
-  auto* name = reinterpret_cast<CoreName>(::dlsym(RTLD_DEFAULT, "openblas_get_corename"));
-  const std::string core = name ? name() : "";
+  const std::string core = OpenBlasCoreName(RTLD_DEFAULT);
   const char* set = std::getenv("OPENBLAS_CORETYPE");
   if (set && *set) return core;
+  if (core.empty()) return core;  // no OpenBLAS behind LibTorch here
   const std::string ask = BlasKernelsToAsk(core, DetectCpuVectorUnits());
-  if (!name || ask.empty()) return core;
+  if (ask.empty()) return core;
   std::fprintf(stderr,
                "OpenBLAS chose its generic %s kernels: running again with OPENBLAS_CORETYPE=%s\n",
                core.c_str(), ask.c_str());

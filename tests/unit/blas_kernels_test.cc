@@ -34,18 +34,16 @@ TEST(BlasKernels, TheLibrarysOwnVectorChoiceStands) {
 TEST(BlasKernels, AfterTheProbeOpenBlasLoadsWithVectorKernels) {
   if (const char* set = std::getenv("OPENBLAS_CORETYPE"); set && *set)
     GTEST_SKIP() << "OPENBLAS_CORETYPE is set by the caller: " << set;
-  if (void* loaded = ::dlopen("libopenblas.so.0", RTLD_LAZY | RTLD_NOLOAD)) {
+  if (void* loaded = ::dlopen(kOpenBlasLibrary, RTLD_LAZY | RTLD_NOLOAD)) {
     ::dlclose(loaded);
     GTEST_SKIP() << "OpenBLAS is already loaded in this process";
   }
   const BlasKernelChoice choice = PreferNativeBlasKernels();
   if (!choice.note.empty()) GTEST_SKIP() << choice.note;
-  void* blas = ::dlopen("libopenblas.so.0", RTLD_LAZY | RTLD_LOCAL);
+  void* blas = ::dlopen(kOpenBlasLibrary, RTLD_LAZY | RTLD_LOCAL);
   ASSERT_NE(blas, nullptr);
-  using CoreName = char* (*)();
-  auto* name = reinterpret_cast<CoreName>(::dlsym(blas, "openblas_get_corename"));
-  ASSERT_NE(name, nullptr);
-  const std::string core = name();
+  const std::string core = OpenBlasCoreName(blas);
+  ASSERT_FALSE(core.empty());
   ::dlclose(blas);
   EXPECT_EQ(BlasKernelsToAsk(core, DetectCpuVectorUnits()), "")
       << "OpenBLAS runs its " << core << " kernels (it chose " << choice.detected << ", asked '"

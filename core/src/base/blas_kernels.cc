@@ -10,11 +10,11 @@
 
 namespace motionpipe {
 
-namespace {
-
-constexpr char kOpenBlas[] = "libopenblas.so.0";
-
-}  // namespace
+std::string OpenBlasCoreName(void* handle) {
+  using CoreName = char* (*)();
+  auto* name = reinterpret_cast<CoreName>(::dlsym(handle, "openblas_get_corename"));
+  return name ? name() : "";
+}
 
 CpuVectorUnits DetectCpuVectorUnits() {
   CpuVectorUnits units;
@@ -54,23 +54,21 @@ BlasKernelChoice PreferNativeBlasKernels() {
       out.note = "OPENBLAS_CORETYPE is set";
       return out;
     }
-    if (void* loaded = ::dlopen(kOpenBlas, RTLD_LAZY | RTLD_NOLOAD)) {
+    if (void* loaded = ::dlopen(kOpenBlasLibrary, RTLD_LAZY | RTLD_NOLOAD)) {
       ::dlclose(loaded);
       out.note = "OpenBLAS was already loaded";
       return out;
     }
-    void* blas = ::dlopen(kOpenBlas, RTLD_LAZY | RTLD_LOCAL);
+    void* blas = ::dlopen(kOpenBlasLibrary, RTLD_LAZY | RTLD_LOCAL);
     if (!blas) {
       out.note = "no OpenBLAS on this machine";
       return out;
     }
-    using CoreName = char* (*)();
-    if (auto* name = reinterpret_cast<CoreName>(::dlsym(blas, "openblas_get_corename")))
-      out.detected = name();
+    out.detected = OpenBlasCoreName(blas);
     ::dlclose(blas);
     const std::string ask = BlasKernelsToAsk(out.detected, DetectCpuVectorUnits());
     if (ask.empty()) return out;
-    if (void* still = ::dlopen(kOpenBlas, RTLD_LAZY | RTLD_NOLOAD)) {
+    if (void* still = ::dlopen(kOpenBlasLibrary, RTLD_LAZY | RTLD_NOLOAD)) {
       ::dlclose(still);
       out.note = "OpenBLAS stayed loaded after its probe";
       MP_LOG(kWarn, "blas")

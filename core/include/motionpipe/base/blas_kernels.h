@@ -15,6 +15,13 @@ struct CpuVectorUnits {
   bool avx512 = false;    // AVX512 F, CD, BW, DQ and VL (OpenBLAS's SkylakeX kernels)
 };
 
+// OpenBLAS's soname, as LibTorch's libblas.so.3 alternative brings it in (Debian's pthreads build).
+inline constexpr char kOpenBlasLibrary[] = "libopenblas.so.0";
+
+// The kernels the OpenBLAS behind `handle` (a dlopen handle, or RTLD_DEFAULT where it is linked)
+// runs: openblas_get_corename(), or "" where there is no OpenBLAS there.
+std::string OpenBlasCoreName(void* handle);
+
 // This CPU's units, from CPUID (and the OS saving their registers).
 CpuVectorUnits DetectCpuVectorUnits();
 
