@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "motionpipe/base/blas_kernels.h"
+#include "motionpipe/base/cpu_kernels.h"
 #include "motionpipe/formats/npy.h"
 
 namespace motionpipe::bench {
@@ -34,24 +34,27 @@ double ExamplesPerSecond(Step&& step, int64_t steps, int64_t batch) {
   return static_cast<double>(steps * batch) / Since(started);
 }
 
-// For a benchmark linked with LibTorch, whose OpenBLAS chose its kernels before main: when that
-// choice is generic on a CPU with AVX2 or AVX-512 (motionpipe/base/blas_kernels.h) and the user set
-// no OPENBLAS_CORETYPE, runs this program again with the one the worker would ask for, so that the
-// figures are those of the kernels the pipeline uses (the references it starts inherit it). Returns
-// the kernels in use, for the header of a table.
-inline std::string UseNativeBlasKernels(char** argv) {
+// For a benchmark linked with LibTorch: the kernels the pipeline's workers run
+// (motionpipe/base/cpu_kernels.h), so that the figures are theirs (the references it starts inherit
+// both variables). ATEN_CPU_CAPABILITY is set before LibTorch's first operation; OpenBLAS chose its
+// kernels before main, so where that choice is generic on a CPU with AVX2 or AVX-512 and the user
+// set no OPENBLAS_CORETYPE, this program runs again with the one the worker would ask for. Returns
+// OpenBLAS's kernels, for the header of a table (nn::AtenCapabilityInUse says LibTorch's).
+inline std::string UseNativeCpuKernels(char** argv) {
+  PreferNativeAtenKernels();
   const std::string core = OpenBlasCoreName(RTLD_DEFAULT);
+  const std::string in_use = core.empty() ? "none" : core;
   const char* set = std::getenv("OPENBLAS_CORETYPE");
-  if (set && *set) return core;
-  if (core.empty()) return core;  // no OpenBLAS behind LibTorch here
+  if (set && *set) return in_use;
+  if (core.empty()) return in_use;  // no OpenBLAS behind LibTorch here
   const std::string ask = BlasKernelsToAsk(core, DetectCpuVectorUnits());
-  if (ask.empty()) return core;
+  if (ask.empty()) return in_use;
   std::fprintf(stderr,
                "OpenBLAS chose its generic %s kernels: running again with OPENBLAS_CORETYPE=%s\n",
                core.c_str(), ask.c_str());
   ::setenv("OPENBLAS_CORETYPE", ask.c_str(), 1);
   ::execv("/proc/self/exe", argv);
-  return core;  // exec failed: keep going with the kernels at hand
+  return in_use;  // exec failed: keep going with the kernels at hand
 }
 
 // Starts `args` (args[0] a path) as a child process; its pid (the child exits 127 if exec fails).

@@ -571,7 +571,7 @@ void BenchLatency(const Args& a, const Size& size, const std::vector<std::string
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string blas_kernels = bench::UseNativeBlasKernels(argv);
+  const std::string kernels = bench::UseNativeCpuKernels(argv);
   const std::optional<Args> args = ParseArgs(argc, argv);
   if (!args) {
     std::fprintf(stderr,
@@ -588,8 +588,8 @@ int main(int argc, char** argv) {
       static_cast<long long>(args->threads));
   // The bf16 columns time LibTorch's bf16 products as they are on this CPU; the train stage
   // runs bf16 as float32 where they are emulated (plugins/common/precision.h).
-  std::printf("bf16 products on this CPU: %s; OpenBLAS kernels: %s\n", nn::Bf16ProductsOnThisCpu(),
-              blas_kernels.c_str());
+  std::printf("bf16 products on this CPU: %s; OpenBLAS kernels: %s; LibTorch's: %s\n",
+              nn::Bf16ProductsOnThisCpu(), kernels.c_str(), nn::AtenCapabilityInUse().c_str());
   std::printf("%-6s %10s %12s %12s %8s %11s %11s %9s %12s %9s\n", "size", "params", "C++ samp/s",
               "Py samp/s", "ratio", "C++ GFLOP/s", "sgemm peak", "of peak", "bf16 samp/s",
               "bf16/f32");

@@ -9,16 +9,14 @@
 // trainer asked for bf16 there runs in float32 (`EffectivePrecision`).
 #pragma once
 
-#if defined(__x86_64__) || defined(__i386__)
-#include <cpuid.h>
-#endif
-
 #include <ATen/autocast_mode.h>
 #include <torch/torch.h>
 
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+
+#include "motionpipe/base/cpu_kernels.h"
 
 namespace motionpipe::nn {
 
@@ -33,29 +31,12 @@ inline Precision ParsePrecision(const std::string& value, const std::string& whe
 
 inline const char* PrecisionName(Precision p) { return p == Precision::kBf16 ? "bf16" : "float32"; }
 
-// Whether this CPU multiplies bf16 natively: AVX512-BF16 (CPUID leaf 7 subleaf 1, EAX bit 5) with
-// AVX512F (leaf 7 subleaf 0, EBX bit 16) and an OS that saves the AVX-512 state (XCR0 bits 5-7,
-// with SSE/AVX state bits 1-2), or AMX-BF16 (leaf 7 subleaf 0, EDX bit 22). Read once. Only x86
-// is read; elsewhere (an ARM CPU's BF16 extension included) it answers false, and bf16 runs as
-// float32.
+// Whether this CPU multiplies bf16 natively: AVX512-BF16 on an AVX-512 CPU whose OS saves the
+// AVX-512 state, or AMX-BF16 (motionpipe/base/cpu_kernels.h reads CPUID). Only x86 is read;
+// elsewhere (an ARM CPU's BF16 extension included) it answers false, and bf16 runs as float32.
 inline bool CpuHasNativeBf16() {
-#if defined(__x86_64__) || defined(__i386__)
-  static const bool native = [] {
-    unsigned a = 0, b = 0, c = 0, d = 0;
-    if (!__get_cpuid_count(1, 0, &a, &b, &c, &d) || !(c & (1u << 27))) return false;  // OSXSAVE
-    uint32_t xcr0_low = 0, xcr0_high = 0;
-    __asm__ volatile("xgetbv" : "=a"(xcr0_low), "=d"(xcr0_high) : "c"(0));
-    if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return false;
-    const bool avx512f = (b & (1u << 16)) && (xcr0_low & 0xe6u) == 0xe6u;
-    const bool amx_bf16 = (d & (1u << 22)) != 0;
-    unsigned a1 = 0, b1 = 0, c1 = 0, d1 = 0;
-    const bool avx512_bf16 = __get_cpuid_count(7, 1, &a1, &b1, &c1, &d1) && (a1 & (1u << 5));
-    return (avx512f && avx512_bf16) || amx_bf16;
-  }();
-  return native;
-#else
-  return false;
-#endif
+  const CpuVectorUnits units = DetectCpuVectorUnits();
+  return units.avx512_bf16 || units.amx_bf16;
 }
 
 // What `CpuHasNativeBf16` found, in words for a benchmark's or a log's header.

@@ -3,11 +3,15 @@
 // torch::set_num_threads and spins on sched_yield beside the worker's threads), and the allocator.
 #pragma once
 
+#include <ATen/Version.h>
 #include <dlfcn.h>
 #include <malloc.h>
 #include <torch/torch.h>
 
 #include <algorithm>
+#include <string>
+
+#include "motionpipe/base/cpu_kernels.h"
 
 namespace motionpipe::nn {
 
@@ -32,7 +36,7 @@ inline void SetTorchThreads(int threads) {
   using SetBlasThreads = void (*)(int);
   // The BLAS came in with LibTorch into this plugin's local scope: look for it by name as well.
   void* handles[] = {RTLD_DEFAULT, dlopen("libblas.so.3", RTLD_LAZY | RTLD_NOLOAD),
-                     dlopen("libopenblas.so.0", RTLD_LAZY | RTLD_NOLOAD)};
+                     dlopen(kOpenBlasLibrary, RTLD_LAZY | RTLD_NOLOAD)};
   for (void* handle : handles) {
     if (!handle) continue;
     if (auto* set = reinterpret_cast<SetBlasThreads>(dlsym(handle, "openblas_set_num_threads"))) {
@@ -40,6 +44,18 @@ inline void SetTorchThreads(int threads) {
       break;
     }
   }
+}
+
+// The vector kernels LibTorch's own operations run ("AVX512", "AVX2", "DEFAULT"), as
+// at::show_config() reports them. LibTorch fixes them at its first dispatch, from
+// ATEN_CPU_CAPABILITY if set (motionpipe/base/cpu_kernels.h): asking this fixes them too.
+inline std::string AtenCapabilityInUse() {
+  const std::string config = at::show_config();
+  const std::string key = "CPU capability usage: ";
+  const size_t found = config.find(key);
+  if (found == std::string::npos) return "";
+  const size_t begin = found + key.size();
+  return config.substr(begin, config.find('\n', begin) - begin);
 }
 
 }  // namespace motionpipe::nn

@@ -1,6 +1,8 @@
-#include "motionpipe/base/blas_kernels.h"
+#include "motionpipe/base/cpu_kernels.h"
 
+#if defined(__x86_64__) || defined(__i386__)
 #include <cpuid.h>
+#endif
 #include <dlfcn.h>
 #include <strings.h>
 
@@ -17,21 +19,31 @@ std::string OpenBlasCoreName(void* handle) {
 }
 
 CpuVectorUnits DetectCpuVectorUnits() {
-  CpuVectorUnits units;
-  unsigned a = 0, b = 0, c = 0, d = 0;
-  if (!__get_cpuid_count(1, 0, &a, &b, &c, &d)) return units;
-  const bool fma = c & (1u << 12), osxsave = c & (1u << 27), avx = c & (1u << 28);
-  if (!osxsave || !avx) return units;
-  unsigned xcr0_lo = 0, xcr0_hi = 0;
-  __asm__("xgetbv" : "=a"(xcr0_lo), "=d"(xcr0_hi) : "c"(0));
-  const bool ymm_saved = (xcr0_lo & 0x6u) == 0x6u;    // SSE and AVX state
-  const bool zmm_saved = (xcr0_lo & 0xe6u) == 0xe6u;  // and opmask, ZMM0-15 upper, ZMM16-31
-  if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return units;
-  const bool avx2 = b & (1u << 5);
-  units.avx2_fma = ymm_saved && avx2 && fma;
-  const unsigned avx512_fcdbwdqvl = (1u << 16) | (1u << 17) | (1u << 28) | (1u << 30) | (1u << 31);
-  units.avx512 = units.avx2_fma && zmm_saved && (b & avx512_fcdbwdqvl) == avx512_fcdbwdqvl;
-  return units;
+  static const CpuVectorUnits detected = [] {
+    CpuVectorUnits units;
+#if defined(__x86_64__) || defined(__i386__)
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    if (!__get_cpuid_count(1, 0, &a, &b, &c, &d)) return units;
+    const bool fma = c & (1u << 12), osxsave = c & (1u << 27), avx = c & (1u << 28);
+    if (!osxsave || !avx) return units;
+    unsigned xcr0_lo = 0, xcr0_hi = 0;
+    __asm__("xgetbv" : "=a"(xcr0_lo), "=d"(xcr0_hi) : "c"(0));
+    const bool ymm_saved = (xcr0_lo & 0x6u) == 0x6u;    // SSE and AVX state
+    const bool zmm_saved = (xcr0_lo & 0xe6u) == 0xe6u;  // and opmask, ZMM0-15 upper, ZMM16-31
+    if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return units;
+    const bool avx2 = b & (1u << 5);
+    const bool avx512f = zmm_saved && (b & (1u << 16));
+    units.avx2_fma = ymm_saved && avx2 && fma;
+    const unsigned avx512_fcdbwdqvl =
+        (1u << 16) | (1u << 17) | (1u << 28) | (1u << 30) | (1u << 31);
+    units.avx512 = units.avx2_fma && zmm_saved && (b & avx512_fcdbwdqvl) == avx512_fcdbwdqvl;
+    units.amx_bf16 = d & (1u << 22);  // leaf 7, EDX bit 22
+    unsigned a1 = 0, b1 = 0, c1 = 0, d1 = 0;
+    units.avx512_bf16 = avx512f && __get_cpuid_count(7, 1, &a1, &b1, &c1, &d1) && (a1 & (1u << 5));
+#endif
+    return units;
+  }();
+  return detected;
 }
 
 std::string BlasKernelsToAsk(const std::string& corename, const CpuVectorUnits& units) {
@@ -86,6 +98,21 @@ BlasKernelChoice PreferNativeBlasKernels() {
     return out;
   }();
   return choice;
+}
+
+std::string AtenKernelsToAsk(const CpuVectorUnits& units) { return units.avx512 ? "avx512" : ""; }
+
+std::string PreferNativeAtenKernels() {
+  static const std::string capability = [] {
+    if (const char* set = std::getenv("ATEN_CPU_CAPABILITY"); set && *set) return std::string(set);
+    const std::string ask = AtenKernelsToAsk(DetectCpuVectorUnits());
+    if (ask.empty()) return ask;
+    ::setenv("ATEN_CPU_CAPABILITY", ask.c_str(), 0);
+    MP_LOG(kInfo, "blas") << "this CPU has AVX-512: asking LibTorch for its " << ask
+                          << " kernels (ATEN_CPU_CAPABILITY; =avx2 keeps its default)";
+    return ask;
+  }();
+  return capability;
 }
 
 }  // namespace motionpipe
