@@ -108,7 +108,7 @@ std::string PreferNativeAtenKernels() {
     const std::string ask = AtenKernelsToAsk(DetectCpuVectorUnits());
     if (ask.empty()) return ask;
     ::setenv("ATEN_CPU_CAPABILITY", ask.c_str(), 0);
-    MP_LOG(kInfo, "blas") << "this CPU has AVX-512: asking LibTorch for its " << ask
+    MP_LOG(kInfo, "aten") << "this CPU has AVX-512: asking LibTorch for its " << ask
                           << " kernels (ATEN_CPU_CAPABILITY; =avx2 keeps its default)";
     return ask;
   }();

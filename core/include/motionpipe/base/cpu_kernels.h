@@ -8,9 +8,9 @@
 // - LibTorch 1.13's own element-wise and reduction kernels (layer norm, softmax, GELU, AdamW, the
 //   casts of bf16 autocast) run their AVX2 builds on an AVX-512 CPU unless ATEN_CPU_CAPABILITY
 //   asks for avx512: PyTorch made AVX-512 opt-in in 1.13 because older Intel cores lose clock
-//   speed on it (pytorch/pytorch#80252). On the AVX512-BF16 machines here a training step is
-//   1.1-1.4x as fast with it (README "A CPU newer than OpenBLAS"). Read by LibTorch at its first
-//   dispatch.
+//   speed on it (pytorch/pytorch#80252). On the Intel Xeon above one process's training step is
+//   1.1-1.4x as fast with them; two workers side by side gain within the noise (README "LibTorch's
+//   own AVX-512 kernels"). Read by LibTorch at its first dispatch.
 // A user's own OPENBLAS_CORETYPE or ATEN_CPU_CAPABILITY is kept (ATEN_CPU_CAPABILITY=avx2 turns the
 // second off).
 #pragma once
