@@ -34,14 +34,12 @@ double ExamplesPerSecond(Step&& step, int64_t steps, int64_t batch) {
   return static_cast<double>(steps * batch) / Since(started);
 }
 
-// For a benchmark linked with LibTorch: the kernels the pipeline's workers run
-// (motionpipe/base/cpu_kernels.h), so that the figures are theirs (the references it starts inherit
-// both variables). ATEN_CPU_CAPABILITY is set before LibTorch's first operation; OpenBLAS chose its
-// kernels before main, so where that choice is generic on a CPU with AVX2 or AVX-512 and the user
-// set no OPENBLAS_CORETYPE, this program runs again with the one the worker would ask for. Returns
-// OpenBLAS's kernels, for the header of a table (nn::AtenCapabilityInUse says LibTorch's).
-inline std::string UseNativeCpuKernels(char** argv) {
-  PreferNativeAtenKernels();
+// For a benchmark linked with LibTorch, whose OpenBLAS chose its kernels before main: when that
+// choice is generic on a CPU with AVX2 or AVX-512 (motionpipe/base/cpu_kernels.h) and the user set
+// no OPENBLAS_CORETYPE, runs this program again with the one the worker would ask for, so that the
+// figures are those of the kernels the pipeline uses (the references it starts inherit it). Returns
+// OpenBLAS's kernels, for the header of a table (nn::AtenCapabilityInUse says LibTorch's own).
+inline std::string UseNativeBlasKernels(char** argv) {
   const std::string core = OpenBlasCoreName(RTLD_DEFAULT);
   const std::string in_use = core.empty() ? "none" : core;
   const char* set = std::getenv("OPENBLAS_CORETYPE");

@@ -571,7 +571,7 @@ void BenchLatency(const Args& a, const Size& size, const std::vector<std::string
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string kernels = bench::UseNativeCpuKernels(argv);
+  const std::string kernels = bench::UseNativeBlasKernels(argv);
   const std::optional<Args> args = ParseArgs(argc, argv);
   if (!args) {
     std::fprintf(stderr,

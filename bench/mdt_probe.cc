@@ -417,7 +417,7 @@ Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::strin
 }  // namespace
 
 int main(int argc, char** argv) {
-  bench::UseNativeCpuKernels(argv);
+  bench::UseNativeBlasKernels(argv);
   const std::optional<Args> args = ParseArgs(argc, argv);
   if (!args) {
     std::fprintf(stderr,

@@ -283,7 +283,7 @@ void BenchScaling() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string kernels = bench::UseNativeCpuKernels(argv);
+  const std::string kernels = bench::UseNativeBlasKernels(argv);
   const std::optional<Args> args = ParseArgs(argc, argv);
   if (!args) {
     std::fprintf(stderr,

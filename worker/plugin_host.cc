@@ -103,8 +103,8 @@ Status PluginHost::LoadFile(const std::string& path) {
     MP_LOG(kWarn, "plugins") << path << ": " << why;
     return FailedPrecondition(path + ": " + why);
   };
-  // The model plugins bring LibTorch and its OpenBLAS, which pick their kernels when loaded.
-  PreferNativeCpuKernels();
+  // The model plugins bring LibTorch and its OpenBLAS, which picks its kernels when loaded.
+  PreferNativeBlasKernels();
   // RTLD_LOCAL: the plugin's symbols stay its own. Never dlclose: LibTorch code must stay mapped.
   void* handle = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
   if (!handle) return refuse(std::string("cannot load: ") + ::dlerror());

@@ -47,8 +47,9 @@ inline void SetTorchThreads(int threads) {
 }
 
 // The vector kernels LibTorch's own operations run ("AVX512", "AVX2", "DEFAULT"), as
-// at::show_config() reports them. LibTorch fixes them at its first dispatch, from
-// ATEN_CPU_CAPABILITY if set (motionpipe/base/cpu_kernels.h): asking this fixes them too.
+// at::show_config() reports them: AVX2 on an AVX-512 CPU unless ATEN_CPU_CAPABILITY=avx512
+// (LibTorch 1.13 made AVX-512 opt-in). LibTorch fixes them at its first dispatch: asking this fixes
+// them too.
 inline std::string AtenCapabilityInUse() {
   const std::string config = at::show_config();
   const std::string key = "CPU capability usage: ";

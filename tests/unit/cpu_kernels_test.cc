@@ -55,36 +55,6 @@ TEST(BlasKernels, AfterTheProbeOpenBlasLoadsWithVectorKernels) {
   EXPECT_EQ(PreferNativeBlasKernels().asked, choice.asked);
 }
 
-TEST(AtenKernels, AnAvx512CpuAsksLibTorchForItsAvx512Kernels) {
-  CpuVectorUnits avx512;
-  avx512.avx2_fma = avx512.avx512 = true;
-  CpuVectorUnits avx2;
-  avx2.avx2_fma = true;
-  EXPECT_EQ(AtenKernelsToAsk(avx512), "avx512");
-  EXPECT_EQ(AtenKernelsToAsk(avx2), "");
-  EXPECT_EQ(AtenKernelsToAsk(CpuVectorUnits{}), "");
-}
-
-// On this machine, in this process: the variable LibTorch reads is set on an AVX-512 CPU, left
-// unset elsewhere, and a caller's own value is never replaced.
-TEST(AtenKernels, TheProbeSetsTheCapabilityOnlyWhereTheCpuHasAvx512) {
-  if (const char* set = std::getenv("ATEN_CPU_CAPABILITY"); set && *set) {
-    EXPECT_EQ(PreferNativeAtenKernels(), set);
-    EXPECT_STREQ(std::getenv("ATEN_CPU_CAPABILITY"), set);
-    return;
-  }
-  const std::string asked = PreferNativeAtenKernels();
-  const char* now = std::getenv("ATEN_CPU_CAPABILITY");
-  if (DetectCpuVectorUnits().avx512) {
-    EXPECT_EQ(asked, "avx512");
-    ASSERT_NE(now, nullptr);
-    EXPECT_STREQ(now, "avx512");
-  } else {
-    EXPECT_EQ(asked, "");
-    EXPECT_EQ(now, nullptr);
-  }
-}
-
 TEST(CpuVectorUnits, Avx512ImpliesAvx2AndBf16ProductsImplyAvx512) {
   const CpuVectorUnits units = DetectCpuVectorUnits();
   if (units.avx512) {

@@ -100,19 +100,4 @@ BlasKernelChoice PreferNativeBlasKernels() {
   return choice;
 }
 
-std::string AtenKernelsToAsk(const CpuVectorUnits& units) { return units.avx512 ? "avx512" : ""; }
-
-std::string PreferNativeAtenKernels() {
-  static const std::string capability = [] {
-    if (const char* set = std::getenv("ATEN_CPU_CAPABILITY"); set && *set) return std::string(set);
-    const std::string ask = AtenKernelsToAsk(DetectCpuVectorUnits());
-    if (ask.empty()) return ask;
-    ::setenv("ATEN_CPU_CAPABILITY", ask.c_str(), 0);
-    MP_LOG(kInfo, "aten") << "this CPU has AVX-512: asking LibTorch for its " << ask
-                          << " kernels (ATEN_CPU_CAPABILITY; =avx2 keeps its default)";
-    return ask;
-  }();
-  return capability;
-}
-
 }  // namespace motionpipe
