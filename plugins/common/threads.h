@@ -46,7 +46,7 @@ inline void SetTorchThreads(int threads) {
   }
 }
 
-// The vector kernels LibTorch's own operations run ("AVX512", "AVX2", "DEFAULT"), as
+// The vector kernels LibTorch's own operations run ("AVX512", "AVX2", "NO AVX"), as
 // at::show_config() reports them: AVX2 on an AVX-512 CPU unless ATEN_CPU_CAPABILITY=avx512
 // (LibTorch 1.13 made AVX-512 opt-in). LibTorch fixes them at its first dispatch: asking this fixes
 // them too.
