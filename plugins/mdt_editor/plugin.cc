@@ -404,25 +404,30 @@ class EditorGenerator : public plugin::Generator {
         }
       }
     }
+    // A condition for branches stacked along the batch, each keeping or dropping the text and the
+    // source (1 drops) for all n edits.
+    const auto stacked = [&](const std::vector<int>& drop_text,
+                             const std::vector<int>& drop_source) {
+      const int64_t count = static_cast<int64_t>(drop_text.size());
+      const auto flags = [&](const std::vector<int>& per_branch) {
+        std::vector<int64_t> v;
+        for (int flag : per_branch) v.insert(v.end(), static_cast<size_t>(n), flag);
+        return torch::tensor(v).to(torch::kBool);
+      };
+      Condition stack;
+      for (int64_t b = 0; b < count; ++b)
+        stack.texts.insert(stack.texts.end(), texts.begin(), texts.end());
+      stack.drop_text = flags(drop_text);
+      if (o.uses_source()) {
+        stack.source = source.repeat({1, count, 1});
+        stack.source_padding = source_padding.repeat({count, 1});
+        stack.drop_source = flags(drop_source);
+      }
+      return stack;
+    };
     // The guidance branches in one batch: mdt/tmed [u; c_m; c_tm], mdm [u; c_t].
     const int64_t branches = o.uses_source() ? 3 : 2;
-    Condition c;
-    for (int64_t b = 0; b < branches; ++b)
-      c.texts.insert(c.texts.end(), texts.begin(), texts.end());
-    const auto flags = [&](std::vector<int> per_branch) {
-      std::vector<int64_t> v;
-      for (int64_t b = 0; b < branches; ++b)
-        v.insert(v.end(), static_cast<size_t>(n), per_branch[static_cast<size_t>(b)]);
-      return torch::tensor(v).to(torch::kBool);
-    };
-    if (o.uses_source()) {
-      c.source = source.repeat({1, branches, 1});
-      c.source_padding = source_padding.repeat({branches, 1});
-      c.drop_text = flags({1, 1, 0});
-      c.drop_source = flags({1, 0, 0});
-    } else {
-      c.drop_text = flags({1, 0});
-    }
+    const Condition c = o.uses_source() ? stacked({1, 1, 0}, {1, 0, 0}) : stacked({1, 0}, {});
     const auto padding = target_padding.repeat({branches, 1});
     const Denoise denoise = [&](const torch::Tensor& xt, int64_t t) {
       const auto x0 = model_->net()
@@ -473,14 +478,7 @@ class EditorGenerator : public plugin::Generator {
     if (lock_predicted_) {
       // The head of the fully conditional branch alone (text and source kept), reading the edit
       // itself as a clean x_t (t = 0).
-      Condition full;
-      full.texts = texts;
-      full.drop_text = torch::zeros({n}, torch::kBool);
-      if (o.uses_source()) {
-        full.source = source;
-        full.source_padding = source_padding;
-        full.drop_source = torch::zeros({n}, torch::kBool);
-      }
+      const Condition full = stacked({0}, {0});
       const auto p =
           model_->net()->forward(x, torch::zeros({n}, torch::kInt64), target_padding, full);
       stands = torch::sigmoid(p.contacts.to(torch::kFloat32)).contiguous();

@@ -4,6 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <fstream>
+#include <initializer_list>
+#include <set>
+#include <sstream>
 #include <string>
 
 namespace motionpipe {
@@ -55,14 +59,28 @@ TEST(BlasKernels, AfterTheProbeOpenBlasLoadsWithVectorKernels) {
   EXPECT_EQ(PreferNativeBlasKernels().asked, choice.asked);
 }
 
-TEST(CpuVectorUnits, Avx512ImpliesAvx2AndBf16ProductsImplyAvx512) {
+// The CPUID reading against the kernel's own: the flags /proc/cpuinfo lists for the first CPU
+// (which Linux shows only where the OS saves the registers they need).
+TEST(CpuVectorUnits, AgreeWithTheFlagsLinuxReports) {
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(cpuinfo, line) && line.rfind("flags", 0) != 0) {
+  }
+  if (line.rfind("flags", 0) != 0) GTEST_SKIP() << "no flags line in /proc/cpuinfo";
+  std::set<std::string> flags;
+  std::istringstream words(line.substr(line.find(':') + 1));
+  for (std::string w; words >> w;) flags.insert(w);
+  const auto has = [&](std::initializer_list<const char*> names) {
+    for (const char* name : names)
+      if (!flags.count(name)) return false;
+    return true;
+  };
   const CpuVectorUnits units = DetectCpuVectorUnits();
-  if (units.avx512) {
-    EXPECT_TRUE(units.avx2_fma);
-  }
-  if (units.avx512_bf16) {
-    EXPECT_TRUE(units.avx512);
-  }
+  EXPECT_EQ(units.avx2_fma, has({"avx2", "fma"}));
+  EXPECT_EQ(units.avx512,
+            has({"avx2", "fma", "avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"}));
+  EXPECT_EQ(units.avx512_bf16, has({"avx512f", "avx512_bf16"}));
+  EXPECT_EQ(units.amx_bf16, has({"amx_bf16"}));
 }
 
 }  // namespace
