@@ -150,7 +150,7 @@ class EditStage : public StageExecutor {
       if (Status s = WriteClips(ctx.output_dir() + "/edited.npz", clips); !s.ok())
         return TaskReport::Error(s.message());
     }
-    const json summary = {
+    json summary = {
         {"model", (*generator)->Name()},
         {"checkpoint", checkpoint},
         {"split", split},
@@ -159,12 +159,15 @@ class EditStage : public StageExecutor {
         {"motions_per_second", static_cast<double>(clips.size()) / std::max(seconds, 1e-9)},
         {"sampler", p.value("sampler", std::string("ddpm"))},
         {"steps", p.value("steps", 0)}};
+    const auto counts = (*generator)->Counts();
+    for (const auto& [name, value] : counts) summary["counts"][name] = value;
     if (Status s = WriteFileAtomic(ctx.output_dir() + "/edits.json", summary.dump(1) + "\n");
         !s.ok())
       return TaskReport::Error(s.message());
     TaskReport out = TaskReport::Ok();
     out.metrics["edited"] = static_cast<double>(clips.size());
     out.metrics["motions_per_second"] = summary["motions_per_second"].get<double>();
+    for (const auto& [name, value] : counts) out.metrics[name] = value;
     return out;
   }
 

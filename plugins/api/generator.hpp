@@ -5,6 +5,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "motionpipe/base/status.h"
@@ -39,6 +40,9 @@ class Generator {
     }
     return out;
   }
+  // Totals the model counted over everything it generated so far (an editor that plants its own
+  // edits' feet: the foot frames it held), by name; the edit stage writes them into its summary.
+  virtual std::vector<std::pair<std::string, double>> Counts() const { return {}; }
   // Embeddings in the model's latent space (evaluators): of motions and of texts.
   virtual Result<std::vector<std::vector<float>>> EncodeMotions(
       const std::vector<Motion>& motions) {

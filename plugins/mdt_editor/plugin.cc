@@ -11,6 +11,7 @@
 #include <torch/torch.h>
 
 #include <filesystem>
+#include <map>
 
 #include "../api/generator.hpp"
 #include "../api/model.hpp"
@@ -231,7 +232,10 @@ class EditorGenerator : public plugin::Generator {
     // foot_lock: {contacts: predicted, ...}: the edit, decoded at the rate asked for, has its feet
     // planted (LockFeet) where the checkpoint's contact head (loss.contacts) says they stand in
     // the last estimate, instead of where the post-process's height and speed test guesses
-    // (issue 15; not in the paper). contacts: test (the default) is that test.
+    // (issue 15; not in the paper). contacts: test (the default) is that test;
+    // predicted_near_floor holds the head's calls only where the foot joint is below the
+    // contact height (at any speed: the test's dragged feet), predicted_or_test those and every
+    // frame the test holds.
     const nlohmann::json lock = options.value("foot_lock", nlohmann::json::object());
     auto lock_options =
         FootLockOptionsFromJson(lock, "foot_lock", {"below_step", "plant", "contacts"});
@@ -243,18 +247,25 @@ class EditorGenerator : public plugin::Generator {
       throw std::invalid_argument("foot_lock.below_step must be in [0, " +
                                   std::to_string(model_->schedule().steps()) + "]");
     const std::string contacts = lock.value("contacts", std::string("test"));
-    if (contacts != "test" && contacts != "predicted")
-      throw std::invalid_argument("foot_lock.contacts must be test or predicted (got '" + contacts +
-                                  "')");
-    lock_predicted_ = contacts == "predicted";
+    const std::map<std::string, GivenContacts> rules = {
+        {"predicted", GivenContacts::kAlone},
+        {"predicted_near_floor", GivenContacts::kNearFloor},
+        {"predicted_or_test", GivenContacts::kNearFloorOrTest}};
+    if (contacts != "test" && rules.count(contacts) == 0)
+      throw std::invalid_argument(
+          "foot_lock.contacts must be test, predicted, predicted_near_floor or "
+          "predicted_or_test (got '" +
+          contacts + "')");
+    lock_predicted_ = contacts != "test";
+    if (lock_predicted_) foot_lock_.given = rules.at(contacts);
     if (lock_predicted_ && !(model_->options().contacts_weight > 0))
-      throw std::invalid_argument(
-          "foot_lock.contacts predicted needs a checkpoint trained with a contact head "
-          "(loss.contacts > 0)");
+      throw std::invalid_argument("foot_lock.contacts " + contacts +
+                                  " needs a checkpoint trained with a contact head "
+                                  "(loss.contacts > 0)");
     if (lock_predicted_ && foot_lock_below_step_ > 0)
-      throw std::invalid_argument(
-          "foot_lock: contacts predicted plants the edit once; below_step plants the estimates "
-          "inside the sampler: one or the other");
+      throw std::invalid_argument("foot_lock: contacts " + contacts +
+                                  " plants the edit once; below_step plants the estimates "
+                                  "inside the sampler: one or the other");
   }
 
   std::string Name() const override {
@@ -504,11 +515,21 @@ class EditorGenerator : public plugin::Generator {
       if (stands.defined()) {
         const auto held =
             ContactsAtRate(stands.select(1, i).narrow(0, 0, frames), o.fps, rate, m.num_frames());
-        m = LockFeet(Skeleton::Smpl22(), m, foot_lock_, nullptr, &held);
+        FootLockReport one;
+        m = LockFeet(Skeleton::Smpl22(), m, foot_lock_, &one, &held);
+        planted_.Add(one);
       }
       out.push_back(std::move(m));
     }
     return out;
+  }
+
+  std::vector<std::pair<std::string, double>> Counts() const override {
+    if (!lock_predicted_) return {};
+    return {{"planted_foot_frames", static_cast<double>(planted_.held)},
+            {"planted_runs", static_cast<double>(planted_.runs)},
+            {"unreached_ankle_frames", static_cast<double>(planted_.unreached)},
+            {"mean_shift_m", planted_.MeanShift()}};
   }
 
   std::unique_ptr<EditorModel> model_;
@@ -519,6 +540,7 @@ class EditorGenerator : public plugin::Generator {
   int64_t foot_lock_below_step_ = 0;
   bool plant_feet_ = true;
   bool lock_predicted_ = false;
+  FootLockReport planted_;  // what the contact head's planting held, over every edit so far
   std::string labeler_;
   double guidance_motion_ = 2, guidance_text_ = 2;
 };

@@ -185,6 +185,14 @@ stages:
     kind: edit
     inputs: [mdt_contacts, corpus]
     params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {contacts: predicted}}}
+  contacts_near_floor: # the head's calls where the foot is near the floor
+    kind: edit
+    inputs: [mdt_contacts, corpus]
+    params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {contacts: predicted_near_floor}}}
+  contacts_or_test:    # those, or the height and speed test
+    kind: edit
+    inputs: [mdt_contacts, corpus]
+    params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {contacts: predicted_or_test}}}
   eval_locked:
     kind: eval_edit
     inputs: [evaluator_b, locked, corpus]
@@ -499,6 +507,19 @@ class EditTest(EngineTest):
         self.assertTrue(all(0 < float(row["contacts"]) < 5 for row in logged), logged)
         only_legs_changed(by_clip(self.path("judges", "judges-*", "contacts_raw")),
                           by_clip(self.path("judges", "judges-*", "contacts_locked")))
+        only_legs_changed(by_clip(self.path("judges", "judges-*", "contacts_raw")),
+                          by_clip(self.path("judges", "judges-*", "contacts_or_test")))
+        # What the planting held is written beside the edits; the raw edits hold nothing.
+        def counts(stage):
+            with open(glob.glob(self.path("judges", "judges-*", stage, "task-00000", "edits.json"))[0]) as f:
+                return json.load(f).get("counts")
+        self.assertIsNone(counts("contacts_raw"))
+        for stage in ("contacts_locked", "contacts_near_floor", "contacts_or_test"):
+            self.assertEqual(sorted(counts(stage)), ["mean_shift_m", "planted_foot_frames", "planted_runs",
+                                                     "unreached_ankle_frames"], stage)
+        # The test's frames added to the calls near the floor hold no fewer frames.
+        self.assertGreaterEqual(counts("contacts_or_test")["planted_foot_frames"],
+                                counts("contacts_near_floor")["planted_foot_frames"])
         # Only a checkpoint with the head can say where its feet stand.
         headless = judges.replace("model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options",
                                   'model: "%s", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options'

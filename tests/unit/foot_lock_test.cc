@@ -171,6 +171,60 @@ TEST(FootLock, GivenContactsReplaceTheHeightAndSpeedTest) {
   EXPECT_THROW(LockFeet(skeleton, dragged, {}, nullptr, &short_list), std::invalid_argument);
 }
 
+// Issue 15: the calls combined with the test (options.given). The left ankle is dragged over the
+// floor at 1.5 m/s in frames 0-9, stands on it in 10-19 and stands still in the air (20 cm) in
+// 20-29; a model calls it standing in 0-9 and in 20-29, not in 10-19.
+TEST(FootLock, GivenContactsNearTheFloorOrWithTheTest) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  const Motion motion = Standing([](int frame) {
+    return Vec3{-0.2 + 0.05 * std::min(frame, 9), 0.1, frame < 20 ? 0.03 : 0.2};
+  });
+  std::vector<uint8_t> contacts(static_cast<size_t>(motion.num_frames()) * 4, 0);
+  for (int frame = 0; frame < motion.num_frames(); ++frame)
+    contacts[static_cast<size_t>(frame) * 4] = frame < 10 || frame >= 20;
+  const std::vector<float> before = ComputeJoints(skeleton, motion);
+  const auto lock = [&](GivenContacts given, FootLockReport* report) {
+    FootLockOptions options;
+    options.given = given;
+    return ComputeJoints(skeleton, LockFeet(skeleton, motion, options, report, &contacts));
+  };
+  const auto place = [&](int begin, int end) {
+    Vec3 sum{0, 0, 0};
+    for (int frame = begin; frame < end; ++frame) sum = sum + JointAt(before, frame, kLeftAnkle);
+    return (1.0 / (end - begin)) * sum;
+  };
+  const auto held_at = [&](const std::vector<float>& joints, int begin, int end, const Vec3& at) {
+    for (int frame = begin; frame < end; ++frame) {
+      EXPECT_NEAR(JointAt(joints, frame, kLeftAnkle).x, at.x, 1e-6) << frame;
+      EXPECT_NEAR(JointAt(joints, frame, kLeftAnkle).y, at.y, 1e-6) << frame;
+    }
+  };
+  const auto untouched = [&](const std::vector<float>& joints, int begin, int end) {
+    for (int frame = begin; frame < end; ++frame)
+      EXPECT_LT(Norm(JointAt(joints, frame, kLeftAnkle) - JointAt(before, frame, kLeftAnkle)), 1e-6)
+          << frame;
+  };
+  // Alone: both called runs held, the one in the air too.
+  FootLockReport alone;
+  const std::vector<float> a = lock(GivenContacts::kAlone, &alone);
+  EXPECT_EQ(alone.runs, 2);
+  EXPECT_EQ(alone.held, 20);
+  held_at(a, 0, 10, place(0, 10));
+  held_at(a, 20, 30, place(20, 30));
+  // Near the floor: the dragged run held, the one in the air left as it is.
+  FootLockReport near;
+  const std::vector<float> n = lock(GivenContacts::kNearFloor, &near);
+  EXPECT_EQ(near.runs, 1);
+  EXPECT_EQ(near.held, 10);
+  held_at(n, 0, 10, place(0, 10));
+  untouched(n, 20, 30);
+  // Or the test: the dragged run and the standing one join into one run of 20 frames (with the
+  // right foot and the toes the test holds), the air left as it is.
+  const std::vector<float> o = lock(GivenContacts::kNearFloorOrTest, nullptr);
+  held_at(o, 0, 20, place(0, 20));
+  untouched(o, 23, 30);  // past the run's 0.1-s fade
+}
+
 TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
   const Skeleton& skeleton = Skeleton::Smpl22();
   // The left foot drags along the floor under a pelvis that walks 0.87 m at 0.9 m/s: from the

@@ -17,20 +17,36 @@ struct Hold {
   std::vector<Vec3> place;  // z unused: a held joint keeps its own height
 };
 
-// `given` (optional): the frames in contact, replacing the height and speed test.
+// `given` (optional): a model's calls of the frames in contact, which options.given combines with
+// the height and speed test.
 Hold FindHold(const std::vector<Vec3>& path, double fps, const FootLockOptions& options,
               const std::vector<char>* given, FootLockReport* report) {
   const int64_t frames = static_cast<int64_t>(path.size());
   Hold hold{std::vector<double>(path.size(), 0.0), std::vector<Vec3>(path.size())};
-  std::vector<char> contact = given ? *given : std::vector<char>(path.size(), 0);
-  for (int64_t f = 0; f < (given ? 0 : frames); ++f) {
+  std::vector<char> contact(path.size(), 0);
+  for (int64_t f = 0; f < frames; ++f) {
     // Central difference (one-sided at the ends): a single jittery frame does not split a run.
     const int64_t a = std::max<int64_t>(0, f - 1), b = std::min(frames - 1, f + 1);
     const Vec3 step = path[static_cast<size_t>(b)] - path[static_cast<size_t>(a)];
     const double speed = std::hypot(step.x, step.y) * fps / static_cast<double>(b - a);
-    contact[static_cast<size_t>(f)] =
-        path[static_cast<size_t>(f)].z < options.floor + options.contact_height &&
-        speed < options.max_speed;
+    const bool low = path[static_cast<size_t>(f)].z < options.floor + options.contact_height;
+    const bool tested = low && speed < options.max_speed;
+    if (!given) {
+      contact[static_cast<size_t>(f)] = tested;
+      continue;
+    }
+    const bool called = (*given)[static_cast<size_t>(f)] != 0;
+    switch (options.given) {
+      case GivenContacts::kAlone:
+        contact[static_cast<size_t>(f)] = called;
+        break;
+      case GivenContacts::kNearFloor:
+        contact[static_cast<size_t>(f)] = called && low;
+        break;
+      case GivenContacts::kNearFloorOrTest:
+        contact[static_cast<size_t>(f)] = (called && low) || tested;
+        break;
+    }
   }
   for (int64_t begin = 0; begin < frames;) {
     if (!contact[static_cast<size_t>(begin)]) {

@@ -21,12 +21,22 @@
 
 namespace motionpipe {
 
+// How a model's own contact calls (LockFeet's `contacts`) choose the frames to hold.
+enum class GivenContacts {
+  kAlone,           // the calls replace the height-and-speed test (a call in the air is held)
+  kNearFloor,       // the calls where the joint is below the contact height, at any speed
+  kNearFloorOrTest  // those, and every frame the height-and-speed test holds
+};
+
 struct FootLockOptions {
   double floor = 0;              // z of the floor (joint level), metres
   double contact_height = 0.05;  // a foot joint below floor + this may be in contact (the metric's)
   double max_speed = 1.0;        // m/s: a foot joint faster than this is swinging, not sliding
   int min_frames = 2;            // shortest run of contact frames that is held
   double blend_seconds = 0.1;    // on each side of a run the hold fades in/out over this long
+  // Only read when LockFeet is given contacts; not one of the map's keys (the caller that has
+  // the calls names its own choice: the MDT's edit option foot_lock.contacts).
+  GivenContacts given = GivenContacts::kAlone;
 };
 
 struct FootLockReport {
@@ -57,8 +67,8 @@ Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& params,
 // `report` (optional) receives the counts above. `contacts` (optional, [frames * 4]: per frame the
 // left ankle, left toe, right ankle and right toe, non-zero where that joint stands) replaces the
 // contact-height and speed test: a model that predicts its own contacts (the MDT's contact head)
-// says which frames to hold; min_frames and the blend still apply. std::invalid_argument when its
-// size is not 4 per frame.
+// says which frames to hold, alone or with the test as options.given says; min_frames and the
+// blend still apply. std::invalid_argument when its size is not 4 per frame.
 Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options = {},
                 FootLockReport* report = nullptr, const std::vector<uint8_t>* contacts = nullptr);
 
