@@ -41,7 +41,8 @@ class Generator {
     return out;
   }
   // Totals the model counted over everything it generated so far (an editor that plants its own
-  // edits' feet: the foot frames it held), by name; the edit stage writes them into its summary.
+  // edits' feet: the foot frames it held), by name; sums, so that a stage's tasks add up. The
+  // edit stage writes them into its summary and metrics.
   virtual std::vector<std::pair<std::string, double>> Counts() const { return {}; }
   // Embeddings in the model's latent space (evaluators): of motions and of texts.
   virtual Result<std::vector<std::vector<float>>> EncodeMotions(

@@ -524,12 +524,14 @@ class EditorGenerator : public plugin::Generator {
     return out;
   }
 
+  // Sums only, so that an edit stage's tasks add up (the mean shift is planted_shift_m over
+  // planted_foot_frames).
   std::vector<std::pair<std::string, double>> Counts() const override {
     if (!lock_predicted_) return {};
     return {{"planted_foot_frames", static_cast<double>(planted_.held)},
             {"planted_runs", static_cast<double>(planted_.runs)},
             {"unreached_ankle_frames", static_cast<double>(planted_.unreached)},
-            {"mean_shift_m", planted_.MeanShift()}};
+            {"planted_shift_m", planted_.shift}};
   }
 
   std::unique_ptr<EditorModel> model_;

@@ -515,7 +515,7 @@ class EditTest(EngineTest):
                 return json.load(f).get("counts")
         self.assertIsNone(counts("contacts_raw"))
         for stage in ("contacts_locked", "contacts_near_floor", "contacts_or_test"):
-            self.assertEqual(sorted(counts(stage)), ["mean_shift_m", "planted_foot_frames", "planted_runs",
+            self.assertEqual(sorted(counts(stage)), ["planted_foot_frames", "planted_runs", "planted_shift_m",
                                                      "unreached_ankle_frames"], stage)
         # The test's frames added to the calls near the floor hold no fewer frames.
         self.assertGreaterEqual(counts("contacts_or_test")["planted_foot_frames"],
