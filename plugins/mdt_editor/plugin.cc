@@ -11,6 +11,7 @@
 #include <torch/torch.h>
 
 #include <filesystem>
+#include <iterator>
 #include <map>
 
 #include "../api/generator.hpp"
@@ -251,11 +252,13 @@ class EditorGenerator : public plugin::Generator {
         {"predicted", GivenContacts::kAlone},
         {"predicted_near_floor", GivenContacts::kNearFloor},
         {"predicted_or_test", GivenContacts::kNearFloorOrTest}};
-    if (contacts != "test" && rules.count(contacts) == 0)
-      throw std::invalid_argument(
-          "foot_lock.contacts must be test, predicted, predicted_near_floor or "
-          "predicted_or_test (got '" +
-          contacts + "')");
+    if (contacts != "test" && rules.count(contacts) == 0) {
+      std::string known = "test";
+      for (auto rule = rules.begin(); rule != rules.end(); ++rule)
+        known += (std::next(rule) == rules.end() ? " or " : ", ") + rule->first;
+      throw std::invalid_argument("foot_lock.contacts must be " + known + " (got '" + contacts +
+                                  "')");
+    }
     lock_predicted_ = contacts != "test";
     if (lock_predicted_) foot_lock_.given = rules.at(contacts);
     if (lock_predicted_ && !(model_->options().contacts_weight > 0))
