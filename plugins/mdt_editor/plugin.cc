@@ -216,6 +216,14 @@ class EditorGenerator : public plugin::Generator {
     if (guidance_from_step_ < 0 || guidance_from_step_ > model_->schedule().steps())
       throw std::invalid_argument("guidance_from_step must be in [0, " +
                                   std::to_string(model_->schedule().steps()) + "]");
+    // How an edit made at the network's own rate (`fps`) is brought to the source's: linear
+    // (slerp and lerp, the default) or cubic (a Catmull-Rom spline through the network's frames;
+    // motion.h). Not in the paper, whose network runs at 30 fps (issue 15: the jerk the upsampling
+    // adds).
+    auto upsample =
+        ParseUpsampling(options.value("upsample", std::string("linear")), "edit option upsample");
+    if (!upsample.ok()) throw std::invalid_argument(upsample.status().message());
+    upsample_ = *upsample;
     // > 0: DDIM starts from the aligned source noised to this step (SDEdit), not from pure noise.
     start_step_ = options.value("start_step", int64_t{0});
     if (start_step_ < 0 || start_step_ >= model_->schedule().steps())
@@ -510,7 +518,8 @@ class EditorGenerator : public plugin::Generator {
       const double rate = r.source ? r.source->fps : r.fps;
       Motion m = DecodeMotionFix207(features, anchor, o.fps > 0 ? o.fps : rate);
       if (o.fps > 0) {
-        MP_ASSIGN_OR_RETURN(m, ResampleToFrames(m, rate, requested[static_cast<size_t>(i)]));
+        MP_ASSIGN_OR_RETURN(
+            m, ResampleToFrames(m, rate, requested[static_cast<size_t>(i)], upsample_));
       }
       for (float v : m.poses) {
         if (!std::isfinite(v)) return Internal("edit: the model produced NaN");
@@ -540,6 +549,7 @@ class EditorGenerator : public plugin::Generator {
   std::unique_ptr<EditorModel> model_;
   bool body_parts_ = false;
   int64_t start_step_ = 0;
+  ResampleMethod upsample_ = ResampleMethod::kInterpolate;
   int64_t guidance_from_step_ = 0;
   FootLockOptions foot_lock_;
   int64_t foot_lock_below_step_ = 0;

@@ -168,6 +168,13 @@ class SincGenerator : public plugin::Generator {
     model_->Module().eval();
     compositing_ = model_->variant() == "compositing" || options.value("compositing", false);
     reconstruct_ = options.value("reconstruct", false);
+    // How a motion made at the network's own rate is brought to the one asked for: linear (slerp
+    // and lerp, the default) or cubic (a Catmull-Rom spline through the network's frames;
+    // motion.h). Not in the paper, whose network runs at 30 fps (issue 15).
+    auto upsample = ParseUpsampling(options.value("upsample", std::string("linear")),
+                                    "generate option upsample");
+    if (!upsample.ok()) throw std::invalid_argument(upsample.status().message());
+    upsample_ = *upsample;
     if (reconstruct_ && compositing_)
       throw std::invalid_argument("reconstruct and compositing do not go together");
     if (compositing_ && model_->variant() != "single" && model_->variant() != "compositing") {
@@ -278,7 +285,7 @@ class SincGenerator : public plugin::Generator {
     for (float v : m.poses) {
       if (!std::isfinite(v)) return Internal("generate: the model produced NaN");
     }
-    if (!SameFrameRate(rate, fps)) return ResampleToFrames(m, fps, asked);
+    if (!SameFrameRate(rate, fps)) return ResampleToFrames(m, fps, asked, upsample_);
     return m;
   }
 
@@ -298,6 +305,7 @@ class SincGenerator : public plugin::Generator {
   std::unique_ptr<SincModel> model_;
   bool compositing_ = false;
   bool reconstruct_ = false;
+  ResampleMethod upsample_ = ResampleMethod::kInterpolate;
 };
 
 const mp_object_factory kFactories[] = {

@@ -4,6 +4,7 @@
 
 #include "motionpipe/base/file.h"
 #include "motionpipe/motion/motion.h"
+#include "motionpipe/motion/plausibility.h"
 #include "test_util.h"
 
 namespace motionpipe {
@@ -202,6 +203,74 @@ TEST(Motion, ResampleInterpolateIsSmoothAndExactAtSamples) {
   const Vec3 mid = up.Translation(21);
   const Vec3 expect = 0.5 * (motion.Translation(10) + motion.Translation(11));
   EXPECT_LT(Norm(mid - expect), 1e-6);
+}
+
+TEST(Motion, ResampleCubicPassesThroughTheFramesAndFollowsASmoothMotionCloserThanLinear) {
+  // A smooth 30-fps motion taken to a model's 10 fps by index and brought back: both upsamplings
+  // give back every kept frame; between them the spline lies nearer the original than slerp does
+  // (its error is third order in the frame step, linear interpolation's second), and its joints'
+  // jerk is lower: slerp's velocity jumps at every kept frame.
+  const Motion motion = testing::SmoothMotion(91, 7, 30);
+  const Motion low = ToModelRate(motion, 10);
+  const Result<Motion> linear = ResampleToFrames(low, 30, 91, ResampleMethod::kInterpolate);
+  const Result<Motion> cubic = ResampleToFrames(low, 30, 91, ResampleMethod::kCubic);
+  ASSERT_TRUE(linear.ok() && cubic.ok());
+  ASSERT_EQ(cubic->num_frames(), 91);
+  double linear_error = 0, cubic_error = 0;
+  for (int64_t frame = 0; frame < 91; ++frame) {
+    for (int joint = 0; joint < kNumJoints; ++joint) {
+      const double off =
+          MaxAbsDiff(cubic->LocalRotation(frame, joint), motion.LocalRotation(frame, joint));
+      if (frame % 3 == 0) {
+        EXPECT_LT(off, 1e-6) << "frame " << frame << " joint " << joint;
+      }
+      cubic_error += off;
+      linear_error +=
+          MaxAbsDiff(linear->LocalRotation(frame, joint), motion.LocalRotation(frame, joint));
+    }
+    if (frame % 3 == 0) {
+      EXPECT_LT(Norm(cubic->Translation(frame) - motion.Translation(frame)), 1e-9);
+    }
+  }
+  EXPECT_LT(cubic_error, 0.5 * linear_error);
+  const Skeleton skeleton = Skeleton::Smpl22();
+  const double jerk_linear = EvaluateMotionPlausibility(skeleton, *linear).jerk_mean;
+  const double jerk_cubic = EvaluateMotionPlausibility(skeleton, *cubic).jerk_mean;
+  const double jerk_original = EvaluateMotionPlausibility(skeleton, motion).jerk_mean;
+  EXPECT_LT(jerk_cubic, jerk_linear);
+  EXPECT_LT(std::abs(jerk_cubic - jerk_original), std::abs(jerk_linear - jerk_original));
+}
+
+TEST(Motion, ResampleCubicKeepsAStraightPathAndTakesTheShortArc) {
+  // Translation along a line at constant speed is a line again between the second and the
+  // second-to-last frame (the end segments see a repeated frame); a rotation whose quaternion
+  // changes sign between frames (q and -q are one rotation) is not spun the long way round.
+  Motion motion = Motion::Rest(6, 10, 0.9);
+  for (int64_t frame = 0; frame < 6; ++frame) {
+    motion.SetTranslation(frame, {0.3 * static_cast<double>(frame), 1.0, 0.9});
+    // 2.6 to 3.85 rad: through pi, where the quaternion of the rotation changes sign
+    motion.SetLocalRotation(frame, 1, RotZ(2.6 + 0.25 * static_cast<double>(frame)));
+  }
+  const Motion up = Resample(motion, 30, ResampleMethod::kCubic);
+  ASSERT_EQ(up.num_frames(), 16);
+  for (int64_t frame = 3; frame <= 12; ++frame) {
+    EXPECT_NEAR(up.Translation(frame).x, 0.1 * static_cast<double>(frame), 1e-6) << frame;
+    const double angle = 2.6 + 0.25 * static_cast<double>(frame) / 3;
+    EXPECT_LT(MaxAbsDiff(up.LocalRotation(frame, 1), RotZ(angle)), 2e-3) << frame;
+  }
+  for (int64_t frame : {1, 2, 13, 14}) {  // the end segments: slower near the repeated frame
+    const double angle = 2.6 + 0.25 * static_cast<double>(frame) / 3;
+    EXPECT_LT(MaxAbsDiff(up.LocalRotation(frame, 1), RotZ(angle)), 0.03) << frame;
+  }
+  EXPECT_FALSE(ResampleToFrames(motion, 30, 16, ResampleMethod::kByIndex).ok());
+}
+
+TEST(Motion, ParseUpsamplingNamesTheOptionInItsError) {
+  EXPECT_EQ(*ParseUpsampling("linear", "upsample"), ResampleMethod::kInterpolate);
+  EXPECT_EQ(*ParseUpsampling("cubic", "upsample"), ResampleMethod::kCubic);
+  const Result<ResampleMethod> bad = ParseUpsampling("spline", "edit option upsample");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().message(), "edit option upsample must be linear or cubic (got 'spline')");
 }
 
 }  // namespace

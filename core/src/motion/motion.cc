@@ -121,6 +121,20 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end) {
 
 namespace {
 
+// The uniform Catmull-Rom segment between p1 (t = 0) and p2 (t = 1), tangents (p2 - p0) / 2 and
+// (p3 - p1) / 2.
+double CatmullRom(double p0, double p1, double p2, double p3, double t) {
+  return p1 +
+         0.5 * t *
+             ((p2 - p0) + t * ((2 * p0 - 5 * p1 + 4 * p2 - p3) + t * (3 * (p1 - p2) + p3 - p0)));
+}
+
+// q or -q (the same rotation), whichever lies on the hemisphere of `near`.
+Quat SameHemisphere(const Quat& q, const Quat& near) {
+  const double dot = q.w * near.w + q.x * near.x + q.y * near.y + q.z * near.z;
+  return dot < 0 ? Quat{-q.w, -q.x, -q.y, -q.z} : q;
+}
+
 std::string Rate(double fps) {
   char text[32];
   std::snprintf(text, sizeof(text), "%g", fps);
@@ -177,6 +191,26 @@ Motion Resample(const Motion& motion, double target_fps, ResampleMethod method) 
     const int64_t lo = std::min<int64_t>(frames - 1, static_cast<int64_t>(std::floor(src)));
     const int64_t hi = std::min<int64_t>(frames - 1, lo + 1);
     const double t = src - static_cast<double>(lo);
+    if (method == ResampleMethod::kCubic) {
+      const int64_t before = std::max<int64_t>(0, lo - 1);
+      const int64_t after = std::min<int64_t>(frames - 1, hi + 1);
+      for (int joint = 0; joint < kNumJoints; ++joint) {
+        const Quat q1 = MatrixToQuat(motion.LocalRotation(lo, joint));
+        const Quat q0 = SameHemisphere(MatrixToQuat(motion.LocalRotation(before, joint)), q1);
+        const Quat q2 = SameHemisphere(MatrixToQuat(motion.LocalRotation(hi, joint)), q1);
+        const Quat q3 = SameHemisphere(MatrixToQuat(motion.LocalRotation(after, joint)), q2);
+        const Quat q = {
+            CatmullRom(q0.w, q1.w, q2.w, q3.w, t), CatmullRom(q0.x, q1.x, q2.x, q3.x, t),
+            CatmullRom(q0.y, q1.y, q2.y, q3.y, t), CatmullRom(q0.z, q1.z, q2.z, q3.z, t)};
+        out.SetLocalRotation(frame, joint, QuatToMatrix(Normalized(q)));
+      }
+      const Vec3 p0 = motion.Translation(before), p1 = motion.Translation(lo),
+                 p2 = motion.Translation(hi), p3 = motion.Translation(after);
+      out.SetTranslation(
+          frame, {CatmullRom(p0.x, p1.x, p2.x, p3.x, t), CatmullRom(p0.y, p1.y, p2.y, p3.y, t),
+                  CatmullRom(p0.z, p1.z, p2.z, p3.z, t)});
+      continue;
+    }
     for (int joint = 0; joint < kNumJoints; ++joint) {
       const Quat a = MatrixToQuat(motion.LocalRotation(lo, joint));
       const Quat b = MatrixToQuat(motion.LocalRotation(hi, joint));
@@ -207,10 +241,13 @@ int64_t FramesCovering(int64_t frames, double rate, double fps) {
   return static_cast<int64_t>(std::ceil(static_cast<double>(frames - 1) * fps / rate - 1e-9)) + 1;
 }
 
-Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frames) {
+Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frames,
+                                ResampleMethod method) {
   if (motion.num_frames() == 0) return InvalidArgument("resampling a motion without frames");
+  if (method == ResampleMethod::kByIndex)
+    return InvalidArgument("resampling to a number of frames interpolates (linear or cubic)");
   // Resample keeps a motion already at `rate` (SameFrameRate) as it is.
-  Motion out = Resample(motion, rate, ResampleMethod::kInterpolate);
+  Motion out = Resample(motion, rate, method);
   out.fps = rate;
   // Resample covers the same duration, so it gives at least `frames` frames from FramesCovering's;
   // a shorter motion (another length) repeats its last frame.
@@ -224,6 +261,12 @@ Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frame
                 &out.trans[static_cast<size_t>(f) * 3]);
   }
   return out;
+}
+
+Result<ResampleMethod> ParseUpsampling(const std::string& name, const std::string& origin) {
+  if (name == "linear") return ResampleMethod::kInterpolate;
+  if (name == "cubic") return ResampleMethod::kCubic;
+  return InvalidArgument(origin + " must be linear or cubic (got '" + name + "')");
 }
 
 }  // namespace motionpipe

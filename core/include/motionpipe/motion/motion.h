@@ -45,8 +45,12 @@ Motion SliceFrames(const Motion& motion, int64_t begin, int64_t end);
 // Resampling to another frame rate. ByIndex picks source frames, the field's convention for AMASS
 // 120 -> 30 fps (numpy's arange(0, T, src/dst).astype(int): output frame i is source frame
 // floor(i * src/dst)). Interpolate slerps rotations and lerps translation, for rates that do not
-// divide.
-enum class ResampleMethod { kByIndex, kInterpolate };
+// divide: continuous, its velocity jumps at every source frame. Cubic runs a uniform Catmull-Rom
+// spline through the source frames (Catmull and Rom 1974; the end frames repeated): on each
+// joint's quaternions, every one on the hemisphere of its neighbour, renormalised, and on
+// translation; it passes through the source frames and its velocity is continuous, so bringing a
+// model's frames up to a higher rate adds no jerk at the frames themselves (issue 15).
+enum class ResampleMethod { kByIndex, kInterpolate, kCubic };
 // Rates that agree to 10 ppm are the same rate: a BVH stores 30 fps as "Frame Time: 0.03333333",
 // i.e. 30.0000003 fps, which must not drop a frame. Resample keeps such a motion's frames.
 bool SameFrameRate(double a, double b);
@@ -65,9 +69,14 @@ Motion ToModelRate(const Motion& motion, double fps);
 // `rate` once resampled back to it: ceil((frames - 1) fps / rate) + 1 (`frames` itself when fps <=
 // 0 or the same rate).
 int64_t FramesCovering(int64_t frames, double rate, double fps);
-// A motion made at another rate brought to `rate` (interpolated) and cut to exactly `frames`
-// frames (a shorter one repeats its last frame); InvalidArgument for a motion without frames.
-Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frames);
+// A motion made at another rate brought to `rate` (by `method`: kInterpolate or kCubic) and cut
+// to exactly `frames` frames (a shorter one repeats its last frame); InvalidArgument for a motion
+// without frames or for kByIndex.
+Result<Motion> ResampleToFrames(const Motion& motion, double rate, int64_t frames,
+                                ResampleMethod method = ResampleMethod::kInterpolate);
+// The upsampling a generator's option names: "linear" (kInterpolate) or "cubic" (kCubic);
+// InvalidArgument naming `origin` for anything else.
+Result<ResampleMethod> ParseUpsampling(const std::string& name, const std::string& origin);
 
 // Bounds on a resampling request, so that a mistyped rate (--fps 1e9) is an error, not an
 // allocation of gigabytes: at most 1,000 fps (mocap systems record up to a few hundred) and at most
