@@ -193,6 +193,10 @@ stages:
     kind: edit
     inputs: [mdt_contacts, corpus]
     params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {foot_lock: {contacts: predicted_or_test}}}
+  contacts_cubic:      # the network's 10-fps frames brought to 30 by a spline
+    kind: edit
+    inputs: [mdt_contacts, corpus]
+    params: {model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options: {upsample: cubic}}
   eval_locked:
     kind: eval_edit
     inputs: [evaluator_b, locked, corpus]
@@ -520,6 +524,19 @@ class EditTest(EngineTest):
         # The test's frames added to the calls near the floor hold no fewer frames.
         self.assertGreaterEqual(counts("contacts_or_test")["planted_foot_frames"],
                                 counts("contacts_near_floor")["planted_foot_frames"])
+        # Upsampled by the spline, the edits pass through the network's own frames (every third at
+        # 30 fps, the same as slerp's) and differ between them.
+        linear, cubic = by_clip(self.path("judges", "judges-*", "contacts_raw")), by_clip(self.path("judges", "judges-*", "contacts_cubic"))
+        self.assertEqual(sorted(cubic), sorted(linear))
+        for clip, (poses, trans) in cubic.items():
+            np.testing.assert_allclose(rotation_matrices(poses[::3]), rotation_matrices(linear[clip][0][::3]), atol=1e-5)
+            np.testing.assert_allclose(trans[::3], linear[clip][1][::3], atol=1e-6)
+            self.assertFalse(np.array_equal(poses, linear[clip][0]), clip)
+        bad = judges.replace("options: {upsample: cubic}", "options: {upsample: spline}").replace("name: judges", "name: badspline")
+        result = subprocess.run([MOTIONPIPE, "run", self.write_pipeline("badspline.yaml", bad), "--workers", "1", "--threads", "1"],
+                                capture_output=True, text=True, timeout=600)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("edit option upsample must be linear or cubic (got 'spline')", result.stdout + result.stderr)
         # Only a checkpoint with the head can say where its feet stand.
         headless = judges.replace("model: mdt_contacts, split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options",
                                   'model: "%s", split: test, limit: 2, sampler: ddim, steps: 4, batch: 2, options'
