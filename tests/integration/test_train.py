@@ -11,11 +11,16 @@ import signal
 import struct
 import subprocess
 import unittest
+import sys
 import zipfile
 
 import numpy as np
 
 from harness import MOTIONPIPE, EngineTest, torch_load
+
+# Rodrigues, the NumPy reference's (one copy in the repository).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "bench", "reference"))
+from similarity_ref import rotation_matrices  # noqa: E402
 
 PIPELINE = """
 name: train_test
@@ -253,6 +258,28 @@ class TrainStageTest(EngineTest):
         with np.load(clip) as z:
             self.assertEqual(z["poses"].shape, (75, 22, 3))
             self.assertEqual(float(z["fps"][0]), 30)
+        # upsample: cubic brings the same network frames back through a spline: equal to slerp's at
+        # every third frame, different between; a name it does not know is refused.
+        def generated(run):
+            into = {}
+            for path in glob.glob(os.path.join(run, "gen", "task-*", "generated.npz")):
+                with np.load(path) as z:
+                    for i, sid in enumerate(z["ids"]):
+                        into[str(sid)] = z["poses"][z["offsets"][i]:z["offsets"][i + 1]].copy()
+            return into
+        cubic_job = self.run_pipeline("tenth_cubic", 1, "stages.sinc.params.config.fps=10",
+                                      "stages.gen.params.options.upsample=cubic")
+        linear, cubic = generated(job), generated(cubic_job)
+        self.assertEqual(sorted(cubic), sorted(linear))
+        for sid in cubic:
+            np.testing.assert_allclose(rotation_matrices(cubic[sid][::3]), rotation_matrices(linear[sid][::3]), atol=1e-5)
+        self.assertFalse(all(np.array_equal(cubic[sid], linear[sid]) for sid in cubic))
+        pipeline = self.write_pipeline("spline.yaml", PIPELINE.replace("OUT", self.path("spline")))
+        result = subprocess.run([MOTIONPIPE, "run", pipeline, "--workers", "1", "--threads", "1",
+                                 "stages.sinc.params.config.fps=10", "stages.gen.params.options.upsample=spline"],
+                                capture_output=True, text=True, timeout=300)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("generate option upsample must be linear or cubic (got 'spline')", result.stdout + result.stderr)
 
     def test_composed_truth_composes_each_pair_from_the_singles_that_bear_its_texts(self):
         # eval_generate's composed_truth on a spans file made here: two test pairs "walk forward while
