@@ -10,8 +10,8 @@ import os
 import signal
 import struct
 import subprocess
-import unittest
 import sys
+import unittest
 import zipfile
 
 import numpy as np
