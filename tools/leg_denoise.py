@@ -10,16 +10,22 @@ ones, given the pelvis as it is (Holden 2018, "Robust solving of optical motion 
 denoising", applied to the legs of generated motion). The corruptions imitate what the edits' legs
 carry: noise at the network's 10-fps frames interpolated to 30 fps, a slow random offset, the legs
 drawn part of the way toward the triplet partner's (an edit keeps 17% of the way back to its source),
-and the legs' timing warped against the pelvis. The loss: the rotations (matrix entries), the leg
-joints' world positions by forward kinematics, and the speed of foot joints where the clean motion
-stands on them (contact: below 5 cm and slower than 0.15 m/s, the evaluation's figures).
+and the legs' timing warped against the pelvis; with --shrink, a share of the batch with the legs'
+swing narrowed (legs that do not step, as SINC's), and with --height the pelvis height drifted, the
+network then also giving back a height correction (the edits float on a fifth of their frames).
+The loss: the rotations (matrix entries), the leg joints' world positions by forward kinematics,
+and the speed of foot joints where the clean motion stands on them (contact: below 5 cm and slower
+than 0.15 m/s, the evaluation's figures).
 
-    /usr/bin/python3 tools/leg_denoise.py train out/demo-1/corpus/result/motionfix out/denoise/model.pt
+    /usr/bin/python3 tools/leg_denoise.py train out/demo-1/corpus/result/motionfix out/denoise/model.pt \
+        --shrink 0.25 --height
     /usr/bin/python3 tools/leg_denoise.py apply out/denoise/model.pt out/demo-1/edit_mdt out/denoise/edit_mdt
 
 `apply` writes each input task's edited.npz (or generated.npz) with the legs replaced, every other
 array as it was, so eval_edit / eval_generate score it as a row of its own (an experiment config
-names the directory); the pelvis, its path and the upper body stay the model's.
+names the directory); the pelvis's path and orientation and the upper body stay the model's (its
+height too, without --height). A measurement: the corpus's prior, it makes real mocap slide more
+(docs/EXPERIMENTS.md "A learned clean-up of the legs").
 """
 import argparse
 import glob
@@ -199,7 +205,9 @@ def corrupt(legs, partner, generator, degrees, shrink=0.0):
     key_noise = key_noise[..., :T].reshape(B, len(LEG), 3, T).permute(0, 3, 1, 2)
     e = math.radians(degrees) * u() * key_noise
     # a slow offset, up to 3x that, over 0.1-0.5 s
-    e = e + 3 * math.radians(degrees) * u() * smooth_noise((B, T, len(LEG), 3), 3 + 12 * float(torch.rand(1, generator=generator)), generator)
+    amplitude = 3 * math.radians(degrees) * u()  # drawn before the time scale (the runs' order)
+    sigma = 3 + 12 * float(torch.rand(1, generator=generator))
+    e = e + amplitude * smooth_noise((B, T, len(LEG), 3), sigma, generator)
     # part of the way toward the partner's legs, for half the batch
     toward = (torch.rand(B, 1, 1, generator=generator) < 0.5) * 0.4 * torch.rand(B, 1, 1, generator=generator)
     e = e + toward[..., None] * log_map(legs.transpose(-1, -2) @ partner)
@@ -294,7 +302,8 @@ def train(args):
           f"loaded in {time.time() - t0:.0f} s", flush=True)
     model = Denoiser(args.width, height=args.height)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=args.lr, total_steps=args.steps, pct_start=max(0.05, 2.0 / args.steps))
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=args.lr, total_steps=args.steps,
+                                                   pct_start=max(0.05, 2.0 / args.steps))
     weights = (1.0, 10.0, args.slide)
     val_generator = torch.Generator().manual_seed(12345)
     val_batch = batch(motions_val, usable_val[:256], val_generator)
@@ -302,7 +311,8 @@ def train(args):
     t0 = time.time()
     for step in range(1, args.steps + 1):
         pick = torch.randint(0, len(usable), (args.batch,), generator=generator)
-        terms = losses(model, *batch(motions, [usable[i] for i in pick], generator), offsets, generator, args.degrees, args.shrink)
+        terms = losses(model, *batch(motions, [usable[i] for i in pick], generator), offsets, generator,
+                       args.degrees, args.shrink)
         loss = sum(w * x for w, x in zip(weights, terms))
         optimiser.zero_grad()
         loss.backward()
@@ -321,7 +331,8 @@ def train(args):
                 best = val
                 os.makedirs(os.path.dirname(os.path.abspath(args.model)), exist_ok=True)
                 tmp = args.model + ".tmp"
-                torch.save({"width": args.width, "height": args.height, "state": model.state_dict(), "step": step, "val": val}, tmp)
+                torch.save({"width": args.width, "height": args.height, "state": model.state_dict(), "step": step,
+                            "val": val}, tmp)
                 os.replace(tmp, args.model)
 
 

@@ -69,9 +69,9 @@ class LegDenoiseTest(unittest.TestCase):
     def test_forward_kinematics_agree_with_root_stats(self):
         trans, poses = walk(12)
         R = leg_denoise.rodrigues(torch.from_numpy(poses))
-        ours = leg_denoise.leg_positions(torch.from_numpy(trans)[None], R[None, :, 0], R[None, :, list(leg_denoise.LEG)],
-                                         {j: torch.tensor(v, dtype=torch.float32)
-                                          for j, v in root_stats.leg_offsets().items()})[0]
+        offsets = {j: torch.tensor(v, dtype=torch.float32) for j, v in root_stats.leg_offsets().items()}
+        legs = R[None, :, list(leg_denoise.LEG)]
+        ours = leg_denoise.leg_positions(torch.from_numpy(trans)[None], R[None, :, 0], legs, offsets)[0]
         theirs = root_stats.feet(trans.astype(float), root_stats.rotation_matrices(poses.reshape(-1, 3).astype(float))
                                  .reshape(-1, 22, 3, 3), root_stats.leg_offsets())
         # ours: knee, ankle, foot per leg; theirs: ankle, foot per leg
