@@ -40,11 +40,10 @@ import torch
 import torch.nn as nn
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from root_stats import leg_offsets, log_rotation, stage_files  # noqa: E402
+from root_stats import CONTACT_HEIGHT, SKATE_SPEED, leg_offsets, log_rotation, stage_files  # noqa: E402
+from root_stats import LEGS as CHAINS  # noqa: E402  (hip, knee, ankle, foot per leg)
 
 LEG = (1, 2, 4, 5, 7, 8)  # hips, knees, ankles (SMPL-22): the joints whose rotations move the feet
-CHAINS = ((1, 4, 7, 10), (2, 5, 8, 11))
-CONTACT_HEIGHT, SKATE_SPEED = 0.05, 0.15  # core's PlausibilityOptions
 CROP = 60  # training crop, frames at 30 fps (the edits are 2-4 s)
 
 
@@ -292,7 +291,7 @@ def train(args):
     torch.manual_seed(args.seed)
     offsets = {j: torch.tensor(v, dtype=torch.float32) for j, v in leg_offsets().items()}
     t0 = time.time()
-    motions = [m for m in load_triplets(args.triplets, "train", args.limit)]
+    motions = load_triplets(args.triplets, "train", args.limit)
     motions_val = load_triplets(args.triplets, "val", 256)
     usable = [i for i, m in enumerate(motions) if len(m[0]) >= CROP]
     usable_val = [i for i, m in enumerate(motions_val) if len(m[0]) >= CROP]
@@ -378,7 +377,7 @@ def main():
     t = sub.add_parser("train", help="train on a triplet directory's train split")
     t.add_argument("triplets", help="a corpus stage's result/motionfix directory")
     t.add_argument("model", help="where the best model (by a validation batch) is written")
-    t.add_argument("--steps", type=int, default=3000)
+    t.add_argument("--steps", type=int, default=2500)
     t.add_argument("--batch", type=int, default=64)
     t.add_argument("--lr", type=float, default=1e-3)
     t.add_argument("--width", type=int, default=256)
@@ -389,7 +388,7 @@ def main():
                    help="also correct the pelvis height (trained on heights drifted as the edits' are)")
     t.add_argument("--slide", type=float, default=0.1, help="weight of the contact feet's squared speed")
     t.add_argument("--limit", type=int, default=8000, help="training triplets used")
-    t.add_argument("--log", type=int, default=100)
+    t.add_argument("--log", type=int, default=250, help="steps between validations (the best is kept)")
     t.add_argument("--seed", type=int, default=1)
     t.add_argument("--threads", type=int, default=2)
     a = sub.add_parser("apply", help="clean the legs of an edit/generate/foot_lock stage's motions")
