@@ -201,6 +201,22 @@ stages:
     kind: eval_edit
     inputs: [evaluator_b, locked, corpus]
     params: {evaluator: evaluator_b, edits: locked, batch: 2}
+  cleanup:             # the learned leg clean-up (plugins/leg_cleanup), tiny, on the corpus's triplets
+    kind: train
+    inputs: [corpus]
+    params:
+      model: leg_cleanup
+      config: {width: 16, dilations: [1, 2], height: true, crop: 30, corruption: {shrink: 0.5}}
+      steps: 3
+      batch_size: 4
+      warmup: 0
+      validate_every: 3
+      keep: best
+  cleaned:
+    kind: clean_legs
+    inputs: [cleanup]
+    params: {motions: "JOBS/edit_mdt"}
+  cleaned_locked: {kind: foot_lock, inputs: [cleaned], params: {max_speed: 5}}
 """.replace("TINY_MDT", TINY_MDT)
 
 
@@ -545,6 +561,29 @@ class EditTest(EngineTest):
                                  "--workers", "1", "--threads", "1"], capture_output=True, text=True, timeout=600)
         self.assertNotEqual(result.returncode, 0)
         self.assertIn("foot_lock.contacts predicted needs a checkpoint trained with a contact head", result.stdout + result.stderr)
+        # clean_legs: the edits with the legs' rotations and the pelvis height changed by the
+        # clean-up, everything else bit for bit; named as the raw edits' model plus the clean-up,
+        # and planted after it by foot_lock.
+        cleaned = by_clip(self.path("judges", "judges-*", "cleaned"))
+        self.assertEqual(sorted(cleaned), sorted(raw))
+        for clip, (poses, trans) in cleaned.items():
+            self.assertTrue(np.array_equal(poses[:, others], raw[clip][0][:, others]), clip)
+            self.assertTrue(np.array_equal(trans[:, :2], raw[clip][1][:, :2]), clip)
+            self.assertFalse(np.array_equal(poses[:, legs], raw[clip][0][:, legs]), clip)
+            self.assertLess(np.abs(trans[:, 2] - raw[clip][1][:, 2]).max(), 0.05, clip)
+        def model_of(stage):
+            with open(glob.glob(self.path("judges", "judges-*", stage, "task-00000", "edits.json"))[0]) as f:
+                return json.load(f)["model"]
+        self.assertEqual(model_of("cleaned"), "mdt_editor/mdt + leg clean-up")
+        self.assertEqual(model_of("cleaned_locked"), "mdt_editor/mdt + leg clean-up + foot lock")
+        only_legs_changed(cleaned, by_clip(self.path("judges", "judges-*", "cleaned_locked")))
+        # Only a leg_cleanup checkpoint cleans legs: an editor's is refused, by name.
+        wrong = ("name: wrong\noutput_root: %s\nstages:\n  cleaned: {kind: clean_legs, params: {model: \"%s\", motions: \"%s\"}}\n"
+                 % (self.path("judges"), os.path.join(job, "mdt", "task-00000", "model"), os.path.join(job, "edit_mdt")))
+        result = subprocess.run([MOTIONPIPE, "run", self.write_pipeline("wrong.yaml", wrong), "--workers", "1", "--threads", "1"],
+                                capture_output=True, text=True, timeout=120)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("checkpoint, not a leg_cleanup one", result.stdout + result.stderr)
         scored = judged["eval_locked"]
         self.assertEqual(scored["method"], "mdt_editor/mdt + foot lock")
         self.assertEqual(scored["motions"], 3)

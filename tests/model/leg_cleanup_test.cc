@@ -1,0 +1,223 @@
+// The leg clean-up (plugins/leg_cleanup): its rotations, kinematics and heading-free input, the
+// corruption, an untrained net giving the legs back, the loss, a few steps that learn, and its
+// refusals.
+#include "../../plugins/leg_cleanup/leg_cleanup.h"
+
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cmath>
+
+#include "motionpipe/skeleton/skeleton.h"
+
+namespace motionpipe::legs {
+namespace {
+
+// A turning, swinging walk at 30 fps: legs swing, every joint jitters a little.
+Motion Walk(int64_t frames, uint64_t seed = 0) {
+  Motion m = Motion::Rest(frames, 30, 0.9);
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(seed);
+  const auto jitter = 0.05 * torch::randn({frames, kNumJoints, 3}, generator);
+  for (int64_t f = 0; f < frames; ++f) {
+    const double t = static_cast<double>(f) / 30;
+    for (int j = 0; j < kNumJoints; ++j) {
+      for (int c = 0; c < 3; ++c)
+        m.poses[static_cast<size_t>((f * kNumJoints + j) * 3 + c)] = jitter[f][j][c].item<float>();
+    }
+    m.poses[static_cast<size_t>(f * kNumJoints * 3)] = static_cast<float>(M_PI / 2);
+    m.poses[static_cast<size_t>(f * kNumJoints * 3 + 1)] = 0;
+    m.poses[static_cast<size_t>(f * kNumJoints * 3 + 2)] = static_cast<float>(0.3 * t);  // turning
+    m.poses[static_cast<size_t>((f * kNumJoints + 1) * 3)] +=
+        static_cast<float>(0.5 * std::sin(2 * M_PI * t));
+    m.poses[static_cast<size_t>((f * kNumJoints + 2) * 3)] -=
+        static_cast<float>(0.5 * std::sin(2 * M_PI * t));
+    m.SetTranslation(f, {std::cos(t), std::sin(t), 0.9 + 0.02 * std::sin(4 * t)});
+  }
+  return m;
+}
+
+// [1, T, 22, 3, 3] local rotations and [1, T, 3] pelvis of a motion.
+std::pair<torch::Tensor, torch::Tensor> Tensors(const Motion& m) {
+  const int64_t t = m.num_frames();
+  auto poses = torch::from_blob(const_cast<float*>(m.poses.data()), {1, t, kNumJoints, 3}).clone();
+  auto trans = torch::from_blob(const_cast<float*>(m.trans.data()), {1, t, 3}).clone();
+  return {Rodrigues(poses), trans};
+}
+
+torch::Tensor Legs(const torch::Tensor& r) {
+  return torch::stack({r.select(2, 1), r.select(2, 2), r.select(2, 4), r.select(2, 5),
+                       r.select(2, 7), r.select(2, 8)},
+                      2);
+}
+
+TEST(LegCleanup, RotationsRoundTrip) {
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(3);
+  const auto v = 0.9 * torch::randn({50, 3}, generator).clamp(-1.5, 1.5);
+  const auto r = Rodrigues(v);
+  EXPECT_LT((torch::matmul(r, r.transpose(-1, -2)) - torch::eye(3)).abs().max().item<double>(),
+            1e-5);
+  EXPECT_LT((LogMap(r) - v).abs().max().item<double>(), 1e-3);
+  EXPECT_LT((FromSixD(SixD(r)) - r).abs().max().item<double>(), 1e-5);
+  // The identity: no angle, no NaN.
+  EXPECT_LT((Rodrigues(torch::zeros({1, 3})) - torch::eye(3)).abs().max().item<double>(), 1e-7);
+}
+
+TEST(LegCleanup, ForwardKinematicsAgreeWithTheCore) {
+  const Motion m = Walk(12);
+  const auto [r, trans] = Tensors(m);
+  const auto ours = LegPositions(trans, r.select(2, 0), Legs(r))[0];  // [T, 6, 3]
+  const std::vector<float> joints = ComputeJoints(Skeleton::Smpl22(), m);
+  const int order[6] = {4, 7, 10, 5, 8, 11};  // knee, ankle, foot of the left leg, then the right
+  for (int64_t f = 0; f < 12; ++f) {
+    for (int k = 0; k < 6; ++k) {
+      for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(ours[f][k][c].item<double>(),
+                    joints[static_cast<size_t>((f * kNumJoints + order[k]) * 3 + c)], 1e-4)
+            << "frame " << f << " joint " << order[k];
+    }
+  }
+}
+
+TEST(LegCleanup, RootFeaturesDoNotSeeTheHeading) {
+  const Motion m = Walk(20);
+  const auto [r, trans] = Tensors(m);
+  const auto a = RootFeatures(trans, r.select(2, 0), 30);
+  // The whole motion turned 70 degrees about the vertical and moved: the same features.
+  const double angle = 70 * M_PI / 180;
+  const auto yaw = torch::tensor({std::cos(angle), -std::sin(angle), 0.0, std::sin(angle),
+                                  std::cos(angle), 0.0, 0.0, 0.0, 1.0},
+                                 torch::kFloat32)
+                       .reshape({3, 3});
+  const auto turned_trans =
+      torch::matmul(yaw, trans.unsqueeze(-1)).squeeze(-1) + torch::tensor({5.f, -2.f, 0.f});
+  const auto b = RootFeatures(turned_trans, torch::matmul(yaw, r.select(2, 0)), 30);
+  EXPECT_EQ(a.sizes(), (std::vector<int64_t>{1, 20, kRootFeatures}));
+  EXPECT_LT((a - b).abs().max().item<double>(), 1e-3);
+  // The height is the pelvis's; the speed the walk's (1 m/s along a circle of radius 1).
+  EXPECT_NEAR(a[0][3][0].item<double>(), m.trans[3 * 3 + 2], 1e-6);
+  EXPECT_NEAR(a[0][5].narrow(0, 1, 3).norm().item<double>(), 1.0, 0.05);
+}
+
+TEST(LegCleanup, CorruptionIsBoundedAndDoesWhatItSays) {
+  const Motion m = Walk(60);
+  const auto [r, trans] = Tensors(m);
+  const auto legs = Legs(r);
+  CleanupOptions none;
+  none.degrees = 0, none.toward_share = 0, none.warp_share = 0, none.shrink = 0;
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(1);
+  EXPECT_LT((Corrupt(legs, legs, none, generator) - legs).abs().max().item<double>(), 1e-5);
+  // A still pose: warping its timing or shrinking its swing changes nothing.
+  const auto still = legs.narrow(1, 0, 1).expand_as(legs).contiguous();
+  CleanupOptions reshape = none;
+  reshape.warp_share = 1, reshape.shrink = 1;
+  EXPECT_LT((Corrupt(still, still, reshape, generator) - still).abs().max().item<double>(), 1e-5);
+  // Shrunk, the swing about the window's mean narrows.
+  CleanupOptions shrink = none;
+  shrink.shrink = 1;
+  const auto spread = [](const torch::Tensor& x) {
+    const auto six = SixD(x);
+    return (six - six.mean(1, true)).pow(2).mean().item<double>();
+  };
+  EXPECT_LT(spread(Corrupt(legs, legs, shrink, generator)), spread(legs));
+  CleanupOptions noisy = none;
+  noisy.degrees = 1;
+  const auto angle =
+      LogMap(torch::matmul(legs.transpose(-1, -2), Corrupt(legs, legs, noisy, generator)))
+          .norm(2, -1);
+  // Key noise of spread up to 1 degree and a slow offset up to 3: a few degrees on average.
+  EXPECT_GT(angle.max().item<double>(), 0);
+  EXPECT_LT(angle.mean().item<double>(), 6 * M_PI / 180);
+  EXPECT_LT(angle.max().item<double>(), 25 * M_PI / 180);
+  // The partner drawn in by up to `toward`: never further than the partner.
+  CleanupOptions toward = none;
+  toward.toward_share = 1;
+  const auto partner = legs.flip(1).contiguous();
+  const auto moved = Corrupt(legs, partner, toward, generator);
+  const auto to_partner = LogMap(torch::matmul(legs.transpose(-1, -2), partner)).norm(2, -1);
+  const auto moved_by = LogMap(torch::matmul(legs.transpose(-1, -2), moved)).norm(2, -1);
+  EXPECT_LE((moved_by - 0.4 * to_partner).max().item<double>(), 1e-3);
+  // The height error: offset, drift and wobble within 5 + 7.5 cm + 5 cm per unit of wobble.
+  const auto drift = HeightDrift(64, 60, generator);
+  EXPECT_EQ(drift.sizes(), (std::vector<int64_t>{64, 60}));
+  EXPECT_LT(drift.abs().max().item<double>(), 0.5);
+  EXPECT_GT(drift.abs().max().item<double>(), 0.01);
+}
+
+TEST(LegCleanup, AnUntrainedNetGivesTheMotionBack) {
+  CleanupOptions options;
+  options.width = 16;
+  options.height = true;
+  CleanupNet net(options);
+  const Motion m = Walk(40);
+  auto cleaned = CleanLegs(net, options, m);
+  ASSERT_TRUE(cleaned.ok()) << cleaned.status().message();
+  ASSERT_EQ(cleaned->num_frames(), 40);
+  for (int64_t f = 0; f < 40; ++f) {
+    for (int j = 0; j < kNumJoints; ++j) {
+      const bool leg = j == 1 || j == 2 || j == 4 || j == 5 || j == 7 || j == 8;
+      for (int c = 0; c < 3; ++c) {
+        const size_t i = static_cast<size_t>((f * kNumJoints + j) * 3 + c);
+        if (leg) {
+          EXPECT_NEAR(cleaned->poses[i], m.poses[i], 1e-5);
+        } else {
+          EXPECT_EQ(cleaned->poses[i], m.poses[i]);
+        }
+      }
+    }
+  }
+  EXPECT_EQ(cleaned->trans, m.trans);
+  // Too short to clean: as it was; at another rate: refused, naming both rates.
+  const Motion short_motion = Walk(5);
+  EXPECT_EQ(CleanLegs(net, options, short_motion)->poses, short_motion.poses);
+  Motion slow = m;
+  slow.fps = 20;
+  auto refused = CleanLegs(net, options, slow);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("20"), std::string::npos);
+  EXPECT_NE(refused.status().message().find("trained at 30"), std::string::npos);
+}
+
+TEST(LegCleanup, TheLossIsZeroOnCleanLegsAndFallsWithTraining) {
+  torch::manual_seed(0);
+  CleanupOptions options;
+  options.width = 32;
+  options.dilations = {1, 2};
+  CleanupNet net(options);
+  const Motion m = Walk(60, 4);
+  const auto [r, trans] = Tensors(m);
+  Window w;
+  w.trans = trans, w.given_trans = trans, w.r0 = r.select(2, 0), w.legs = Legs(r);
+  w.noisy = w.legs;
+  auto clean = CleanupLosses(net, w, options);
+  EXPECT_LT(clean["rotation"].item<double>(), 1e-10);
+  EXPECT_LT(clean["position"].item<double>(), 1e-10);
+  // Legs that carry a fixed offset: a few steps on them take most of it away.
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(2);
+  w.noisy = torch::matmul(w.legs, Rodrigues(0.1 * torch::randn({1, 1, 6, 3}, generator)));
+  torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(1e-3));
+  const double before = CleanupLosses(net, w, options)["loss"].item<double>();
+  for (int step = 0; step < 60; ++step) {
+    adam.zero_grad();
+    CleanupLosses(net, w, options)["loss"].backward();
+    adam.step();
+  }
+  const double after = CleanupLosses(net, w, options)["loss"].item<double>();
+  EXPECT_LT(after, 0.2 * before) << before << " -> " << after;
+}
+
+TEST(LegCleanup, OptionsRefuseNonsense) {
+  EXPECT_THROW(CleanupOptions::FromJson({{"width", 0}}), std::invalid_argument);
+  EXPECT_THROW(CleanupOptions::FromJson({{"dilations", {1, 0}}}), std::invalid_argument);
+  EXPECT_THROW(CleanupOptions::FromJson({{"crop", 4}}), std::invalid_argument);
+  EXPECT_THROW(CleanupOptions::FromJson({{"corruption", {{"shrink", 1.5}}}}),
+               std::invalid_argument);
+  const auto round = CleanupOptions::FromJson(
+      {{"height", true}, {"corruption", {{"shrink", 0.25}}}, {"loss", {{"slide", 0.5}}}});
+  EXPECT_EQ(CleanupOptions::FromJson(round.ToJson()).ToJson(), round.ToJson());
+  EXPECT_TRUE(round.height);
+  EXPECT_EQ(round.shrink, 0.25);
+  EXPECT_EQ(round.slide_weight, 0.5);
+}
+
+}  // namespace
+}  // namespace motionpipe::legs
