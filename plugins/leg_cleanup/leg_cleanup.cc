@@ -1,6 +1,7 @@
 #include "leg_cleanup.h"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "motionpipe/math/rotation.h"
@@ -116,6 +117,12 @@ nlohmann::json CleanupOptions::ToJson() const {
         {"warp_share", warp_share}}},
       {"loss",
        {{"rotation", rotation_weight}, {"position", position_weight}, {"slide", slide_weight}}}};
+}
+
+std::string FpsText(double fps) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", fps);
+  return text;
 }
 
 torch::Tensor Rodrigues(const torch::Tensor& v) {
@@ -302,6 +309,103 @@ torch::Tensor HeightDrift(int64_t batch, int64_t frames, at::Generator& generato
   return 0.05 * offset + 0.15 * drift * ramp + 0.05 * wobble_size * wobble;
 }
 
+CleanupDataset::CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context)
+    : options_(options) {
+  const nlohmann::json config =
+      context.config.is_object() ? context.config : nlohmann::json::object();
+  // The held-out split for validation (data.val_split, "val"), else data.split ("train").
+  const std::string split = context.split == "val" ? config.value("val_split", std::string("val"))
+                                                   : config.value("split", std::string("train"));
+  const int64_t limit = config.value("limit", int64_t{0});
+  std::vector<std::string> paths;
+  const std::string given = config.value("triplets", std::string());
+  if (!given.empty()) {
+    paths = TripletFilesIn(given);
+    if (paths.empty())
+      throw std::invalid_argument("leg_cleanup: data.triplets: no triplet files in " + given);
+  }
+  for (const auto& dir : given.empty() ? context.input_dirs : std::vector<std::string>{}) {
+    const std::vector<std::string> found = TripletFilesIn(dir);
+    paths.insert(paths.end(), found.begin(), found.end());
+    if (!found.empty()) break;  // a corpus's result holds every triplet; its tasks, shards
+  }
+  if (paths.empty())
+    throw std::invalid_argument(
+        "leg_cleanup: no triplet files in the inputs (give a corpus stage as input, or "
+        "data.triplets)");
+  int64_t triplets = 0;
+  for (const auto& path : paths) {
+    auto columns = ReadTripletColumns(path, {.positions = false});
+    if (!columns.ok()) throw std::invalid_argument(columns.status().message());
+    const size_t file = files_.size();
+    files_.push_back(std::move(*columns));
+    const TripletColumns& c = files_.back();
+    if (c.source.joints != kNumJoints || c.target.joints != kNumJoints)
+      throw std::invalid_argument(c.origin + ": not an SMPL-22 body");
+    for (int64_t row = 0; row < c.rows; ++row) {
+      if (c.splits[static_cast<size_t>(row)] != split) continue;
+      if (std::abs(c.fps[static_cast<size_t>(row)] - options_.fps) > 1e-6) {
+        throw std::invalid_argument(c.origin + ": triplet " + c.ids[static_cast<size_t>(row)] +
+                                    " at " + FpsText(c.fps[static_cast<size_t>(row)]) +
+                                    " fps; the clean-up trains at " + FpsText(options_.fps));
+      }
+      for (bool source : {true, false}) {
+        if (Frames(file, row, source) >= options_.crop) items_.push_back({file, row, source});
+      }
+      if (limit > 0 && ++triplets >= limit) break;
+    }
+    if (limit > 0 && triplets >= limit) break;
+  }
+  if (items_.empty())
+    throw std::invalid_argument("leg_cleanup: no motions of " + std::to_string(options_.crop) +
+                                " frames or more in split '" + split + "' of the inputs");
+}
+
+plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t seed) {
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(seed);
+  const auto b = static_cast<int64_t>(indices.size());
+  const int64_t t = options_.crop;
+  // Filled as plain arrays (element-wise tensor indexing would cost more than the step's net).
+  std::vector<float> trans_v(static_cast<size_t>(b * t * 3)), r0_v(static_cast<size_t>(b * t * 9));
+  std::vector<float> legs_v(static_cast<size_t>(b * t * 54)), partner_v(legs_v.size());
+  for (int64_t i = 0; i < b; ++i) {
+    const Item& item = items_.at(static_cast<size_t>(indices[static_cast<size_t>(i)]));
+    const int64_t frames = Frames(item.file, item.row, item.source);
+    const int64_t start = torch::randint(0, frames - t + 1, {1}, generator).item<int64_t>();
+    const int64_t partner_frames = Frames(item.file, item.row, !item.source);
+    for (int64_t f = 0; f < t; ++f) {
+      const auto at = static_cast<size_t>(i * t + f);
+      const float* pose = Pose(item.file, item.row, item.source, start + f);
+      Write(&r0_v[at * 9], pose);
+      const float* other =
+          Pose(item.file, item.row, !item.source, std::min(start + f, partner_frames - 1));
+      for (size_t k = 0; k < kLegJoints.size(); ++k) {
+        Write(&legs_v[(at * 6 + k) * 9], pose + 3 * kLegJoints[k]);
+        Write(&partner_v[(at * 6 + k) * 9], other + 3 * kLegJoints[k]);
+      }
+      const float* x = Trans(item.file, item.row, item.source, start + f);
+      for (size_t c = 0; c < 3; ++c) trans_v[at * 3 + c] = x[c];
+    }
+  }
+  const auto trans = torch::from_blob(trans_v.data(), {b, t, 3}).clone();
+  const auto r0 = torch::from_blob(r0_v.data(), {b, t, 3, 3}).clone();
+  const auto legs = torch::from_blob(legs_v.data(), {b, t, 6, 3, 3}).clone();
+  const auto partner = torch::from_blob(partner_v.data(), {b, t, 6, 3, 3});
+  plugin::Batch batch;
+  batch.size = b;
+  batch.tensors["noisy"] = Corrupt(legs, partner, options_, generator);
+  auto given = trans;
+  if (options_.height) {
+    given = trans.clone();
+    given.select(-1, 2).add_(HeightDrift(b, t, generator));
+  }
+  batch.tensors["trans"] = trans;
+  batch.tensors["given_trans"] = given;
+  batch.tensors["r0"] = r0;
+  batch.tensors["legs"] = legs;
+  return batch;
+}
+
 std::map<std::string, torch::Tensor> CleanupLosses(CleanupNet& net, const Window& window,
                                                    const CleanupOptions& options) {
   auto [cleaned, dz] =
@@ -339,8 +443,8 @@ Result<Motion> CleanLegs(CleanupNet& net, const CleanupOptions& options, const M
   const int64_t frames = motion.num_frames();
   if (frames < 8) return motion;
   if (std::abs(motion.fps - options.fps) > 1e-6) {
-    return InvalidArgument("a motion at " + std::to_string(motion.fps) +
-                           " fps: the leg clean-up was trained at " + std::to_string(options.fps));
+    return InvalidArgument("a motion at " + FpsText(motion.fps) +
+                           " fps: the leg clean-up was trained at " + FpsText(options.fps));
   }
   torch::NoGradGuard no_grad;
   std::vector<float> rotations(static_cast<size_t>(frames) * (1 + kLegJoints.size()) * 9);

@@ -22,7 +22,10 @@
 #include <utility>
 #include <vector>
 
+#include "../api/model.hpp"
 #include "motionpipe/base/status.h"
+#include "motionpipe/formats/motionfix.h"
+#include "motionpipe/math/rotation.h"
 #include "motionpipe/motion/motion.h"
 
 namespace motionpipe::legs {
@@ -90,6 +93,9 @@ struct Window {
   torch::Tensor noisy;        // [B, T, 6, 3, 3] corrupted
 };
 
+// A frame rate as people write it ("30", "29.97").
+std::string FpsText(double fps);
+
 // The corruption of clean legs [B, T, 6, 3, 3] (partner: the partner motions' legs on the same
 // frames), drawing from `generator`.
 torch::Tensor Corrupt(const torch::Tensor& legs, const torch::Tensor& partner,
@@ -102,6 +108,52 @@ torch::Tensor HeightDrift(int64_t batch, int64_t frames, at::Generator& generato
 // rescaled to unit spread.
 torch::Tensor SmoothNoise(const std::vector<int64_t>& shape, double sigma_frames,
                           at::Generator& generator);
+
+// Training windows from both sides of a split's triplets (each side's partner: the other side), at
+// least options.crop frames long: random crops, corrupted as CleanupOptions says, drawn from the
+// batch's seed (the same batch for the same indices and seed). data: {split: train, val_split: val,
+// limit: 0 (triplets of the split; 0 = all), triplets: a directory with triplet files instead of
+// the inputs}. std::invalid_argument naming the file for data it cannot use.
+class CleanupDataset : public plugin::Dataset {
+ public:
+  CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context);
+  int64_t size() const override { return static_cast<int64_t>(items_.size()); }
+  // tensors: trans, given_trans [B, crop, 3], r0 [B, crop, 3, 3], legs, noisy [B, crop, 6, 3, 3].
+  plugin::Batch Get(const std::vector<int64_t>& indices, uint64_t seed) override;
+
+ private:
+  struct Item {
+    size_t file = 0;
+    int64_t row = 0;
+    bool source = true;
+  };
+  const TripletColumns::Side& SideOf(size_t file, bool source) const {
+    return source ? files_[file].source : files_[file].target;
+  }
+  int64_t Frames(size_t file, int64_t row, bool source) const {
+    const auto& o = SideOf(file, source).offsets;
+    return o[static_cast<size_t>(row) + 1] - o[static_cast<size_t>(row)];
+  }
+  const float* Pose(size_t file, int64_t row, bool source, int64_t frame) const {
+    const auto& s = SideOf(file, source);
+    return s.poses + (s.offsets[static_cast<size_t>(row)] + frame) * s.joints * 3;
+  }
+  const float* Trans(size_t file, int64_t row, bool source, int64_t frame) const {
+    const auto& s = SideOf(file, source);
+    return s.trans + (s.offsets[static_cast<size_t>(row)] + frame) * 3;
+  }
+  // The rotation matrix (row-major) of an axis-angle triple.
+  static void Write(float* to, const float* axis_angle) {
+    const Mat3 r = AxisAngleToMatrix({axis_angle[0], axis_angle[1], axis_angle[2]});
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) to[i * 3 + j] = static_cast<float>(r[i][j]);
+    }
+  }
+
+  CleanupOptions options_;
+  std::vector<TripletColumns> files_;
+  std::vector<Item> items_;
+};
 
 // Loss terms of one window: "rotation", "position", "slide" and their weighted sum "loss".
 std::map<std::string, torch::Tensor> CleanupLosses(CleanupNet& net, const Window& window,

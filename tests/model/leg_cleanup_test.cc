@@ -7,7 +7,9 @@
 #include <torch/torch.h>
 
 #include <cmath>
+#include <filesystem>
 
+#include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
 
 namespace motionpipe::legs {
@@ -203,6 +205,89 @@ TEST(LegCleanup, TheLossIsZeroOnCleanLegsAndFallsWithTraining) {
   }
   const double after = CleanupLosses(net, w, options)["loss"].item<double>();
   EXPECT_LT(after, 0.2 * before) << before << " -> " << after;
+}
+
+// A triplets directory: `rows` triplets of 60-frame walks in `split` (the last of them 20 frames
+// long, too short for a 40-frame crop) at `fps`.
+std::string WriteTriplets(const std::string& name, int rows, const std::string& split,
+                          double fps = 30) {
+  const std::string dir = ::testing::TempDir() + "/" + name;
+  std::filesystem::create_directories(dir + "/motionfix");
+  std::vector<Triplet> triplets;
+  for (int i = 0; i < rows; ++i) {
+    Triplet t;
+    t.id = name + std::to_string(i);
+    t.text = "walk faster";
+    t.split = i == 0 ? "val" : split;
+    const int64_t frames = i == rows - 1 ? 20 : 60;
+    t.source = Walk(frames, static_cast<uint64_t>(2 * i));
+    t.target = Walk(frames, static_cast<uint64_t>(2 * i + 1));
+    t.source.fps = t.target.fps = fps;
+    triplets.push_back(std::move(t));
+  }
+  EXPECT_TRUE(motionpipe::WriteTriplets(dir + "/motionfix/triplets-00000.npz", triplets).ok());
+  return dir;
+}
+
+TEST(LegCleanup, DatasetCropsBothSidesAndRefusesWhatItCannotUse) {
+  CleanupOptions options;
+  options.crop = 40;
+  options.height = true;
+  plugin::DataContext context;
+  context.input_dirs = {WriteTriplets("cleanup_data", 4, "train")};
+  // Triplets 1 and 2 of the train split, both sides; the 20-frame triplet 3 is too short.
+  CleanupDataset train(options, context);
+  EXPECT_EQ(train.size(), 4);
+  context.split = "val";
+  EXPECT_EQ(CleanupDataset(options, context).size(), 2);
+  context.split = "train";
+  const auto a = train.Get({0, 3, 1}, 7), b = train.Get({0, 3, 1}, 7), c = train.Get({0, 3, 1}, 8);
+  EXPECT_EQ(a.size, 3);
+  EXPECT_EQ(a.tensors.at("legs").sizes(), (std::vector<int64_t>{3, 40, 6, 3, 3}));
+  EXPECT_EQ(a.tensors.at("r0").sizes(), (std::vector<int64_t>{3, 40, 3, 3}));
+  for (const char* name : {"trans", "given_trans", "r0", "legs", "noisy"}) {
+    EXPECT_TRUE(torch::equal(a.tensors.at(name), b.tensors.at(name))) << name;
+  }
+  EXPECT_FALSE(torch::equal(a.tensors.at("noisy"), c.tensors.at("noisy")));
+  // Only the height of the pelvis is drifted; the crop is a motion's own frames (rotations).
+  const auto drift = a.tensors.at("given_trans") - a.tensors.at("trans");
+  EXPECT_EQ(drift.narrow(-1, 0, 2).abs().max().item<double>(), 0);
+  EXPECT_GT(drift.select(-1, 2).abs().max().item<double>(), 0);
+  const auto legs = a.tensors.at("legs");
+  EXPECT_LT(
+      (torch::matmul(legs, legs.transpose(-1, -2)) - torch::eye(3)).abs().max().item<double>(),
+      1e-5);
+  // data.triplets instead of the inputs; then nothing, another rate, only short motions: refused
+  // with the directory, file or triplet named.
+  plugin::DataContext given;
+  given.config = {{"triplets", context.input_dirs[0]}};
+  EXPECT_EQ(CleanupDataset(options, given).size(), 4);
+  given.config = {{"triplets", ::testing::TempDir() + "/nowhere"}};
+  try {
+    CleanupDataset refused(options, given);
+    ADD_FAILURE() << "a directory without triplets was read";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("nowhere"), std::string::npos) << e.what();
+  }
+  plugin::DataContext slow;
+  slow.input_dirs = {WriteTriplets("cleanup_20fps", 3, "train", 20)};
+  try {
+    CleanupDataset refused(options, slow);
+    ADD_FAILURE() << "20-fps triplets were read";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("triplets-00000.npz: triplet cleanup_20fps1 at 20 fps"),
+              std::string::npos)
+        << e.what();
+  }
+  options.crop = 80;
+  try {
+    CleanupDataset refused(options, context);
+    ADD_FAILURE() << "motions shorter than the crop were read";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("no motions of 80 frames or more in split 'train'"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(LegCleanup, OptionsRefuseNonsense) {
