@@ -25,7 +25,7 @@ MODEL = ["vars.batch=4", "vars.warmup=0", "vars.latent=32", "vars.layers_temos=1
 EDITOR = ["vars.dim=32", "vars.cond_layers=1", "vars.layers_edit=1", "vars.heads_edit=2", "vars.ff_edit=32", "vars.edit_limit=3",
           "vars.edit_steps=2", "vars.steps_edit=2"]
 TINY_DEMO = MODEL + EDITOR + ["vars.steps_tmr=2", "vars.steps_sinc=2", "vars.gen_limit=4", "vars.synth_pairs=50",
-                              "stages.showcase.params.panel_size=64"]
+                              "stages.showcase.params.panel_size=64", "vars.steps_cleanup=2", "vars.width_cleanup=16"]
 
 
 class RealDataTest(EngineTest):
@@ -90,7 +90,8 @@ class RealDataTest(EngineTest):
         self.assertEqual([r[0] for r in table1[2:]], ["source as the edit (copy)", "target as the edit (upper bound)",
                                                       "another triplet's target as the edit (chance)",
                                                       "untrained MDT (initial weights)", "SimMotionEdit (MDT)",
-                                                      "MDT + foot lock (post-process)"])
+                                                      "MDT + foot lock (post-process)",
+                                                      "MDT + leg clean-up + foot lock (post-processes)"])
         sinc = tables["Composition: generated motions against the ground truth"]
         self.assertEqual([r[0] for r in sinc[2:]], ["ground truth", "shuffled ground truth (same length class)", "untrained SINC (initial weights)",
                                                     "SINC + synthetic pairs (GPT labels)", "SINC + foot lock (post-process)"])
