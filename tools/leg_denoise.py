@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""A learned clean-up of the legs (issue 15, a measurement of a lever before it is built into a stage).
+"""A learned clean-up of the legs (issue 15, the measurement of the lever that plugins/leg_cleanup now runs).
 
 The demo's edits skate on 0.55 of contact frames (targets 0.006) because the network's leg rotations
 and pelvis path do not agree to within the 0.2 degrees per 10-fps frame that the skate measure asks
@@ -25,7 +25,9 @@ than 0.15 m/s, the evaluation's figures).
 array as it was, so eval_edit / eval_generate score it as a row of its own (an experiment config
 names the directory); the pelvis's path and orientation and the upper body stay the model's (its
 height too, without --height). A measurement: the corpus's prior, it makes real mocap slide more
-(docs/EXPERIMENTS.md "A learned clean-up of the legs").
+(docs/EXPERIMENTS.md "A learned clean-up of the legs"). The pipeline's own: the leg_cleanup model
+plugin (the same net in LibTorch, trained by the train stage) and the clean_legs stage kind
+(configs/experiments/issue15_clean_legs.yaml; the demo's row).
 """
 import argparse
 import glob
