@@ -272,9 +272,10 @@ torch::Tensor Corrupt(const torch::Tensor& legs, const torch::Tensor& partner,
   // The swing shrunk toward its mean over the window, to 0.2-1 of its range.
   const auto pick = Uniform({b}, generator) < options.shrink;
   const auto scale = 0.2 + 0.8 * Uniform({b}, generator);
-  if (warp.any().item<bool>() || pick.any().item<bool>()) {
+  const bool any_warp = warp.any().item<bool>(), any_pick = pick.any().item<bool>();
+  if (any_warp || any_pick) {
     auto six = SixD(noisy);  // [B, T, J, 6]
-    if (warp.any().item<bool>()) {
+    if (any_warp) {
       const double centre = static_cast<double>(t - 1) / 2;
       const auto src =
           ((frame.unsqueeze(0) - centre) * rate.unsqueeze(1) + centre).clamp(0, t - 1);  // [B, T]
@@ -287,7 +288,7 @@ torch::Tensor Corrupt(const torch::Tensor& legs, const torch::Tensor& partner,
       const auto warped = gather(lo_w) * (1 - ww) + gather(hi_w) * ww;
       six = torch::where(warp.reshape({b, 1, 1, 1}), warped, six);
     }
-    if (pick.any().item<bool>()) {
+    if (any_pick) {
       const auto mean = six.mean(1, true);
       const auto shrunk = mean + scale.reshape({b, 1, 1, 1}) * (six - mean);
       six = torch::where(pick.reshape({b, 1, 1, 1}), shrunk, six);
@@ -367,7 +368,8 @@ plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t 
   const int64_t t = options_.crop;
   // Filled as plain arrays (element-wise tensor indexing would cost more than the step's net).
   std::vector<float> trans_v(static_cast<size_t>(b * t * 3)), r0_v(static_cast<size_t>(b * t * 9));
-  std::vector<float> legs_v(static_cast<size_t>(b * t * 54)), partner_v(legs_v.size());
+  const auto legs_n = static_cast<int64_t>(kLegJoints.size());
+  std::vector<float> legs_v(static_cast<size_t>(b * t * legs_n * 9)), partner_v(legs_v.size());
   for (int64_t i = 0; i < b; ++i) {
     const Item& item = items_.at(static_cast<size_t>(indices[static_cast<size_t>(i)]));
     const int64_t frames = Frames(item.file, item.row, item.source);
@@ -380,8 +382,8 @@ plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t 
       const float* other =
           Pose(item.file, item.row, !item.source, std::min(start + f, partner_frames - 1));
       for (size_t k = 0; k < kLegJoints.size(); ++k) {
-        Write(&legs_v[(at * 6 + k) * 9], pose + 3 * kLegJoints[k]);
-        Write(&partner_v[(at * 6 + k) * 9], other + 3 * kLegJoints[k]);
+        Write(&legs_v[(at * kLegJoints.size() + k) * 9], pose + 3 * kLegJoints[k]);
+        Write(&partner_v[(at * kLegJoints.size() + k) * 9], other + 3 * kLegJoints[k]);
       }
       const float* x = Trans(item.file, item.row, item.source, start + f);
       for (size_t c = 0; c < 3; ++c) trans_v[at * 3 + c] = x[c];
@@ -389,8 +391,8 @@ plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t 
   }
   const auto trans = torch::from_blob(trans_v.data(), {b, t, 3}).clone();
   const auto r0 = torch::from_blob(r0_v.data(), {b, t, 3, 3}).clone();
-  const auto legs = torch::from_blob(legs_v.data(), {b, t, 6, 3, 3}).clone();
-  const auto partner = torch::from_blob(partner_v.data(), {b, t, 6, 3, 3});
+  const auto legs = torch::from_blob(legs_v.data(), {b, t, legs_n, 3, 3}).clone();
+  const auto partner = torch::from_blob(partner_v.data(), {b, t, legs_n, 3, 3});
   plugin::Batch batch;
   batch.size = b;
   batch.tensors["noisy"] = Corrupt(legs, partner, options_, generator);
@@ -449,17 +451,20 @@ Result<Motion> CleanLegs(CleanupNet& net, const CleanupOptions& options, const M
   torch::NoGradGuard no_grad;
   std::vector<float> rotations(static_cast<size_t>(frames) * (1 + kLegJoints.size()) * 9);
   size_t at = 0;
-  for (int64_t f = 0; f < frames; ++f) {
-    for (int joint : {0, 1, 2, 4, 5, 7, 8}) {
-      const Mat3 r = motion.LocalRotation(f, joint);
-      for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) rotations[at++] = static_cast<float>(r[i][j]);
-      }
+  const auto put = [&](const Mat3& r) {
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) rotations[at++] = static_cast<float>(r[i][j]);
     }
+  };
+  for (int64_t f = 0; f < frames; ++f) {
+    put(motion.LocalRotation(f, 0));  // the global orientation, then the legs
+    for (int joint : kLegJoints) put(motion.LocalRotation(f, joint));
   }
-  const auto all = torch::from_blob(rotations.data(), {1, frames, 7, 3, 3}, torch::kFloat32);
+  const auto all = torch::from_blob(rotations.data(),
+                                    {1, frames, 1 + static_cast<int64_t>(kLegJoints.size()), 3, 3},
+                                    torch::kFloat32);
   const auto r0 = all.select(2, 0);
-  const auto legs = all.narrow(2, 1, 6);
+  const auto legs = all.narrow(2, 1, static_cast<int64_t>(kLegJoints.size()));
   const auto trans =
       torch::from_blob(const_cast<float*>(motion.trans.data()), {1, frames, 3}, torch::kFloat32);
   auto [cleaned, dz] = net->forward(RootFeatures(trans, r0, options.fps), legs);

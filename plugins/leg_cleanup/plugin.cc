@@ -20,8 +20,6 @@
 #include "leg_cleanup.h"
 #include "motionpipe/base/file.h"
 #include "motionpipe/base/job_layout.h"
-#include "motionpipe/formats/motionfix.h"
-#include "motionpipe/math/rotation.h"
 
 namespace motionpipe::legs {
 
