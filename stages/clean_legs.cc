@@ -40,11 +40,8 @@ class CleanLegsStage : public StageExecutor {
   TaskReport Run(TaskContext& ctx) override {
     if (!plugins_) return TaskReport::Error("clean_legs: this worker has no plugin host");
     std::string checkpoint;
-    auto generator = OpenModel(ctx, *plugins_, json::object(), &checkpoint);
+    auto generator = OpenModel(ctx, *plugins_, json::object(), &checkpoint, "leg_cleanup");
     if (!generator.ok()) return TaskReport::BadInput("clean_legs: " + generator.status().message());
-    if ((*generator)->Name() != "leg_cleanup")
-      return TaskReport::BadInput("clean_legs: " + checkpoint + " is a " + (*generator)->Name() +
-                                  " checkpoint, not a leg_cleanup one");
     PostProcess post;
     post.kind = "clean_legs";
     post.label = "leg clean-up";

@@ -110,9 +110,16 @@ std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {
 }
 
 Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins,
-                               const json& options, std::string* checkpoint) {
+                               const json& options, std::string* checkpoint,
+                               const std::string& model) {
   *checkpoint = FindCheckpoint(ctx, ctx.params.value("model", std::string()));
   if (checkpoint->empty()) return NotFound("no input holds a checkpoint (a train stage's model/)");
+  if (!model.empty()) {
+    MP_ASSIGN_OR_RETURN(const std::string name, worker::CheckpointModelName(*checkpoint));
+    if (name != model)
+      return InvalidArgument(*checkpoint + " is a " + name + " checkpoint, not a " + model +
+                             " one");
+  }
   return LoadGenerator(plugins, *checkpoint, options);
 }
 

@@ -31,9 +31,11 @@ std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string&
 // the latest training job.
 std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage);
 
-// The generator of the checkpoint named by params.model (see FindCheckpoint), with `options`.
+// The generator of the checkpoint named by params.model (see FindCheckpoint), with `options`. With
+// `model` given, a checkpoint of another model is refused by name before its weights are loaded.
 Result<GeneratorPtr> OpenModel(const TaskContext& ctx, const PluginHost& plugins,
-                               const json& options, std::string* checkpoint);
+                               const json& options, std::string* checkpoint,
+                               const std::string& model = "");
 
 // The spans table of a `singles` stage: `stage` (an input's name or a path pattern, as StageDirs),
 // or the first input that has one.

@@ -19,8 +19,7 @@ Result<std::string> ResolveCheckpoint(const std::string& path) {
                   ": not a checkpoint (no model.json in it, in model/ or in task-00000/model/)");
 }
 
-Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string& path,
-                                   const nlohmann::json& options) {
+Result<std::string> CheckpointModelName(const std::string& path) {
   MP_ASSIGN_OR_RETURN(const std::string dir, ResolveCheckpoint(path));
   MP_ASSIGN_OR_RETURN(const std::string text, ReadFile(layout::ModelConfigFile(dir)));
   nlohmann::json meta;
@@ -29,8 +28,15 @@ Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string&
   } catch (const std::exception& e) {
     return DataLoss(layout::ModelConfigFile(dir) + ": " + e.what());
   }
-  const std::string name = meta.value("name", std::string());
+  const std::string name = meta.is_object() ? meta.value("name", std::string()) : std::string();
   if (name.empty()) return DataLoss(layout::ModelConfigFile(dir) + ": no model name");
+  return name;
+}
+
+Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string& path,
+                                   const nlohmann::json& options) {
+  MP_ASSIGN_OR_RETURN(const std::string dir, ResolveCheckpoint(path));
+  MP_ASSIGN_OR_RETURN(const std::string name, CheckpointModelName(dir));
   const mp_object_factory* factory = plugins.FindFactory("generator", name);
   if (!factory)
     return NotFound(dir + ": model '" + name +

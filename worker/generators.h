@@ -20,6 +20,10 @@ using GeneratorPtr = std::unique_ptr<plugin::Generator, std::function<void(plugi
 // (…/sinc, whose rank-0 task holds it).
 Result<std::string> ResolveCheckpoint(const std::string& path);
 
+// The model a checkpoint holds: the name its model.json gives (the plugin whose factory loads it),
+// read without loading the weights. DataLoss naming the file when it has none.
+Result<std::string> CheckpointModelName(const std::string& path);
+
 // Loads the generator of a checkpoint; `options` are merged into the factory's configuration
 // (e.g. {"compositing": true}).
 Result<GeneratorPtr> LoadGenerator(const PluginHost& plugins, const std::string& path,

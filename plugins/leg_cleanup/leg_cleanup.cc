@@ -147,19 +147,6 @@ torch::Tensor LogMap(const torch::Tensor& r) {
   return axis * (angle / (2 * torch::sin(angle).clamp_min(1e-6))).unsqueeze(-1);
 }
 
-torch::Tensor SixD(const torch::Tensor& r) {
-  return torch::cat({r.index({Ellipsis, Slice(), 0}), r.index({Ellipsis, Slice(), 1})}, -1);
-}
-
-torch::Tensor FromSixD(const torch::Tensor& x) {
-  const auto a = x.index({Ellipsis, Slice(0, 3)});
-  auto b = x.index({Ellipsis, Slice(3, 6)});
-  const auto e1 = a / a.norm(2, -1, true).clamp_min(1e-8);
-  b = b - (e1 * b).sum(-1, true) * e1;
-  const auto e2 = b / b.norm(2, -1, true).clamp_min(1e-8);
-  return torch::stack({e1, e2, torch::cross(e1, e2, -1)}, -1);
-}
-
 torch::Tensor RootFeatures(const torch::Tensor& trans, const torch::Tensor& r0, double fps) {
   const auto h = Heading(r0);
   const auto unturn = YawMatrix(-h);
@@ -180,7 +167,8 @@ torch::Tensor LegPositions(const torch::Tensor& trans, const torch::Tensor& r0,
   const auto& offsets = RestOffsets();
   const auto offset = [&](int joint) { return offsets[joint].to(trans.dtype()).unsqueeze(-1); };
   std::vector<torch::Tensor> out;
-  for (const auto& chain : kLegChains) {
+  static const std::array<std::array<int, 4>, 2> chains = nn::LegChains(Skeleton::Smpl22());
+  for (const auto& chain : chains) {
     auto world = r0;
     auto position = trans + torch::matmul(r0, offset(chain[0])).squeeze(-1);
     for (size_t k = 1; k < chain.size(); ++k) {

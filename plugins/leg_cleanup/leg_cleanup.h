@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "../api/model.hpp"
+#include "../common/kinematics.h"
 #include "motionpipe/base/status.h"
 #include "motionpipe/formats/motionfix.h"
 #include "motionpipe/math/rotation.h"
@@ -32,8 +33,6 @@ namespace motionpipe::legs {
 
 // The joints whose rotations move the feet (SMPL-22): hips, knees, ankles, left before right.
 constexpr std::array<int, 6> kLegJoints = {1, 2, 4, 5, 7, 8};
-// The chains hip, knee, ankle, foot of the left and the right leg.
-constexpr std::array<std::array<int, 4>, 2> kLegChains = {{{1, 4, 7, 10}, {2, 5, 8, 11}}};
 constexpr int64_t kRootFeatures = 11;  // RootFeatures' width
 constexpr int64_t kLegPositions = 6;   // knee, ankle, foot of each leg (LegPositions)
 
@@ -58,9 +57,14 @@ struct CleanupOptions {
 // Rotation matrices [..., 3, 3] of rotation vectors [..., 3], and back (angles below pi).
 torch::Tensor Rodrigues(const torch::Tensor& v);
 torch::Tensor LogMap(const torch::Tensor& r);
-// The first two columns [..., 6] of rotation matrices (Zhou et al. 2019), and back by Gram-Schmidt.
-torch::Tensor SixD(const torch::Tensor& r);
-torch::Tensor FromSixD(const torch::Tensor& x);
+// The first two columns [..., 6] of rotation matrices (Zhou et al. 2019; the Python tool's
+// convention, which the net's inputs keep), and back by Gram-Schmidt (plugins/common/kinematics.h).
+inline torch::Tensor SixD(const torch::Tensor& r) {
+  return nn::MatrixToSixD(r, nn::SixDAxes::kColumns);
+}
+inline torch::Tensor FromSixD(const torch::Tensor& x) {
+  return nn::SixDToMatrix(x, nn::SixDAxes::kColumns);
+}
 
 // Per frame [B, T, 11], heading-free: the pelvis height, its velocity in the heading frame (m/s),
 // the heading's angular speed (rad/s) and the pelvis orientation without heading (6D). trans

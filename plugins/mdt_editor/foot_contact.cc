@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "../common/kinematics.h"
 #include "motionpipe/skeleton/skeleton.h"
 
 namespace motionpipe::mdt {
@@ -19,14 +20,9 @@ torch::Tensor MatVec(const torch::Tensor& a, const torch::Tensor& v) {
   return (a * v.unsqueeze(-2)).sum(-1);
 }
 
-// The 6D representation's matrix (its first two rows, Gram-Schmidt; core's Rot6dToMatrix).
+// The 6D representation's matrix (its first two rows, core's Rot6dToMatrix).
 torch::Tensor Rot6dToMatrix(const torch::Tensor& six) {
-  const auto a = six.narrow(-1, 0, 3), b = six.narrow(-1, 3, 3);
-  const auto r0 = a / a.norm(2, -1, true).clamp_min(1e-8);
-  const auto orthogonal = b - (r0 * b).sum(-1, true) * r0;
-  const auto r1 = orthogonal / orthogonal.norm(2, -1, true).clamp_min(1e-8);
-  const auto r2 = torch::cross(r0, r1, -1);
-  return torch::stack({r0, r1, r2}, -2);
+  return nn::SixDToMatrix(six, nn::SixDAxes::kRows);
 }
 
 // The local rotation of joint j (1..21) from columns 15:141.
@@ -44,7 +40,8 @@ torch::Tensor FootPositions(const torch::Tensor& features, const torch::Tensor& 
   };
   std::vector<torch::Tensor> feet;
   // hip, knee, ankle, foot of each leg (the parents chain).
-  for (const std::array<int, 4>& leg : {std::array<int, 4>{1, 4, 7, 10}, {2, 5, 8, 11}}) {
+  static const std::array<std::array<int, 4>, 2> legs = nn::LegChains(skeleton);
+  for (const std::array<int, 4>& leg : legs) {
     auto global = pelvis;
     auto position = MatVec(global, offset(leg[0]));
     for (size_t k = 1; k < leg.size(); ++k) {

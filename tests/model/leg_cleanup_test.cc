@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -62,6 +63,54 @@ TEST(LegCleanup, RotationsRoundTrip) {
   EXPECT_LT((FromSixD(SixD(r)) - r).abs().max().item<double>(), 1e-5);
   // The identity: no angle, no NaN.
   EXPECT_LT((Rodrigues(torch::zeros({1, 3})) - torch::eye(3)).abs().max().item<double>(), 1e-7);
+}
+
+// The shared 6D helpers (plugins/common/kinematics.h): by rows they are core's Rot6d (the MotionFix
+// features the editors' foot losses read), by columns the transposed matrix's (the clean-up's
+// inputs); the leg chains are the skeleton's, hip to foot, each joint the child of the one before.
+TEST(LegCleanup, SharedSixDAndLegChainsFollowTheCore) {
+  auto generator = at::make_generator<at::CPUGeneratorImpl>(5);
+  const auto r = Rodrigues(torch::randn({20, 3}, generator).to(torch::kFloat64));
+  const auto rows = nn::MatrixToSixD(r, nn::SixDAxes::kRows);
+  const auto columns = nn::MatrixToSixD(r, nn::SixDAxes::kColumns);
+  EXPECT_LT((columns - nn::MatrixToSixD(r.transpose(-1, -2), nn::SixDAxes::kRows))
+                .abs()
+                .max()
+                .item<double>(),
+            1e-12);
+  // Not orthonormal: the Gram-Schmidt has work to do.
+  const auto six = rows + 0.3 * torch::randn({20, 6}, generator).to(torch::kFloat64);
+  const auto by_rows = nn::SixDToMatrix(six, nn::SixDAxes::kRows);
+  const auto by_columns = nn::SixDToMatrix(six, nn::SixDAxes::kColumns);
+  EXPECT_LT((by_columns - by_rows.transpose(-1, -2)).abs().max().item<double>(), 1e-12);
+  for (int64_t i = 0; i < 20; ++i) {
+    Mat3 m;
+    Rot6d given;
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b) m[a][b] = r[i][a][b].item<double>();
+    }
+    for (int k = 0; k < 6; ++k) given[static_cast<size_t>(k)] = six[i][k].item<double>();
+    const Rot6d core_six = MatrixToRot6d(m);
+    const Mat3 core_matrix = Rot6dToMatrix(given);
+    for (int k = 0; k < 6; ++k)
+      EXPECT_NEAR(rows[i][k].item<double>(), core_six[static_cast<size_t>(k)], 1e-12);
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b)
+        EXPECT_NEAR(by_rows[i][a][b].item<double>(), core_matrix[a][b], 1e-9);
+    }
+  }
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  const auto chains = nn::LegChains(skeleton);
+  EXPECT_EQ(chains[0], (std::array<int, 4>{1, 4, 7, 10}));
+  EXPECT_EQ(chains[1], (std::array<int, 4>{2, 5, 8, 11}));
+  for (const auto& chain : chains) {
+    EXPECT_EQ(skeleton.parents()[static_cast<size_t>(chain[0])], 0);
+    for (size_t k = 1; k < chain.size(); ++k)
+      EXPECT_EQ(skeleton.parents()[static_cast<size_t>(chain[k])], chain[k - 1]);
+    // The clean-up's joints are each chain's hip, knee and ankle.
+    for (size_t k = 0; k < 3; ++k)
+      EXPECT_NE(std::find(kLegJoints.begin(), kLegJoints.end(), chain[k]), kLegJoints.end());
+  }
 }
 
 TEST(LegCleanup, ForwardKinematicsAgreeWithTheCore) {

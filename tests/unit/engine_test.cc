@@ -8,8 +8,10 @@
 
 #include "cron.h"
 #include "executor.h"
+#include "generators.h"
 #include "journal.h"
 #include "motionpipe/base/file.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/net/protocol.h"
 #include "motionpipe/net/security.h"
 #include "pipeline.h"
@@ -979,6 +981,36 @@ TEST(PluginHost, LoadsTheSamplePluginAndRefusesBadOnes) {
   const TaskReport refused = RunTask(*checksum, bad);
   EXPECT_EQ(refused.outcome, Outcome::kBadInput);
   EXPECT_NE(refused.message.find("/no/such/dir is missing"), std::string::npos);
+}
+
+// A checkpoint's model is read from its model.json without loading weights (clean_legs refuses an
+// editor's checkpoint before an MDT's weights are read), from any of the directories a user may
+// name; a file that cannot say is named.
+TEST(Generators, CheckpointModelNameIsReadWithoutLoading) {
+  namespace fs = std::filesystem;
+  const std::string stage = ::testing::TempDir() + "/checkpoint_name/cleanup";
+  const std::string model = layout::CheckpointDir(layout::TaskDir(stage));
+  fs::create_directories(model);
+  std::ofstream(layout::ModelConfigFile(model)) << R"({"name": "leg_cleanup", "width": 8})";
+  for (const std::string& path : {stage, layout::TaskDir(stage), model}) {
+    const auto name = worker::CheckpointModelName(path);
+    ASSERT_TRUE(name.ok()) << path << ": " << name.status().message();
+    EXPECT_EQ(*name, "leg_cleanup");
+  }
+  const auto expect_refused = [&](const std::string& text, const std::string& why) {
+    std::ofstream(layout::ModelConfigFile(model)) << text;
+    const auto name = worker::CheckpointModelName(stage);
+    ASSERT_FALSE(name.ok()) << text;
+    EXPECT_NE(name.status().message().find(layout::ModelConfigFile(model)), std::string::npos)
+        << name.status().message();
+    EXPECT_NE(name.status().message().find(why), std::string::npos) << name.status().message();
+  };
+  expect_refused(R"({"width": 8})", "no model name");
+  expect_refused(R"(["leg_cleanup"])", "no model name");
+  expect_refused("{\"name\": ", "parse error");
+  const auto missing = worker::CheckpointModelName(stage + "/no_such");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("no such checkpoint directory"), std::string::npos);
 }
 
 // A stage kind is one unit: the executor a worker runs also plans the stage in the coordinator, so
