@@ -1,9 +1,13 @@
 #include "leg_cleanup.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <stdexcept>
+#include <tuple>
 
+#include "motionpipe/formats/clip.h"
 #include "motionpipe/math/rotation.h"
 #include "motionpipe/motion/plausibility.h"
 #include "motionpipe/skeleton/skeleton.h"
@@ -302,9 +306,21 @@ CleanupDataset::CleanupDataset(const CleanupOptions& options, const plugin::Data
     : options_(options) {
   const nlohmann::json config =
       context.config.is_object() ? context.config : nlohmann::json::object();
-  // The held-out split for validation (data.val_split, "val"), else data.split ("train").
-  const std::string split = context.split == "val" ? config.value("val_split", std::string("val"))
-                                                   : config.value("split", std::string("train"));
+  const bool validation = context.split == "val";
+  const bool motions = config.contains("motions");
+  // Triplets: data.triplets, else the inputs' unless data.motions names the data alone.
+  if (config.contains("triplets") || !motions) {
+    // The held-out split for validation (data.val_split, "val"), else data.split ("train").
+    AddTriplets(config, context.input_dirs,
+                validation ? config.value("val_split", std::string("val"))
+                           : config.value("split", std::string("train")));
+  }
+  if (motions) AddMotions(config, validation);
+}
+
+void CleanupDataset::AddTriplets(const nlohmann::json& config,
+                                 const std::vector<std::string>& input_dirs,
+                                 const std::string& split) {
   const int64_t limit = config.value("limit", int64_t{0});
   std::vector<std::string> paths;
   const std::string given = config.value("triplets", std::string());
@@ -313,41 +329,130 @@ CleanupDataset::CleanupDataset(const CleanupOptions& options, const plugin::Data
     if (paths.empty())
       throw std::invalid_argument("leg_cleanup: data.triplets: no triplet files in " + given);
   }
-  for (const auto& dir : given.empty() ? context.input_dirs : std::vector<std::string>{}) {
+  for (const auto& dir : given.empty() ? input_dirs : std::vector<std::string>{}) {
     const std::vector<std::string> found = TripletFilesIn(dir);
     paths.insert(paths.end(), found.begin(), found.end());
     if (!found.empty()) break;  // a corpus's result holds every triplet; its tasks, shards
   }
   if (paths.empty())
     throw std::invalid_argument(
-        "leg_cleanup: no triplet files in the inputs (give a corpus stage as input, or "
-        "data.triplets)");
+        "leg_cleanup: no triplet files in the inputs (give a corpus stage as input, "
+        "data.triplets, or data.motions for motion files)");
+  files_.reserve(paths.size());  // the tracks point into the files' columns
   int64_t triplets = 0;
+  const size_t first = tracks_.size();
   for (const auto& path : paths) {
     auto columns = ReadTripletColumns(path, {.positions = false});
     if (!columns.ok()) throw std::invalid_argument(columns.status().message());
-    const size_t file = files_.size();
     files_.push_back(std::move(*columns));
     const TripletColumns& c = files_.back();
     if (c.source.joints != kNumJoints || c.target.joints != kNumJoints)
       throw std::invalid_argument(c.origin + ": not an SMPL-22 body");
     for (int64_t row = 0; row < c.rows; ++row) {
-      if (c.splits[static_cast<size_t>(row)] != split) continue;
-      if (std::abs(c.fps[static_cast<size_t>(row)] - options_.fps) > 1e-6) {
-        throw std::invalid_argument(c.origin + ": triplet " + c.ids[static_cast<size_t>(row)] +
-                                    " at " + FpsText(c.fps[static_cast<size_t>(row)]) +
-                                    " fps; the clean-up trains at " + FpsText(options_.fps));
+      const auto r = static_cast<size_t>(row);
+      if (c.splits[r] != split) continue;
+      if (std::abs(c.fps[r] - options_.fps) > 1e-6) {
+        throw std::invalid_argument(c.origin + ": triplet " + c.ids[r] + " at " +
+                                    FpsText(c.fps[r]) + " fps; the clean-up trains at " +
+                                    FpsText(options_.fps));
       }
+      const auto side = [&](const TripletColumns::Side& s) {
+        const int64_t at = s.offsets[r];
+        return std::make_pair(s.poses + at * kNumJoints * 3, s.trans + at * 3);
+      };
+      const auto frames = [&](const TripletColumns::Side& s) {
+        return s.offsets[r + 1] - s.offsets[r];
+      };
       for (bool source : {true, false}) {
-        if (Frames(file, row, source) >= options_.crop) items_.push_back({file, row, source});
+        const auto& self = source ? c.source : c.target;
+        const auto& other = source ? c.target : c.source;
+        if (frames(self) < options_.crop) continue;
+        const auto [poses, trans] = side(self);
+        tracks_.push_back({poses, trans, frames(self), side(other).first, frames(other)});
       }
       if (limit > 0 && ++triplets >= limit) break;
     }
     if (limit > 0 && triplets >= limit) break;
   }
-  if (items_.empty())
+  if (tracks_.size() == first)
     throw std::invalid_argument("leg_cleanup: no motions of " + std::to_string(options_.crop) +
                                 " frames or more in split '" + split + "' of the inputs");
+}
+
+void CleanupDataset::AddMotions(const nlohmann::json& config, bool validation) {
+  namespace fs = std::filesystem;
+  const nlohmann::json& given = config.at("motions");
+  std::vector<std::string> named;
+  if (given.is_string()) {
+    named.push_back(given.get<std::string>());
+  } else if (given.is_array() && !given.empty() &&
+             std::all_of(given.begin(), given.end(), [](const auto& v) { return v.is_string(); })) {
+    for (const auto& v : given) named.push_back(v.get<std::string>());
+  } else {
+    throw std::invalid_argument(
+        "leg_cleanup: data.motions: a file or directory, or a list of them");
+  }
+  const double fraction = config.value("val_fraction", 0.1);
+  if (!(fraction > 0 && fraction < 1))
+    throw std::invalid_argument("leg_cleanup: data.val_fraction must be in (0, 1), not " +
+                                std::to_string(fraction));
+  std::vector<std::string> files;
+  for (const std::string& path : named) {
+    std::error_code error;
+    if (fs::is_directory(path, error)) {
+      std::vector<std::string> found;
+      for (const auto& entry : fs::directory_iterator(path)) {
+        const std::string ext = entry.path().extension().string();
+        if (entry.is_regular_file() && (ext == ".npz" || ext == ".bvh"))
+          found.push_back(entry.path().string());
+      }
+      if (found.empty())
+        throw std::invalid_argument("leg_cleanup: data.motions: no motion files (.npz, .bvh) in " +
+                                    path);
+      std::sort(found.begin(), found.end());
+      files.insert(files.end(), found.begin(), found.end());
+    } else if (fs::exists(path, error)) {
+      files.push_back(path);
+    } else {
+      throw std::invalid_argument("leg_cleanup: data.motions: no such file or directory: " + path);
+    }
+  }
+  const size_t first = motions_.size();
+  for (const std::string& file : files) {
+    auto clips = LoadMotionFile(file, options_.fps);
+    if (!clips.ok()) throw std::invalid_argument("leg_cleanup: " + clips.status().message());
+    for (Clip& clip : *clips) motions_.push_back(std::move(clip.motion));
+  }
+  // The part of each motion this split reads: the first (1 - fraction) of its frames for
+  // training, the rest for validation.
+  const auto part = [&](size_t i) {
+    const Motion& m = motions_[i];
+    const int64_t frames = m.num_frames();
+    const auto held = static_cast<int64_t>(std::llround(fraction * static_cast<double>(frames)));
+    const int64_t start = validation ? frames - held : 0;
+    const int64_t count = validation ? held : frames - held;
+    return std::make_tuple(m.poses.data() + start * kNumJoints * 3, m.trans.data() + start * 3,
+                           count);
+  };
+  const size_t n = motions_.size() - first;
+  const size_t before = tracks_.size();
+  for (size_t k = 0; k < n; ++k) {
+    const auto [poses, trans, frames] = part(first + k);
+    if (frames < options_.crop) continue;
+    const auto partner = part(first + (k + 1) % n);
+    if (std::get<2>(partner) > 0) {
+      tracks_.push_back({poses, trans, frames, std::get<0>(partner), std::get<2>(partner)});
+    } else {
+      tracks_.push_back({poses, trans, frames, poses, frames});
+    }
+  }
+  if (tracks_.size() == before)
+    throw std::invalid_argument(
+        "leg_cleanup: data.motions: no motion has " + std::to_string(options_.crop) +
+        " frames or more in its " +
+        (validation ? "held-out last " + std::to_string(fraction) + " (data.val_fraction)"
+                    : std::string("training part")) +
+        " at " + FpsText(options_.fps) + " fps (" + std::to_string(files.size()) + " file(s))");
 }
 
 plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t seed) {
@@ -359,21 +464,19 @@ plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t 
   const auto legs_n = static_cast<int64_t>(kLegJoints.size());
   std::vector<float> legs_v(static_cast<size_t>(b * t * legs_n * 9)), partner_v(legs_v.size());
   for (int64_t i = 0; i < b; ++i) {
-    const Item& item = items_.at(static_cast<size_t>(indices[static_cast<size_t>(i)]));
-    const int64_t frames = Frames(item.file, item.row, item.source);
-    const int64_t start = torch::randint(0, frames - t + 1, {1}, generator).item<int64_t>();
-    const int64_t partner_frames = Frames(item.file, item.row, !item.source);
+    const Track& track = tracks_.at(static_cast<size_t>(indices[static_cast<size_t>(i)]));
+    const int64_t start = torch::randint(0, track.frames - t + 1, {1}, generator).item<int64_t>();
     for (int64_t f = 0; f < t; ++f) {
       const auto at = static_cast<size_t>(i * t + f);
-      const float* pose = Pose(item.file, item.row, item.source, start + f);
+      const float* pose = track.poses + (start + f) * kNumJoints * 3;
       Write(&r0_v[at * 9], pose);
       const float* other =
-          Pose(item.file, item.row, !item.source, std::min(start + f, partner_frames - 1));
+          track.partner_poses + std::min(start + f, track.partner_frames - 1) * kNumJoints * 3;
       for (size_t k = 0; k < kLegJoints.size(); ++k) {
         Write(&legs_v[(at * kLegJoints.size() + k) * 9], pose + 3 * kLegJoints[k]);
         Write(&partner_v[(at * kLegJoints.size() + k) * 9], other + 3 * kLegJoints[k]);
       }
-      const float* x = Trans(item.file, item.row, item.source, start + f);
+      const float* x = track.trans + (start + f) * 3;
       for (size_t c = 0; c < 3; ++c) trans_v[at * 3 + c] = x[c];
     }
   }

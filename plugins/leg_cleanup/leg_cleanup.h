@@ -113,39 +113,37 @@ torch::Tensor HeightDrift(int64_t batch, int64_t frames, at::Generator& generato
 torch::Tensor SmoothNoise(const std::vector<int64_t>& shape, double sigma_frames,
                           at::Generator& generator);
 
-// Training windows from both sides of a split's triplets (each side's partner: the other side), at
-// least options.crop frames long: random crops, corrupted as CleanupOptions says, drawn from the
-// batch's seed (the same batch for the same indices and seed). data: {split: train, val_split: val,
-// limit: 0 (triplets of the split; 0 = all), triplets: a directory with triplet files instead of
-// the inputs}. std::invalid_argument naming the file for data it cannot use.
+// Training windows, cropped from either of two sources (or both):
+//  - editing triplets, both sides of each triplet of a split (each side's partner: the other side):
+//    data {split: train, val_split: val, limit: 0 (triplets of the split; 0 = all), triplets: a
+//    directory with triplet files instead of the inputs' (a corpus stage's)};
+//  - motion files, what a user has of real mocap: data {motions: a file or directory, or a list of
+//    them (our clips layout, AMASS-style npz, BVH; LoadMotionFile, resampled to options.fps),
+//    val_fraction: 0.1}. The last val_fraction of each motion's frames is held out for validation;
+//    each motion's partner is the next one's same part (a lone motion's, its own).
+// Windows are at least options.crop frames long: random crops, corrupted as CleanupOptions says,
+// drawn from the batch's seed (the same batch for the same indices and seed).
+// std::invalid_argument naming the file for data it cannot use.
 class CleanupDataset : public plugin::Dataset {
  public:
   CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context);
-  int64_t size() const override { return static_cast<int64_t>(items_.size()); }
+  int64_t size() const override { return static_cast<int64_t>(tracks_.size()); }
   // tensors: trans, given_trans [B, crop, 3], r0 [B, crop, 3, 3], legs, noisy [B, crop, 6, 3, 3].
   plugin::Batch Get(const std::vector<int64_t>& indices, uint64_t seed) override;
 
  private:
-  struct Item {
-    size_t file = 0;
-    int64_t row = 0;
-    bool source = true;
+  // The frames a window may be cropped from ([frames, 22, 3] axis-angle poses, [frames, 3] pelvis)
+  // and the partner whose legs the corruption draws toward on the same frames.
+  struct Track {
+    const float* poses = nullptr;
+    const float* trans = nullptr;
+    int64_t frames = 0;
+    const float* partner_poses = nullptr;
+    int64_t partner_frames = 0;
   };
-  const TripletColumns::Side& SideOf(size_t file, bool source) const {
-    return source ? files_[file].source : files_[file].target;
-  }
-  int64_t Frames(size_t file, int64_t row, bool source) const {
-    const auto& o = SideOf(file, source).offsets;
-    return o[static_cast<size_t>(row) + 1] - o[static_cast<size_t>(row)];
-  }
-  const float* Pose(size_t file, int64_t row, bool source, int64_t frame) const {
-    const auto& s = SideOf(file, source);
-    return s.poses + (s.offsets[static_cast<size_t>(row)] + frame) * s.joints * 3;
-  }
-  const float* Trans(size_t file, int64_t row, bool source, int64_t frame) const {
-    const auto& s = SideOf(file, source);
-    return s.trans + (s.offsets[static_cast<size_t>(row)] + frame) * 3;
-  }
+  void AddTriplets(const nlohmann::json& config, const std::vector<std::string>& input_dirs,
+                   const std::string& split);
+  void AddMotions(const nlohmann::json& config, bool validation);
   // The rotation matrix (row-major) of an axis-angle triple.
   static void Write(float* to, const float* axis_angle) {
     const Mat3 r = AxisAngleToMatrix({axis_angle[0], axis_angle[1], axis_angle[2]});
@@ -156,7 +154,8 @@ class CleanupDataset : public plugin::Dataset {
 
   CleanupOptions options_;
   std::vector<TripletColumns> files_;
-  std::vector<Item> items_;
+  std::vector<Motion> motions_;  // data.motions at options.fps (the tracks point into them)
+  std::vector<Track> tracks_;
 };
 
 // Loss terms of one window: "rotation", "position", "slide" and their weighted sum "loss".

@@ -1,12 +1,14 @@
 // The leg_cleanup plugin: a learned clean-up of generated legs (leg_cleanup.h), trained by the
 // train stage on a corpus stage's editing triplets (both sides of each triplet of the split, at
-// least `crop` frames long) and run by the clean_legs stage on an edit or generate stage's motions.
+// least `crop` frames long) or on motion files (real mocap: clips, AMASS npz, BVH), and run by the
+// clean_legs stage on an edit or generate stage's motions.
 //
 // Factories: ("model", "leg_cleanup") for the train stage, config: CleanupOptions (width,
 // dilations, height, fps, crop, corruption {degrees, shrink, toward_share, toward, warp_share},
 // loss {rotation, position, slide}), data: {split: train, val_split: val, limit: 0 (triplets of
 // the split; 0 = all), triplets: a directory with triplet files (an earlier job's corpus result)
-// instead of the inputs};
+// instead of the inputs, motions: motion files or directories (the last val_fraction, 0.1, of
+// each motion validates); CleanupDataset};
 // ("generator", "leg_cleanup") loads a checkpoint directory: a request's `source` is the motion to
 // clean (texts are not read).
 #include "../api/plugin.hpp"

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
 
@@ -337,6 +338,84 @@ TEST(LegCleanup, DatasetCropsBothSidesAndRefusesWhatItCannotUse) {
               std::string::npos)
         << e.what();
   }
+}
+
+// A motion whose pelvis walks 1 cm a frame along x, so that a window tells which frames it took.
+Motion Ramp(int64_t frames, double fps) {
+  Motion m = Motion::Rest(frames, fps, 0.9);
+  for (int64_t f = 0; f < frames; ++f) m.SetTranslation(f, {0.01 * static_cast<double>(f), 0, 0.9});
+  return m;
+}
+
+// Motion files (real mocap: clips, AMASS npz, BVH) instead of triplets: resampled to the trained
+// rate, the last val_fraction of each motion held out, refusals naming what is wrong.
+TEST(LegCleanup, DatasetReadsMotionFilesAndHoldsOutEachOnesEnd) {
+  const std::string dir = ::testing::TempDir() + "/cleanup_motions";
+  std::filesystem::create_directories(dir);
+  std::vector<Clip> clips(3);
+  clips[0].id = "ramp60";
+  clips[0].motion = Ramp(200, 60);  // 100 frames at 30 fps
+  clips[1].id = "walk";
+  clips[1].motion = Walk(90);
+  clips[2].id = "short";
+  clips[2].motion = Walk(20);
+  ASSERT_TRUE(WriteClips(dir + "/clips.npz", clips).ok());
+  CleanupOptions options;
+  options.crop = 40;
+  plugin::DataContext train;
+  train.config = {{"motions", dir}, {"val_fraction", 0.5}};
+  plugin::DataContext val = train;
+  val.split = "val";
+  // Each of the two long motions gives a track to either part; the short one to neither.
+  CleanupDataset from_dir(options, train), held_out(options, val);
+  EXPECT_EQ(from_dir.size(), 2);
+  EXPECT_EQ(held_out.size(), 2);
+  // The ramp at 30 fps: 2 cm a frame; training windows from its first 50 frames, validation ones
+  // from its last 50.
+  for (uint64_t seed = 0; seed < 8; ++seed) {
+    const auto x_train = from_dir.Get({0}, seed).tensors.at("trans").select(-1, 0);
+    const auto x_val = held_out.Get({0}, seed).tensors.at("trans").select(-1, 0);
+    EXPECT_LT(x_train.max().item<double>(), 0.02 * 50 - 1e-4);
+    EXPECT_GT(x_val.min().item<double>(), 0.02 * 50 - 1e-4);
+    EXPECT_NEAR((x_train[0][1] - x_train[0][0]).item<double>(), 0.02, 1e-5);
+  }
+  // A list of files; together with triplets.
+  plugin::DataContext listed;
+  listed.config = {{"motions", nlohmann::json::array({dir + "/clips.npz"})}, {"val_fraction", 0.5}};
+  EXPECT_EQ(CleanupDataset(options, listed).size(), 2);
+  listed.config["triplets"] = WriteTriplets("cleanup_with_motions", 4, "train");
+  EXPECT_EQ(CleanupDataset(options, listed).size(), 2 + 4);
+  // A CMU BVH as shipped (120 fps, retargeted to SMPL-22): 8.28 s at 30 fps.
+  plugin::DataContext bvh;
+  bvh.config = {{"motions", MOTIONPIPE_DATA_DIR "/mocap/cmu/131_01.bvh"}};
+  CleanupDataset cmu(options, bvh);
+  ASSERT_EQ(cmu.size(), 1);
+  const auto legs = cmu.Get({0}, 3).tensors.at("legs");
+  EXPECT_EQ(legs.sizes(), (std::vector<int64_t>{1, 40, 6, 3, 3}));
+  EXPECT_TRUE(torch::isfinite(legs).all().item<bool>());
+  const auto expect_refused = [&](const nlohmann::json& config, const std::string& why,
+                                  const CleanupOptions& o) {
+    plugin::DataContext context;
+    context.config = config;
+    try {
+      CleanupDataset refused(o, context);
+      ADD_FAILURE() << config.dump() << " was read";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  expect_refused({{"motions", dir + "/nowhere"}}, "no such file or directory: " + dir + "/nowhere",
+                 options);
+  const std::string empty = ::testing::TempDir() + "/cleanup_no_motions";
+  std::filesystem::create_directories(empty);
+  expect_refused({{"motions", empty}}, "no motion files (.npz, .bvh) in " + empty, options);
+  expect_refused({{"motions", 3}}, "data.motions: a file or directory, or a list of them", options);
+  expect_refused({{"motions", dir}, {"val_fraction", 1.5}}, "val_fraction must be in (0, 1)",
+                 options);
+  CleanupOptions long_crop = options;
+  long_crop.crop = 120;
+  expect_refused({{"motions", dir}}, "no motion has 120 frames or more in its training part",
+                 long_crop);
 }
 
 TEST(LegCleanup, OptionsRefuseNonsense) {
