@@ -123,9 +123,9 @@ nlohmann::json CleanupOptions::ToJson() const {
        {{"rotation", rotation_weight}, {"position", position_weight}, {"slide", slide_weight}}}};
 }
 
-std::string FpsText(double fps) {
+std::string NumberText(double value) {
   char text[32];
-  std::snprintf(text, sizeof text, "%g", fps);
+  std::snprintf(text, sizeof text, "%g", value);
   return text;
 }
 
@@ -353,8 +353,8 @@ void CleanupDataset::AddTriplets(const nlohmann::json& config,
       if (c.splits[r] != split) continue;
       if (std::abs(c.fps[r] - options_.fps) > 1e-6) {
         throw std::invalid_argument(c.origin + ": triplet " + c.ids[r] + " at " +
-                                    FpsText(c.fps[r]) + " fps; the clean-up trains at " +
-                                    FpsText(options_.fps));
+                                    NumberText(c.fps[r]) + " fps; the clean-up trains at " +
+                                    NumberText(options_.fps));
       }
       const auto side = [&](const TripletColumns::Side& s) {
         const int64_t at = s.offsets[r];
@@ -395,7 +395,7 @@ void CleanupDataset::AddMotions(const nlohmann::json& config, bool validation) {
   const double fraction = config.value("val_fraction", 0.1);
   if (!(fraction > 0 && fraction < 1))
     throw std::invalid_argument("leg_cleanup: data.val_fraction must be in (0, 1), not " +
-                                std::to_string(fraction));
+                                NumberText(fraction));
   std::vector<std::string> files;
   for (const std::string& path : named) {
     std::error_code error;
@@ -450,9 +450,9 @@ void CleanupDataset::AddMotions(const nlohmann::json& config, bool validation) {
     throw std::invalid_argument(
         "leg_cleanup: data.motions: no motion has " + std::to_string(options_.crop) +
         " frames or more in its " +
-        (validation ? "held-out last " + std::to_string(fraction) + " (data.val_fraction)"
+        (validation ? "held-out last " + NumberText(fraction) + " (data.val_fraction)"
                     : std::string("training part")) +
-        " at " + FpsText(options_.fps) + " fps (" + std::to_string(files.size()) + " file(s))");
+        " at " + NumberText(options_.fps) + " fps (" + std::to_string(files.size()) + " file(s))");
 }
 
 plugin::Batch CleanupDataset::Get(const std::vector<int64_t>& indices, uint64_t seed) {
@@ -536,8 +536,8 @@ Result<Motion> CleanLegs(CleanupNet& net, const CleanupOptions& options, const M
   const int64_t frames = motion.num_frames();
   if (frames < 8) return motion;
   if (std::abs(motion.fps - options.fps) > 1e-6) {
-    return InvalidArgument("a motion at " + FpsText(motion.fps) +
-                           " fps: the leg clean-up was trained at " + FpsText(options.fps));
+    return InvalidArgument("a motion at " + NumberText(motion.fps) +
+                           " fps: the leg clean-up was trained at " + NumberText(options.fps));
   }
   torch::NoGradGuard no_grad;
   std::vector<float> rotations(static_cast<size_t>(frames) * (1 + kLegJoints.size()) * 9);

@@ -97,8 +97,8 @@ struct Window {
   torch::Tensor noisy;        // [B, T, 6, 3, 3] corrupted
 };
 
-// A frame rate as people write it ("30", "29.97").
-std::string FpsText(double fps);
+// A number as people write it ("30", "29.97", "0.25"): frame rates and fractions in messages.
+std::string NumberText(double value);
 
 // The corruption of clean legs [B, T, 6, 3, 3] (partner: the partner motions' legs on the same
 // frames), drawing from `generator`.

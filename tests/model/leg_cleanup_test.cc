@@ -412,6 +412,19 @@ TEST(LegCleanup, DatasetReadsMotionFilesAndHoldsOutEachOnesEnd) {
   expect_refused({{"motions", 3}}, "data.motions: a file or directory, or a list of them", options);
   expect_refused({{"motions", dir}, {"val_fraction", 1.5}}, "val_fraction must be in (0, 1)",
                  options);
+  // The default held-out tenth of 100 and 90 frames holds no 40-frame window.
+  plugin::DataContext short_val;
+  short_val.split = "val";
+  short_val.config = {{"motions", dir}};
+  try {
+    CleanupDataset refused(options, short_val);
+    ADD_FAILURE() << "a held-out part shorter than the crop was read";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("no motion has 40 frames or more in its held-out last 0.1 "
+                                         "(data.val_fraction) at 30 fps (1 file(s))"),
+              std::string::npos)
+        << e.what();
+  }
   CleanupOptions long_crop = options;
   long_crop.crop = 120;
   expect_refused({{"motions", dir}}, "no motion has 120 frames or more in its training part",
