@@ -28,7 +28,9 @@ Result<std::string> CheckpointModelName(const std::string& path) {
   } catch (const std::exception& e) {
     return DataLoss(layout::ModelConfigFile(dir) + ": " + e.what());
   }
-  const std::string name = meta.is_object() ? meta.value("name", std::string()) : std::string();
+  // A name that is not a string is no name (json's value() would throw on it).
+  const bool named = meta.is_object() && meta.contains("name") && meta["name"].is_string();
+  const std::string name = named ? meta["name"].get<std::string>() : std::string();
   if (name.empty()) return DataLoss(layout::ModelConfigFile(dir) + ": no model name");
   return name;
 }

@@ -1007,6 +1007,7 @@ TEST(Generators, CheckpointModelNameIsReadWithoutLoading) {
   };
   expect_refused(R"({"width": 8})", "no model name");
   expect_refused(R"(["leg_cleanup"])", "no model name");
+  expect_refused(R"({"name": 3})", "no model name");
   expect_refused("{\"name\": ", "parse error");
   const auto missing = worker::CheckpointModelName(stage + "/no_such");
   ASSERT_FALSE(missing.ok());
