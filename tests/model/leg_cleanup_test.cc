@@ -257,6 +257,17 @@ TEST(LegCleanup, TheLossIsZeroOnCleanLegsAndFallsWithTraining) {
   EXPECT_LT(after, 0.2 * before) << before << " -> " << after;
 }
 
+// A dataset the options and data context cannot make: refused with a message holding `why`.
+void ExpectRefused(const CleanupOptions& options, const plugin::DataContext& context,
+                   const std::string& why) {
+  try {
+    CleanupDataset refused(options, context);
+    ADD_FAILURE() << context.config.dump() << " was read (" << why << ")";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+  }
+}
+
 // A triplets directory: `rows` triplets of 60-frame walks in `split` (the last of them 20 frames
 // long, too short for a 40-frame crop) at `fps`.
 std::string WriteTriplets(const std::string& name, int rows, const std::string& split,
@@ -313,31 +324,12 @@ TEST(LegCleanup, DatasetCropsBothSidesAndRefusesWhatItCannotUse) {
   given.config = {{"triplets", context.input_dirs[0]}};
   EXPECT_EQ(CleanupDataset(options, given).size(), 4);
   given.config = {{"triplets", ::testing::TempDir() + "/nowhere"}};
-  try {
-    CleanupDataset refused(options, given);
-    ADD_FAILURE() << "a directory without triplets was read";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("nowhere"), std::string::npos) << e.what();
-  }
+  ExpectRefused(options, given, "nowhere");
   plugin::DataContext slow;
   slow.input_dirs = {WriteTriplets("cleanup_20fps", 3, "train", 20)};
-  try {
-    CleanupDataset refused(options, slow);
-    ADD_FAILURE() << "20-fps triplets were read";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("triplets-00000.npz: triplet cleanup_20fps1 at 20 fps"),
-              std::string::npos)
-        << e.what();
-  }
+  ExpectRefused(options, slow, "triplets-00000.npz: triplet cleanup_20fps1 at 20 fps");
   options.crop = 80;
-  try {
-    CleanupDataset refused(options, context);
-    ADD_FAILURE() << "motions shorter than the crop were read";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("no motions of 80 frames or more in split 'train'"),
-              std::string::npos)
-        << e.what();
-  }
+  ExpectRefused(options, context, "no motions of 80 frames or more in split 'train'");
 }
 
 // A motion whose pelvis walks 1 cm a frame along x, so that a window tells which frames it took.
@@ -397,12 +389,7 @@ TEST(LegCleanup, DatasetReadsMotionFilesAndHoldsOutEachOnesEnd) {
                                   const CleanupOptions& o) {
     plugin::DataContext context;
     context.config = config;
-    try {
-      CleanupDataset refused(o, context);
-      ADD_FAILURE() << config.dump() << " was read";
-    } catch (const std::invalid_argument& e) {
-      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
-    }
+    ExpectRefused(o, context, why);
   };
   expect_refused({{"motions", dir + "/nowhere"}}, "no such file or directory: " + dir + "/nowhere",
                  options);
@@ -416,15 +403,9 @@ TEST(LegCleanup, DatasetReadsMotionFilesAndHoldsOutEachOnesEnd) {
   plugin::DataContext short_val;
   short_val.split = "val";
   short_val.config = {{"motions", dir}};
-  try {
-    CleanupDataset refused(options, short_val);
-    ADD_FAILURE() << "a held-out part shorter than the crop was read";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("no motion has 40 frames or more in its held-out last 0.1 "
-                                         "(data.val_fraction) at 30 fps (1 file(s))"),
-              std::string::npos)
-        << e.what();
-  }
+  ExpectRefused(options, short_val,
+                "no motion has 40 frames or more in its held-out last 0.1 (data.val_fraction) at "
+                "30 fps (1 file(s))");
   CleanupOptions long_crop = options;
   long_crop.crop = 120;
   expect_refused({{"motions", dir}}, "no motion has 120 frames or more in its training part",
