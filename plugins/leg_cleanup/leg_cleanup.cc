@@ -302,8 +302,43 @@ torch::Tensor HeightDrift(int64_t batch, int64_t frames, at::Generator& generato
   return 0.05 * offset + 0.15 * drift * ramp + 0.05 * wobble_size * wobble;
 }
 
-CleanupDataset::CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context)
-    : options_(options) {
+Result<std::shared_ptr<const TripletColumns>> CleanupFiles::Triplets(const std::string& path) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto& slot = triplets_[path];
+  if (!slot) {
+    auto columns = ReadTripletColumns(path, {.positions = false});
+    if (!columns.ok()) {
+      triplets_.erase(path);
+      return columns.status();
+    }
+    ++reads_;
+    slot = std::make_shared<const TripletColumns>(std::move(*columns));
+  }
+  return slot;
+}
+
+Result<std::shared_ptr<const std::vector<Motion>>> CleanupFiles::Motions(const std::string& path,
+                                                                         double fps) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto key = std::make_pair(path, fps);
+  auto& slot = motions_[key];
+  if (!slot) {
+    auto clips = LoadMotionFile(path, fps);
+    if (!clips.ok()) {
+      motions_.erase(key);
+      return clips.status();
+    }
+    ++reads_;
+    std::vector<Motion> motions;
+    for (Clip& clip : *clips) motions.push_back(std::move(clip.motion));
+    slot = std::make_shared<const std::vector<Motion>>(std::move(motions));
+  }
+  return slot;
+}
+
+CleanupDataset::CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context,
+                               std::shared_ptr<CleanupFiles> files)
+    : options_(options), files_(files ? std::move(files) : std::make_shared<CleanupFiles>()) {
   const nlohmann::json config =
       context.config.is_object() ? context.config : nlohmann::json::object();
   const bool validation = context.split == "val";
@@ -338,14 +373,12 @@ void CleanupDataset::AddTriplets(const nlohmann::json& config,
     throw std::invalid_argument(
         "leg_cleanup: no triplet files in the inputs (give a corpus stage as input, "
         "data.triplets, or data.motions for motion files)");
-  files_.reserve(paths.size());  // the tracks point into the files' columns
   int64_t triplets = 0;
   const size_t first = tracks_.size();
   for (const auto& path : paths) {
-    auto columns = ReadTripletColumns(path, {.positions = false});
+    auto columns = files_->Triplets(path);  // the tracks point into the shared columns
     if (!columns.ok()) throw std::invalid_argument(columns.status().message());
-    files_.push_back(std::move(*columns));
-    const TripletColumns& c = files_.back();
+    const TripletColumns& c = **columns;
     if (c.source.joints != kNumJoints || c.target.joints != kNumJoints)
       throw std::invalid_argument(c.origin + ": not an SMPL-22 body");
     for (int64_t row = 0; row < c.rows; ++row) {
@@ -417,16 +450,16 @@ void CleanupDataset::AddMotions(const nlohmann::json& config, bool validation) {
       throw std::invalid_argument("leg_cleanup: data.motions: no such file or directory: " + path);
     }
   }
-  const size_t first = motions_.size();
+  std::vector<const Motion*> motions;  // the tracks point into the shared motions
   for (const std::string& file : files) {
-    auto clips = LoadMotionFile(file, options_.fps);
-    if (!clips.ok()) throw std::invalid_argument("leg_cleanup: " + clips.status().message());
-    for (Clip& clip : *clips) motions_.push_back(std::move(clip.motion));
+    auto loaded = files_->Motions(file, options_.fps);
+    if (!loaded.ok()) throw std::invalid_argument("leg_cleanup: " + loaded.status().message());
+    for (const Motion& m : **loaded) motions.push_back(&m);
   }
   // The part of each motion this split reads: the first (1 - fraction) of its frames for
   // training, the rest for validation.
   const auto part = [&](size_t i) {
-    const Motion& m = motions_[i];
+    const Motion& m = *motions[i];
     const int64_t frames = m.num_frames();
     const auto held = static_cast<int64_t>(std::llround(fraction * static_cast<double>(frames)));
     const int64_t start = validation ? frames - held : 0;
@@ -434,12 +467,12 @@ void CleanupDataset::AddMotions(const nlohmann::json& config, bool validation) {
     return std::make_tuple(m.poses.data() + start * kNumJoints * 3, m.trans.data() + start * 3,
                            count);
   };
-  const size_t n = motions_.size() - first;
+  const size_t n = motions.size();
   const size_t before = tracks_.size();
   for (size_t k = 0; k < n; ++k) {
-    const auto [poses, trans, frames] = part(first + k);
+    const auto [poses, trans, frames] = part(k);
     if (frames < options_.crop) continue;
-    const auto partner = part(first + (k + 1) % n);
+    const auto partner = part((k + 1) % n);
     if (std::get<2>(partner) > 0) {
       tracks_.push_back({poses, trans, frames, std::get<0>(partner), std::get<2>(partner)});
     } else {

@@ -17,6 +17,8 @@
 
 #include <array>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
@@ -113,6 +115,25 @@ torch::Tensor HeightDrift(int64_t batch, int64_t frames, at::Generator& generato
 torch::Tensor SmoothNoise(const std::vector<int64_t>& shape, double sigma_frames,
                           at::Generator& generator);
 
+// The files a model's datasets read, each read once: the train stage makes a training and a
+// validation dataset, which crop different parts (splits, held-out ends) of the same files.
+// Keyed by path; motions at one frame rate (the model's).
+class CleanupFiles {
+ public:
+  // The triplet file's columns, read on first use.
+  Result<std::shared_ptr<const TripletColumns>> Triplets(const std::string& path);
+  // The motion file's motions at `fps` (LoadMotionFile), read on first use.
+  Result<std::shared_ptr<const std::vector<Motion>>> Motions(const std::string& path, double fps);
+  // How many files were read from disk (not from this cache).
+  int64_t reads() const { return reads_; }
+
+ private:
+  std::mutex mutex_;
+  std::map<std::string, std::shared_ptr<const TripletColumns>> triplets_;
+  std::map<std::pair<std::string, double>, std::shared_ptr<const std::vector<Motion>>> motions_;
+  int64_t reads_ = 0;
+};
+
 // Training windows, cropped from either of two sources (or both):
 //  - editing triplets, both sides of each triplet of a split (each side's partner: the other side):
 //    data {split: train, val_split: val, limit: 0 (triplets of the split; 0 = all), triplets: a
@@ -126,7 +147,10 @@ torch::Tensor SmoothNoise(const std::vector<int64_t>& shape, double sigma_frames
 // std::invalid_argument naming the file for data it cannot use.
 class CleanupDataset : public plugin::Dataset {
  public:
-  CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context);
+  // files: where the data files are read (shared with the model's other datasets); a cache of
+  // the dataset's own when null.
+  CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context,
+                 std::shared_ptr<CleanupFiles> files = nullptr);
   int64_t size() const override { return static_cast<int64_t>(tracks_.size()); }
   // tensors: trans, given_trans [B, crop, 3], r0 [B, crop, 3, 3], legs, noisy [B, crop, 6, 3, 3].
   plugin::Batch Get(const std::vector<int64_t>& indices, uint64_t seed) override;
@@ -153,8 +177,7 @@ class CleanupDataset : public plugin::Dataset {
   }
 
   CleanupOptions options_;
-  std::vector<TripletColumns> files_;
-  std::vector<Motion> motions_;  // data.motions at options.fps (the tracks point into them)
+  std::shared_ptr<CleanupFiles> files_;  // holds what the tracks point into
   std::vector<Track> tracks_;
 };
 

@@ -35,7 +35,7 @@ class CleanupModel : public plugin::Model {
   torch::nn::Module& Module() override { return *net_; }
   nlohmann::json Config() const override { return options_.ToJson(); }
   std::unique_ptr<plugin::Dataset> MakeDataset(const plugin::DataContext& context) override {
-    return std::make_unique<CleanupDataset>(options_, context);
+    return std::make_unique<CleanupDataset>(options_, context, files_);
   }
   std::map<std::string, torch::Tensor> Losses(const plugin::Batch& batch, int64_t) override {
     Window w;
@@ -52,6 +52,8 @@ class CleanupModel : public plugin::Model {
  private:
   CleanupOptions options_;
   CleanupNet net_;
+  // The training and validation datasets crop the same files: each is read once.
+  std::shared_ptr<CleanupFiles> files_ = std::make_shared<CleanupFiles>();
 };
 
 // Cleans the legs of the requests' source motions with a trained checkpoint.

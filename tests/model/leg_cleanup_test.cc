@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/motionfix.h"
@@ -371,6 +372,35 @@ TEST(LegCleanup, DatasetReadsMotionFilesAndHoldsOutEachOnesEnd) {
     EXPECT_GT(x_val.min().item<double>(), 0.02 * 50 - 1e-4);
     EXPECT_NEAR((x_train[0][1] - x_train[0][0]).item<double>(), 0.02, 1e-5);
   }
+  // Datasets that share the model's files read each file once: the two parts of the clips, and
+  // the triplets' train and val splits, from one read each, giving what separate reads give.
+  auto files = std::make_shared<CleanupFiles>();
+  plugin::DataContext both = train;
+  both.config["triplets"] = WriteTriplets("cleanup_shared", 4, "train");
+  CleanupDataset shared_train(options, both, files);
+  EXPECT_EQ(files->reads(), 2);
+  both.split = "val";
+  CleanupDataset shared_val(options, both, files);
+  EXPECT_EQ(files->reads(), 2);
+  EXPECT_EQ(shared_train.size(), 2 + 4);
+  EXPECT_EQ(shared_val.size(), 2 + 2);
+  // The triplets' tracks come first, then the motions'.
+  const auto val_batch = shared_val.Get({2, 3}, 5), alone = held_out.Get({0, 1}, 5);
+  for (const char* name : {"trans", "given_trans", "legs", "noisy"}) {
+    EXPECT_TRUE(torch::equal(val_batch.tensors.at(name), alone.tensors.at(name))) << name;
+  }
+  // A file that cannot be read is not kept as read: asked again, it is refused again.
+  plugin::DataContext broken_file;
+  broken_file.config = {{"triplets", ::testing::TempDir() + "/cleanup_shared_none"}};
+  std::filesystem::create_directories(::testing::TempDir() + "/cleanup_shared_none");
+  {
+    std::ofstream broken(::testing::TempDir() + "/cleanup_shared_none/triplets-00000.npz");
+    broken << "not an npz";
+  }
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    EXPECT_THROW(CleanupDataset(options, broken_file, files), std::invalid_argument);
+  }
+  EXPECT_EQ(files->reads(), 2);
   // A list of files; together with triplets.
   plugin::DataContext listed;
   listed.config = {{"motions", nlohmann::json::array({dir + "/clips.npz"})}, {"val_fraction", 0.5}};
