@@ -125,10 +125,13 @@ class CleanupFiles {
   // The motion file's motions at `fps` (LoadMotionFile), read on first use.
   Result<std::shared_ptr<const std::vector<Motion>>> Motions(const std::string& path, double fps);
   // How many files were read from disk (not from this cache).
-  int64_t reads() const { return reads_; }
+  int64_t reads() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return reads_;
+  }
 
  private:
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::map<std::string, std::shared_ptr<const TripletColumns>> triplets_;
   std::map<std::pair<std::string, double>, std::shared_ptr<const std::vector<Motion>>> motions_;
   int64_t reads_ = 0;
