@@ -33,20 +33,25 @@ std::array<std::array<int, 4>, 2> LegChains(const Skeleton& skeleton) {
   const std::array<const std::array<int, 2>*, 2> feet = {&skeleton.left_foot_joints(),
                                                          &skeleton.right_foot_joints()};
   for (size_t side = 0; side < 2; ++side) {
-    const int foot = (*feet[side])[1];
+    const std::array<int, 2>& joints = *feet[side];
     bool found = false;
     for (const std::vector<int>& chain : skeleton.kinematic_chains()) {
-      const auto at = std::find(chain.begin(), chain.end(), foot);
-      // hip, knee, ankle, foot after the root
-      if (chain.empty() || chain.front() != 0 || at == chain.end() || at - chain.begin() != 4)
-        continue;
+      if (chain.empty() || chain.front() != 0) continue;
+      const auto depth = [&](int joint) {
+        return std::find(chain.begin(), chain.end(), joint) - chain.begin();
+      };
+      // root, hip, knee, then the side's two foot joints (ankle and toe, in either order)
+      const auto a = depth(joints[0]), b = depth(joints[1]);
+      if (std::min(a, b) != 3 || std::max(a, b) != 4) continue;
       std::copy(chain.begin() + 1, chain.begin() + 5, legs[side].begin());
       found = true;
       break;
     }
     if (!found)
-      throw std::invalid_argument("skeleton: no kinematic chain from the root to foot joint " +
-                                  std::to_string(foot) + " through hip, knee and ankle");
+      throw std::invalid_argument(
+          "skeleton: no kinematic chain from the root through hip and knee to "
+          "the foot joints " +
+          std::to_string(joints[0]) + " and " + std::to_string(joints[1]));
   }
   return legs;
 }

@@ -23,8 +23,8 @@ torch::Tensor MatrixToSixD(const torch::Tensor& r, SixDAxes axes);
 torch::Tensor SixDToMatrix(const torch::Tensor& six, SixDAxes axes);
 
 // The hip, knee, ankle and foot joint of the left leg, then of the right: the skeleton's kinematic
-// chains from the root that end at each side's foot joints. std::invalid_argument if the skeleton
-// has no such chain of four joints after the root.
+// chains from the root whose third and fourth joints after it are each side's two foot joints (in
+// either order in the skeleton file). std::invalid_argument if the skeleton has no such chain.
 std::array<std::array<int, 4>, 2> LegChains(const Skeleton& skeleton);
 
 }  // namespace motionpipe::nn

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "motionpipe/base/file.h"
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/formats/motionfix.h"
 #include "motionpipe/skeleton/skeleton.h"
@@ -112,6 +113,24 @@ TEST(LegCleanup, SharedSixDAndLegChainsFollowTheCore) {
     // The clean-up's joints are each chain's hip, knee and ankle.
     for (size_t k = 0; k < 3; ++k)
       EXPECT_NE(std::find(kLegJoints.begin(), kLegJoints.end(), chain[k]), kLegJoints.end());
+  }
+  // A skeleton file that lists a side's foot joints toe first gives the same chains; foot joints
+  // off the legs' chains are refused, naming them.
+  auto text = ReadFile(MOTIONPIPE_DATA_DIR "/skeleton/smpl22.json");
+  ASSERT_TRUE(text.ok());
+  auto doc = nlohmann::json::parse(*text);
+  doc["feet_joints"] = {{"left", {10, 7}}, {"right", {11, 8}}};
+  auto swapped = Skeleton::FromJson(doc.dump(), "swapped.json");
+  ASSERT_TRUE(swapped.ok()) << swapped.status().message();
+  EXPECT_EQ(nn::LegChains(*swapped), chains);
+  doc["feet_joints"] = {{"left", {7, 10}}, {"right", {20, 21}}};  // the wrists
+  auto wrists = Skeleton::FromJson(doc.dump(), "wrists.json");
+  ASSERT_TRUE(wrists.ok()) << wrists.status().message();
+  try {
+    nn::LegChains(*wrists);
+    ADD_FAILURE() << "foot joints on the arms were taken for legs";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("foot joints 20 and 21"), std::string::npos) << e.what();
   }
 }
 
