@@ -303,37 +303,18 @@ torch::Tensor HeightDrift(int64_t batch, int64_t frames, at::Generator& generato
 }
 
 Result<std::shared_ptr<const TripletColumns>> CleanupFiles::Triplets(const std::string& path) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  auto& slot = triplets_[path];
-  if (!slot) {
-    auto columns = ReadTripletColumns(path, {.positions = false});
-    if (!columns.ok()) {
-      triplets_.erase(path);
-      return columns.status();
-    }
-    ++reads_;
-    slot = std::make_shared<const TripletColumns>(std::move(*columns));
-  }
-  return slot;
+  return Once(triplets_, path, [&] { return ReadTripletColumns(path, {.positions = false}); });
 }
 
 Result<std::shared_ptr<const std::vector<Motion>>> CleanupFiles::Motions(const std::string& path,
                                                                          double fps) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  const auto key = std::make_pair(path, fps);
-  auto& slot = motions_[key];
-  if (!slot) {
+  return Once(motions_, std::make_pair(path, fps), [&]() -> Result<std::vector<Motion>> {
     auto clips = LoadMotionFile(path, fps);
-    if (!clips.ok()) {
-      motions_.erase(key);
-      return clips.status();
-    }
-    ++reads_;
+    if (!clips.ok()) return clips.status();
     std::vector<Motion> motions;
     for (Clip& clip : *clips) motions.push_back(std::move(clip.motion));
-    slot = std::make_shared<const std::vector<Motion>>(std::move(motions));
-  }
-  return slot;
+    return motions;
+  });
 }
 
 CleanupDataset::CleanupDataset(const CleanupOptions& options, const plugin::DataContext& context,

@@ -131,6 +131,18 @@ class CleanupFiles {
   }
 
  private:
+  // cache[key], loaded by `load` (a Result<T>) on first use; a failed load is not kept.
+  template <typename Key, typename T, typename Load>
+  Result<std::shared_ptr<const T>> Once(std::map<Key, std::shared_ptr<const T>>& cache,
+                                        const Key& key, Load load) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (const auto it = cache.find(key); it != cache.end()) return it->second;
+    auto loaded = load();
+    if (!loaded.ok()) return loaded.status();
+    ++reads_;
+    return cache[key] = std::make_shared<const T>(std::move(*loaded));
+  }
+
   mutable std::mutex mutex_;
   std::map<std::string, std::shared_ptr<const TripletColumns>> triplets_;
   std::map<std::pair<std::string, double>, std::shared_ptr<const std::vector<Motion>>> motions_;
