@@ -1,8 +1,8 @@
-// What the post-process stage kinds (foot_lock, clean_legs) share: an edit or generate stage's
-// motions read, each changed by the post-process, and written in that stage's layout (edited.npz +
-// edits.json, generated.npz + generate.json), so that eval_edit and eval_generate score them as
-// they score the raw ones. The summary keeps the input's model and checkpoint, marked with the
-// post-process (what the report names the row by).
+// What the post-process stage kinds (foot_lock, clean_legs, match_legs) share: an edit or generate
+// stage's motions read, each changed by the post-process, and written in that stage's layout
+// (edited.npz + edits.json, generated.npz + generate.json), so that eval_edit and eval_generate
+// score them as they score the raw ones. The summary keeps the input's model and checkpoint, marked
+// with the post-process (what the report names the row by).
 #pragma once
 
 #include <cstdint>

@@ -217,6 +217,9 @@ stages:
     inputs: [cleanup]
     params: {motions: "JOBS/edit_mdt"}
   cleaned_locked: {kind: foot_lock, inputs: [cleaned], params: {max_speed: 5}}
+  matched:             # legs by motion matching (match_legs) from the corpus's training triplets
+    kind: match_legs
+    params: {motions: "JOBS/edit_mdt", database: "JOBS/corpus"}
 """.replace("TINY_MDT", TINY_MDT)
 
 
@@ -584,6 +587,26 @@ class EditTest(EngineTest):
                                 capture_output=True, text=True, timeout=120)
         self.assertNotEqual(result.returncode, 0)
         self.assertIn("checkpoint, not a leg_cleanup one", result.stdout + result.stderr)
+        # match_legs: the edits with the legs (hips, knees, ankles, toes) of a training motion's
+        # window, everything else bit for bit; its summary counts what it matched.
+        matched = by_clip(self.path("judges", "judges-*", "matched"))
+        self.assertEqual(sorted(matched), sorted(raw))
+        feet = legs + [10, 11]
+        for clip, (poses, trans) in matched.items():
+            self.assertTrue(np.array_equal(poses[:, [j for j in range(22) if j not in feet]],
+                                           raw[clip][0][:, [j for j in range(22) if j not in feet]]), clip)
+            self.assertTrue(np.array_equal(trans, raw[clip][1]), clip)
+        with open(glob.glob(self.path("judges", "judges-*", "matched", "task-00000", "edits.json"))[0]) as f:
+            summary = json.load(f)
+        self.assertEqual(summary["model"], "mdt_editor/mdt + matched legs")
+        counts_matched = summary["match_legs"]
+        self.assertEqual(counts_matched["matched"] + counts_matched["kept"], len(raw))
+        self.assertGreater(counts_matched["matched"], 0)
+        self.assertTrue(any(not np.array_equal(poses[:, feet], raw[clip][0][:, feet]) for clip, (poses, _) in matched.items()))
+        bad = self.write_pipeline("bad_match.yaml", judges.replace('database: "', 'sigma_seconds: -1, database: "'))
+        result = subprocess.run([MOTIONPIPE, "run", bad, "--dry-run"], capture_output=True, text=True, timeout=60)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("stages.matched.params.sigma_seconds: must be >= 0 s", result.stdout + result.stderr)
         scored = judged["eval_locked"]
         self.assertEqual(scored["method"], "mdt_editor/mdt + foot lock")
         self.assertEqual(scored["motions"], 3)

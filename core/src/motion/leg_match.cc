@@ -1,0 +1,309 @@
+#include "motionpipe/motion/leg_match.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <utility>
+
+#include "motionpipe/base/random.h"
+
+namespace motionpipe {
+
+namespace {
+
+constexpr int kPathFeatures = 4;  // velocity x, y in the heading frame, turning speed, height
+constexpr int kPlacedJoints = 4;  // knees and ankles
+constexpr int kFeatures = kPathFeatures + 3 * kPlacedJoints;
+
+// Per side: hip, knee, ankle, toe (from the skeleton's foot joints and their parents).
+std::array<std::array<int, 4>, 2> LegJoints(const Skeleton& skeleton) {
+  std::array<std::array<int, 4>, 2> legs{};
+  const std::array<std::array<int, 2>, 2> feet = {skeleton.left_foot_joints(),
+                                                  skeleton.right_foot_joints()};
+  for (size_t side = 0; side < 2; ++side) {
+    const int ankle = feet[side][0], toe = feet[side][1];
+    const int knee = skeleton.parents()[static_cast<size_t>(ankle)];
+    legs[side] = {skeleton.parents()[static_cast<size_t>(knee)], knee, ankle, toe};
+  }
+  return legs;
+}
+
+// x filtered along time by a Gaussian of sigma frames, the ends repeated ([T, width] rows).
+void Smooth(std::vector<float>& x, int64_t frames, int width, int column, int columns,
+            double sigma) {
+  if (sigma <= 0 || frames < 2) return;
+  const int64_t radius = static_cast<int64_t>(std::ceil(3 * sigma));
+  std::vector<double> kernel(static_cast<size_t>(2 * radius + 1));
+  double total = 0;
+  for (int64_t k = -radius; k <= radius; ++k)
+    total += kernel[static_cast<size_t>(k + radius)] =
+        std::exp(-0.5 * static_cast<double>(k * k) / (sigma * sigma));
+  std::vector<float> out(static_cast<size_t>(frames * width));
+  for (int64_t t = 0; t < frames; ++t)
+    for (int c = 0; c < width; ++c) {
+      double sum = 0;
+      for (int64_t k = -radius; k <= radius; ++k) {
+        const int64_t s = std::clamp<int64_t>(t + k, 0, frames - 1);
+        sum += kernel[static_cast<size_t>(k + radius)] *
+               x[static_cast<size_t>(s * columns + column + c)];
+      }
+      out[static_cast<size_t>(t * width + c)] = static_cast<float>(sum / total);
+    }
+  for (int64_t t = 0; t < frames; ++t)
+    for (int c = 0; c < width; ++c)
+      x[static_cast<size_t>(t * columns + column + c)] = out[static_cast<size_t>(t * width + c)];
+}
+
+// The mean angle (degrees) between two motions' leg-joint local rotations (hips, knees, ankles).
+double LegChangeDegrees(const Skeleton& skeleton, const Motion& a, const Motion& b) {
+  double sum = 0;
+  int64_t count = 0;
+  for (const auto& leg : LegJoints(skeleton))
+    for (int k = 0; k < 3; ++k)
+      for (int64_t f = 0; f < a.num_frames(); ++f) {
+        const Mat3 r = Transpose(a.LocalRotation(f, leg[static_cast<size_t>(k)])) *
+                       b.LocalRotation(f, leg[static_cast<size_t>(k)]);
+        const double c = std::clamp((r.m[0][0] + r.m[1][1] + r.m[2][2] - 1) / 2, -1.0, 1.0);
+        sum += std::acos(c) * 180 / std::numbers::pi;
+        ++count;
+      }
+  return count > 0 ? sum / static_cast<double>(count) : 0.0;
+}
+
+}  // namespace
+
+std::vector<float> LegMatchFeatures(const Skeleton& skeleton, const Motion& motion,
+                                    double sigma_seconds) {
+  const int64_t frames = motion.num_frames();
+  std::vector<float> out(static_cast<size_t>(frames * kFeatures), 0.0f);
+  if (frames == 0) return out;
+  const std::vector<float> joints = ComputeJoints(skeleton, motion);
+  const auto joint = [&](int64_t f, int j) {
+    const float* p = &joints[static_cast<size_t>((f * kNumJoints + j) * 3)];
+    return Vec3{p[0], p[1], p[2]};
+  };
+  std::vector<double> heading(static_cast<size_t>(frames));
+  for (int64_t f = 0; f < frames; ++f) {
+    heading[static_cast<size_t>(f)] = HeadingZYX(motion.LocalRotation(f, 0));
+    if (f > 0) {  // unwrapped
+      double& h = heading[static_cast<size_t>(f)];
+      const double previous = heading[static_cast<size_t>(f - 1)];
+      while (h - previous > std::numbers::pi) h -= 2 * std::numbers::pi;
+      while (h - previous < -std::numbers::pi) h += 2 * std::numbers::pi;
+    }
+  }
+  // Central differences (one-sided at the ends), per second.
+  const auto derivative = [&](int64_t f, const auto& value) {
+    const int64_t a = std::max<int64_t>(f - 1, 0), b = std::min(f + 1, frames - 1);
+    return b > a ? (value(b) - value(a)) * (motion.fps / static_cast<double>(b - a)) : 0.0;
+  };
+  const auto legs = LegJoints(skeleton);
+  for (int64_t f = 0; f < frames; ++f) {
+    float* row = &out[static_cast<size_t>(f * kFeatures)];
+    const Mat3 unturn = RotZ(-heading[static_cast<size_t>(f)]);
+    const Vec3 velocity =
+        unturn * Vec3{derivative(f, [&](int64_t g) { return motion.Translation(g).x; }),
+                      derivative(f, [&](int64_t g) { return motion.Translation(g).y; }), 0.0};
+    row[0] = static_cast<float>(velocity.x);
+    row[1] = static_cast<float>(velocity.y);
+    row[2] = static_cast<float>(
+        derivative(f, [&](int64_t g) { return heading[static_cast<size_t>(g)]; }));
+    row[3] = static_cast<float>(motion.Translation(f).z);
+    const Vec3 pelvis = joint(f, 0);
+    int c = kPathFeatures;
+    for (const auto& leg : legs)
+      for (int k = 1; k <= 2; ++k) {  // knee, ankle
+        const Vec3 p = unturn * (joint(f, leg[static_cast<size_t>(k)]) - pelvis);
+        row[c++] = static_cast<float>(p.x);
+        row[c++] = static_cast<float>(p.y);
+        row[c++] = static_cast<float>(p.z);
+      }
+  }
+  Smooth(out, frames, 3 * kPlacedJoints, kPathFeatures, kFeatures, sigma_seconds * motion.fps);
+  return out;
+}
+
+nlohmann::json LegMatchOptionsToJson(const LegMatchOptions& o) {
+  return {{"sigma_seconds", o.sigma_seconds},
+          {"legs_weight", o.legs_weight},
+          {"frame_step", o.frame_step},
+          {"match_pelvis", o.match_pelvis},
+          {"random", o.random},
+          {"seed", o.seed}};
+}
+
+Result<LegMatchOptions> LegMatchOptionsFromJson(const nlohmann::json& p, const std::string& origin,
+                                                const std::vector<std::string>& other_keys) {
+  LegMatchOptions o;
+  if (!p.is_object()) return InvalidArgument(origin + ": a map of leg-matching options");
+  const nlohmann::json defaults = LegMatchOptionsToJson(o);
+  for (const auto& item : p.items()) {
+    if (defaults.contains(item.key()) ||
+        std::find(other_keys.begin(), other_keys.end(), item.key()) != other_keys.end())
+      continue;
+    std::string known;
+    for (const auto& key : defaults.items()) known += (known.empty() ? "" : ", ") + key.key();
+    return InvalidArgument(origin + "." + item.key() + ": unknown (known: " + known + ")");
+  }
+  try {
+    o.sigma_seconds = p.value("sigma_seconds", o.sigma_seconds);
+    o.legs_weight = p.value("legs_weight", o.legs_weight);
+    o.frame_step = p.value("frame_step", o.frame_step);
+    o.match_pelvis = p.value("match_pelvis", o.match_pelvis);
+    o.random = p.value("random", o.random);
+    o.seed = p.value("seed", o.seed);
+  } catch (const nlohmann::json::exception& e) {
+    return InvalidArgument(origin + ": " + e.what());
+  }
+  if (!(o.sigma_seconds >= 0)) return InvalidArgument(origin + ".sigma_seconds: must be >= 0 s");
+  if (!(o.legs_weight >= 0)) return InvalidArgument(origin + ".legs_weight: must be >= 0");
+  if (o.frame_step < 1) return InvalidArgument(origin + ".frame_step: must be >= 1");
+  return o;
+}
+
+void LegMatchReport::Add(const LegMatchReport& other) {
+  matched += other.matched;
+  kept += other.kept;
+  cost += other.cost;
+  degrees += other.degrees;
+}
+
+LegDatabase::LegDatabase(const Skeleton& skeleton, const LegMatchOptions& options)
+    : skeleton_(&skeleton), options_(options) {}
+
+Status LegDatabase::Add(const Motion& motion, const std::string& origin) {
+  if (!weights_.empty())
+    return FailedPrecondition("leg matching: " + origin + " added after the first match");
+  if (Status s = ValidateMotion(motion, origin); !s.ok()) return InvalidArgument(s.message());
+  if (length_.empty()) fps_ = motion.fps;
+  if (!SameFrameRate(motion.fps, fps_))
+    return InvalidArgument(origin + ": at " + std::to_string(motion.fps) +
+                           " fps where the database's first motion is at " + std::to_string(fps_) +
+                           " (resample them to one rate)");
+  const int64_t T = motion.num_frames(), step = options_.frame_step;
+  length_.push_back(T);
+  first_frame_.push_back(frames());
+  first_compared_.push_back(static_cast<int64_t>(features_.size() / kFeatures));
+  const std::vector<float> f = LegMatchFeatures(*skeleton_, motion, options_.sigma_seconds);
+  for (int64_t t = 0; t < T; t += step)
+    features_.insert(features_.end(), f.begin() + t * kFeatures, f.begin() + (t + 1) * kFeatures);
+  const auto legs = LegJoints(*skeleton_);
+  for (int64_t t = 0; t < T; ++t) {
+    for (const auto& leg : legs)
+      for (int joint : leg)
+        for (int c = 0; c < 3; ++c)
+          legs_.push_back(motion.poses[static_cast<size_t>((t * kNumJoints + joint) * 3 + c)]);
+    for (int c = 0; c < 3; ++c)
+      pelvis_.push_back(motion.poses[static_cast<size_t>(t * kNumJoints * 3 + c)]);
+    height_.push_back(static_cast<float>(motion.Translation(t).z));
+  }
+  return Status::Ok();
+}
+
+Result<Motion> LegDatabase::Match(const Motion& motion, LegMatchReport* report) {
+  if (length_.empty()) return FailedPrecondition("leg matching: the database holds no motion");
+  if (Status s = ValidateMotion(motion, "leg matching"); !s.ok())
+    return InvalidArgument(s.message());
+  if (!SameFrameRate(motion.fps, fps_))
+    return InvalidArgument("leg matching: a motion at " + std::to_string(motion.fps) +
+                           " fps, the database's motions at " + std::to_string(fps_));
+  if (weights_.empty()) {
+    // Each feature scaled by its spread over the database; the groups weighted alike.
+    std::array<double, kFeatures> mean{}, square{};
+    const int64_t rows = static_cast<int64_t>(features_.size() / kFeatures);
+    for (int64_t r = 0; r < rows; ++r)
+      for (int c = 0; c < kFeatures; ++c) {
+        const double x = features_[static_cast<size_t>(r * kFeatures + c)];
+        mean[static_cast<size_t>(c)] += x / static_cast<double>(rows);
+        square[static_cast<size_t>(c)] += x * x / static_cast<double>(rows);
+      }
+    for (int c = 0; c < kFeatures; ++c) {
+      const double m = mean[static_cast<size_t>(c)];
+      const double spread = std::sqrt(std::max(square[static_cast<size_t>(c)] - m * m, 0.0)) + 1e-6;
+      const double group = c < kPathFeatures ? 1.0 / kPathFeatures
+                                             : options_.legs_weight / (kFeatures - kPathFeatures);
+      weights_.push_back(static_cast<float>(group / (spread * spread)));
+    }
+  }
+  LegMatchReport one;
+  const int64_t T = motion.num_frames();
+  const int64_t step = options_.frame_step;
+  // Windows that lie inside one database motion, starting every `step` frames of it.
+  const auto windows = [&](int64_t m) {
+    const int64_t length = length_[static_cast<size_t>(m)];
+    return length >= T ? (length - T) / step + 1 : 0;
+  };
+  int64_t best_motion = -1, best_window = 0;
+  double best = std::numeric_limits<double>::infinity();
+  if (options_.random) {
+    int64_t all = 0;
+    for (int64_t m = 0; m < motions(); ++m) all += windows(m);
+    if (all > 0) {
+      Rng rng(MixSeed(options_.seed, draws_++));
+      int64_t pick =
+          std::min(all - 1, static_cast<int64_t>(rng.Uniform() * static_cast<double>(all)));
+      for (int64_t m = 0; m < motions() && best_motion < 0; ++m) {
+        if (pick < windows(m)) best_motion = m, best_window = pick;
+        pick -= windows(m);
+      }
+    }
+  } else {
+    const std::vector<float> all = LegMatchFeatures(*skeleton_, motion, options_.sigma_seconds);
+    std::vector<float> q;
+    for (int64_t t = 0; t < T; t += step)
+      q.insert(q.end(), all.begin() + t * kFeatures, all.begin() + (t + 1) * kFeatures);
+    const int64_t compared = static_cast<int64_t>(q.size() / kFeatures);
+    const float* w = weights_.data();
+    for (int64_t m = 0; m < motions(); ++m) {
+      const float* base =
+          &features_[static_cast<size_t>(first_compared_[static_cast<size_t>(m)] * kFeatures)];
+      for (int64_t k = 0; k < windows(m); ++k) {
+        double cost = 0;  // abandoned once it exceeds the best
+        for (int64_t j = 0; j < compared && cost < best; ++j) {
+          const float* a = &q[static_cast<size_t>(j * kFeatures)];
+          const float* b = base + (k + j) * kFeatures;
+          float sum = 0;
+          for (int c = 0; c < kFeatures; ++c) sum += w[c] * (a[c] - b[c]) * (a[c] - b[c]);
+          cost += sum;
+        }
+        if (cost < best) best = cost, best_motion = m, best_window = k;
+      }
+    }
+    if (best_motion >= 0) one.cost = best / static_cast<double>(compared);
+  }
+  if (best_motion < 0) {
+    one.kept = 1;
+    if (report) report->Add(one);
+    return motion;
+  }
+  const int64_t first = first_frame_[static_cast<size_t>(best_motion)] + best_window * step;
+  Motion out = motion;
+  const auto legs = LegJoints(*skeleton_);
+  for (int64_t f = 0; f < T; ++f) {
+    const float* row = &legs_[static_cast<size_t>((first + f) * 24)];
+    for (const auto& leg : legs)
+      for (int joint : leg) {
+        for (int c = 0; c < 3; ++c)
+          out.poses[static_cast<size_t>((f * kNumJoints + joint) * 3 + c)] = row[c];
+        row += 3;
+      }
+    if (options_.match_pelvis) {
+      // The matched pelvis's tilt under the motion's own heading, and its height.
+      const float* p = &pelvis_[static_cast<size_t>((first + f) * 3)];
+      const Mat3 matched = AxisAngleToMatrix({p[0], p[1], p[2]});
+      const double turn = HeadingZYX(motion.LocalRotation(f, 0)) - HeadingZYX(matched);
+      out.SetLocalRotation(f, 0, RotZ(turn) * matched);
+      Vec3 position = motion.Translation(f);
+      position.z = height_[static_cast<size_t>(first + f)];
+      out.SetTranslation(f, position);
+    }
+  }
+  one.matched = 1;
+  one.degrees = LegChangeDegrees(*skeleton_, motion, out);
+  if (report) report->Add(one);
+  return out;
+}
+
+}  // namespace motionpipe
