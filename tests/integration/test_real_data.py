@@ -94,7 +94,8 @@ class RealDataTest(EngineTest):
                                                       "MDT + leg clean-up + foot lock (post-processes)"])
         sinc = tables["Composition: generated motions against the ground truth"]
         self.assertEqual([r[0] for r in sinc[2:]], ["ground truth", "shuffled ground truth (same length class)", "untrained SINC (initial weights)",
-                                                    "SINC + synthetic pairs (GPT labels)", "SINC + foot lock (post-process)"])
+                                                    "SINC + synthetic pairs (GPT labels)", "SINC + foot lock (post-process)",
+                                                    "SINC + matched legs + foot lock (post-processes)"])
         self.assertEqual(sinc[2][2], "1.000")  # the ground truth's TEMOS score with itself
         evaluators = [r[0] for r in tables["Evaluator quality"][1:]]
         self.assertIn("TMR: test two-action spans (\"A while B\")", evaluators)
