@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "motionpipe/base/options.h"
+
 namespace motionpipe {
 
 namespace {
@@ -103,16 +105,10 @@ nlohmann::json FootLockOptionsToJson(const FootLockOptions& o) {
 Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const std::string& origin,
                                                 const std::vector<std::string>& other_keys) {
   FootLockOptions o;
-  if (!p.is_object()) return InvalidArgument(origin + ": a map of foot-lock options");
-  const nlohmann::json defaults = FootLockOptionsToJson(o);
-  for (const auto& item : p.items()) {
-    if (defaults.contains(item.key()) ||
-        std::find(other_keys.begin(), other_keys.end(), item.key()) != other_keys.end())
-      continue;
-    std::string known;
-    for (const auto& key : defaults.items()) known += (known.empty() ? "" : ", ") + key.key();
-    return InvalidArgument(origin + "." + item.key() + ": unknown (known: " + known + ")");
-  }
+  if (Status s =
+          CheckOptionKeys(p, FootLockOptionsToJson(o), origin, "foot-lock options", other_keys);
+      !s.ok())
+    return s;
   try {
     o.contact_height = p.value("contact_height", o.contact_height);
     o.max_speed = p.value("max_speed", o.max_speed);

@@ -7,6 +7,7 @@
 #include <numbers>
 #include <utility>
 
+#include "motionpipe/base/options.h"
 #include "motionpipe/base/random.h"
 
 namespace motionpipe {
@@ -137,16 +138,10 @@ nlohmann::json LegMatchOptionsToJson(const LegMatchOptions& o) {
 Result<LegMatchOptions> LegMatchOptionsFromJson(const nlohmann::json& p, const std::string& origin,
                                                 const std::vector<std::string>& other_keys) {
   LegMatchOptions o;
-  if (!p.is_object()) return InvalidArgument(origin + ": a map of leg-matching options");
-  const nlohmann::json defaults = LegMatchOptionsToJson(o);
-  for (const auto& item : p.items()) {
-    if (defaults.contains(item.key()) ||
-        std::find(other_keys.begin(), other_keys.end(), item.key()) != other_keys.end())
-      continue;
-    std::string known;
-    for (const auto& key : defaults.items()) known += (known.empty() ? "" : ", ") + key.key();
-    return InvalidArgument(origin + "." + item.key() + ": unknown (known: " + known + ")");
-  }
+  if (Status s =
+          CheckOptionKeys(p, LegMatchOptionsToJson(o), origin, "leg-matching options", other_keys);
+      !s.ok())
+    return s;
   try {
     o.sigma_seconds = p.value("sigma_seconds", o.sigma_seconds);
     o.legs_weight = p.value("legs_weight", o.legs_weight);
