@@ -420,6 +420,13 @@ TEST(LegCleanup, DatasetReadsMotionFilesAndHoldsOutEachOnesEnd) {
     EXPECT_THROW(CleanupDataset(options, broken_file, files), std::invalid_argument);
   }
   EXPECT_EQ(files->reads(), 2);
+  // Mended in place, the same file is read and used: no failure was kept for it.
+  std::filesystem::copy_file(
+      WriteTriplets("cleanup_shared_mended", 4, "train") + "/motionfix/triplets-00000.npz",
+      ::testing::TempDir() + "/cleanup_shared_none/triplets-00000.npz",
+      std::filesystem::copy_options::overwrite_existing);
+  EXPECT_EQ(CleanupDataset(options, broken_file, files).size(), 2 * 2);  // both sides of 2 usable
+  EXPECT_EQ(files->reads(), 3);
   // A list of files; together with triplets.
   plugin::DataContext listed;
   listed.config = {{"motions", nlohmann::json::array({dir + "/clips.npz"})}, {"val_fraction", 0.5}};
