@@ -1,7 +1,8 @@
 // `match_legs`: the legs of an edit or generate stage's motions taken from the nearest window of a
 // corpus's training motions (motion/leg_match.h: motion matching on the pelvis path and the slow
 // leg posture), written in that stage's layout (post_process.h) so that eval_edit and
-// eval_generate score them as rows of their own. A post-process and the corpus's motions, not a
+// eval_generate score them as rows of their own (a motion longer than every database motion in
+// overlapping windows, blended). A post-process and the corpus's motions, not a
 // model of either paper: it gives SINC's gliding bodies a gait that the learned clean-up cannot
 // (docs/EXPERIMENTS.md "Legs by motion matching"). Chain a foot_lock stage after it to plant the
 // matched feet. With `random: true` it is the control: a random window of the same length.
@@ -81,7 +82,7 @@ class MatchLegsStage : public StageExecutor {
     post.summarise = [&](int64_t motions) {
       const json entry = {{"motions", motions},
                           {"matched", layout.matched},
-                          {"kept", layout.kept},
+                          {"windows", layout.windows},
                           {"mean_cost", layout.MeanCost()},
                           {"mean_leg_change_degrees", layout.MeanDegrees()},
                           {"database_triplets", triplets},
@@ -94,7 +95,7 @@ class MatchLegsStage : public StageExecutor {
     TaskReport out = PostProcessMotions(ctx, post);
     if (out.outcome == worker::Outcome::kOk) {
       out.metrics["matched"] = static_cast<double>(all.matched);
-      out.metrics["kept"] = static_cast<double>(all.kept);
+      out.metrics["windows"] = static_cast<double>(all.windows);
       out.metrics["mean_leg_change_degrees"] = all.MeanDegrees();
     }
     return out;

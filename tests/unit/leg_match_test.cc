@@ -183,7 +183,7 @@ TEST(LegMatch, TheRandomControlDrawsReproducibleWindowsOfTheDatabase) {
   EXPECT_NE(first->poses, second->poses);
 }
 
-TEST(LegMatch, RefusesWhatItCannotMatchAndKeepsWhatIsTooLong) {
+TEST(LegMatch, RefusesWhatItCannotMatch) {
   const std::vector<Motion> walks = Walks(2);
   LegDatabase empty(Smpl(), {});
   EXPECT_EQ(empty.Match(walks[0]).status().code(), StatusCode::kFailedPrecondition);
@@ -194,15 +194,33 @@ TEST(LegMatch, RefusesWhatItCannotMatchAndKeepsWhatIsTooLong) {
   EXPECT_EQ(late_rate.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(late_rate.message().find("clip 7"), std::string::npos) << late_rate.message();
   EXPECT_EQ(db.Match(other_rate).status().code(), StatusCode::kInvalidArgument);
-  // Longer than every database motion: left as it was, and counted.
-  const Motion longer = Walk(9, 6.0);
-  LegMatchReport report;
-  auto kept = db.Match(longer, &report);
-  ASSERT_TRUE(kept.ok());
-  EXPECT_EQ(kept->poses, longer.poses);
-  EXPECT_EQ(report.kept, 1);
-  EXPECT_EQ(report.matched, 0);
+  ASSERT_TRUE(db.Match(walks[0]).ok());
   EXPECT_EQ(db.Add(walks[0], "walk 0").code(), StatusCode::kFailedPrecondition);
+}
+
+TEST(LegMatch, AMotionLongerThanTheDatabasesIsMatchedInBlendedWindows) {
+  // 2-s walks in the database; a 6-s walk it never saw, with still legs.
+  std::vector<Motion> walks;
+  for (int i = 0; i < 8; ++i) walks.push_back(Walk(200 + static_cast<uint64_t>(i), 2.0));
+  LegDatabase db = Database(walks);
+  const Motion walk = Walk(11, 6.0);
+  const Motion still = StillLegs(walk);
+  LegMatchReport report;
+  auto matched = db.Match(still, &report);
+  ASSERT_TRUE(matched.ok()) << matched.status().message();
+  EXPECT_EQ(report.matched, 1);
+  EXPECT_GE(report.windows, 5);  // 180 frames in windows of 60, each 30 after the last
+  EXPECT_EQ(matched->num_frames(), still.num_frames());
+  EXPECT_EQ(matched->trans, still.trans);
+  // The legs step over the whole motion, and where the windows meet they are blended: planted, the
+  // feet slide on under 45% of the still legs' planted skate (0.36 against 0.89 here; with each
+  // window written over the last, unblended, 0.45).
+  EXPECT_GT(KneeSwingDegrees(SliceFrames(*matched, 0, 90)), 0.5 * KneeSwingDegrees(walk));
+  EXPECT_GT(KneeSwingDegrees(SliceFrames(*matched, 90, 180)), 0.5 * KneeSwingDegrees(walk));
+  const double still_skate =
+      EvaluateMotionPlausibility(Smpl(), LockFeet(Smpl(), still)).foot_skate_ratio;
+  EXPECT_LT(EvaluateMotionPlausibility(Smpl(), LockFeet(Smpl(), *matched)).foot_skate_ratio,
+            0.45 * still_skate);
 }
 
 TEST(LegMatch, OptionsAreReadWithTheirKeysAndChecked) {

@@ -160,13 +160,38 @@ Result<LegMatchOptions> LegMatchOptionsFromJson(const nlohmann::json& p, const s
 
 void LegMatchReport::Add(const LegMatchReport& other) {
   matched += other.matched;
-  kept += other.kept;
+  windows += other.windows;
   cost += other.cost;
   degrees += other.degrees;
 }
 
 LegDatabase::LegDatabase(const Skeleton& skeleton, const LegMatchOptions& options)
     : skeleton_(&skeleton), options_(options) {}
+
+std::array<float, LegDatabase::kPlaces> LegDatabase::PlacesAt(int64_t frame) const {
+  // The knees' and ankles' places relative to the pelvis, heading removed: the features' leg
+  // columns before the low-pass (LegMatchFeatures computes the same through ComputeJoints).
+  std::array<float, kPlaces> out{};
+  const float* p = &pelvis_[static_cast<size_t>(frame * 3)];
+  const Mat3 pelvis = RemoveHeading(AxisAngleToMatrix({p[0], p[1], p[2]}));
+  const float* legs = &legs_[static_cast<size_t>(frame * 24)];
+  const auto& offsets = skeleton_->rest_offsets();
+  size_t c = 0;
+  for (const auto& leg : LegJoints(*skeleton_)) {
+    Mat3 global = pelvis;
+    Vec3 place = global * offsets[static_cast<size_t>(leg[0])];
+    for (size_t k = 1; k <= 2; ++k) {  // knee, ankle
+      const float* r = legs + 3 * (k - 1);
+      global = global * AxisAngleToMatrix({r[0], r[1], r[2]});
+      place = place + global * offsets[static_cast<size_t>(leg[k])];
+      out[c++] = static_cast<float>(place.x);
+      out[c++] = static_cast<float>(place.y);
+      out[c++] = static_cast<float>(place.z);
+    }
+    legs += 12;
+  }
+  return out;
+}
 
 Status LegDatabase::Add(const Motion& motion, const std::string& origin) {
   if (!weights_.empty())
@@ -178,8 +203,9 @@ Status LegDatabase::Add(const Motion& motion, const std::string& origin) {
                            " fps where the database's first motion is at " + std::to_string(fps_) +
                            " (resample them to one rate)");
   const int64_t T = motion.num_frames(), step = options_.frame_step;
+  const int64_t first = frames();
   length_.push_back(T);
-  first_frame_.push_back(frames());
+  first_frame_.push_back(first);
   first_compared_.push_back(static_cast<int64_t>(features_.size() / kFeatures));
   const std::vector<float> f = LegMatchFeatures(*skeleton_, motion, options_.sigma_seconds);
   for (int64_t t = 0; t < T; t += step)
@@ -194,7 +220,83 @@ Status LegDatabase::Add(const Motion& motion, const std::string& origin) {
       pelvis_.push_back(motion.poses[static_cast<size_t>(t * kNumJoints * 3 + c)]);
     height_.push_back(static_cast<float>(motion.Translation(t).z));
   }
+  for (int64_t t = 0; t < T; t += step) {
+    const auto places = PlacesAt(first + t);
+    places_.insert(places_.end(), places.begin(), places.end());
+  }
+  longest_ = std::max(longest_, T);
   return Status::Ok();
+}
+
+void LegDatabase::Weigh() {
+  // Each feature scaled by its spread over the database; the groups weighted alike.
+  std::array<double, kFeatures> mean{}, square{};
+  const int64_t rows = static_cast<int64_t>(features_.size() / kFeatures);
+  for (int64_t r = 0; r < rows; ++r)
+    for (int c = 0; c < kFeatures; ++c) {
+      const double x = features_[static_cast<size_t>(r * kFeatures + c)];
+      mean[static_cast<size_t>(c)] += x / static_cast<double>(rows);
+      square[static_cast<size_t>(c)] += x * x / static_cast<double>(rows);
+    }
+  for (int c = 0; c < kFeatures; ++c) {
+    const double m = mean[static_cast<size_t>(c)];
+    const double spread = std::sqrt(std::max(square[static_cast<size_t>(c)] - m * m, 0.0)) + 1e-6;
+    const double group = c < kPathFeatures ? 1.0 / kPathFeatures
+                                           : options_.legs_weight / (kFeatures - kPathFeatures);
+    weights_.push_back(static_cast<float>(group / (spread * spread)));
+  }
+}
+
+LegDatabase::Choice LegDatabase::Nearest(const std::vector<float>& query,
+                                         const std::vector<float>& joined, int64_t T) const {
+  const int64_t step = options_.frame_step;
+  const int64_t compared = static_cast<int64_t>(query.size() / kFeatures);
+  const int64_t joins = static_cast<int64_t>(joined.size() / kPlaces);
+  const float* w = weights_.data();
+  const float* wp =
+      w + kPathFeatures;  // the leg places' weights, for the join with the last window
+  Choice best;
+  for (int64_t m = 0; m < motions(); ++m) {
+    const int64_t length = length_[static_cast<size_t>(m)];
+    const size_t first = static_cast<size_t>(first_compared_[static_cast<size_t>(m)]);
+    const float* base = &features_[first * kFeatures];
+    const float* places = &places_[first * kPlaces];
+    for (int64_t k = 0; k * step + T <= length; ++k) {
+      double cost = 0;  // abandoned once it exceeds the best
+      for (int64_t j = 0; j < compared && cost < best.cost; ++j) {
+        const float* a = &query[static_cast<size_t>(j * kFeatures)];
+        const float* b = base + (k + j) * kFeatures;
+        float sum = 0;
+        for (int c = 0; c < kFeatures; ++c) sum += w[c] * (a[c] - b[c]) * (a[c] - b[c]);
+        if (j < joins) {
+          const float* x = &joined[static_cast<size_t>(j * kPlaces)];
+          const float* y = places + (k + j) * kPlaces;
+          for (int c = 0; c < kPlaces; ++c) sum += wp[c] * (x[c] - y[c]) * (x[c] - y[c]);
+        }
+        cost += sum;
+      }
+      if (cost < best.cost) best = {m, k * step, cost};
+    }
+  }
+  best.cost /= static_cast<double>(compared);  // per compared frame
+  return best;
+}
+
+LegDatabase::Choice LegDatabase::Drawn(int64_t T) {
+  const int64_t step = options_.frame_step;
+  const auto windows = [&](int64_t m) {
+    const int64_t length = length_[static_cast<size_t>(m)];
+    return length >= T ? (length - T) / step + 1 : 0;
+  };
+  int64_t all = 0;
+  for (int64_t m = 0; m < motions(); ++m) all += windows(m);
+  Rng rng(MixSeed(options_.seed, draws_++));
+  int64_t pick = std::min(all - 1, static_cast<int64_t>(rng.Uniform() * static_cast<double>(all)));
+  for (int64_t m = 0; m < motions(); ++m) {
+    if (pick < windows(m)) return {m, pick * step, 0.0};
+    pick -= windows(m);
+  }
+  return {};
 }
 
 Result<Motion> LegDatabase::Match(const Motion& motion, LegMatchReport* report) {
@@ -204,98 +306,80 @@ Result<Motion> LegDatabase::Match(const Motion& motion, LegMatchReport* report) 
   if (!SameFrameRate(motion.fps, fps_))
     return InvalidArgument("leg matching: a motion at " + std::to_string(motion.fps) +
                            " fps, the database's motions at " + std::to_string(fps_));
-  if (weights_.empty()) {
-    // Each feature scaled by its spread over the database; the groups weighted alike.
-    std::array<double, kFeatures> mean{}, square{};
-    const int64_t rows = static_cast<int64_t>(features_.size() / kFeatures);
-    for (int64_t r = 0; r < rows; ++r)
-      for (int c = 0; c < kFeatures; ++c) {
-        const double x = features_[static_cast<size_t>(r * kFeatures + c)];
-        mean[static_cast<size_t>(c)] += x / static_cast<double>(rows);
-        square[static_cast<size_t>(c)] += x * x / static_cast<double>(rows);
-      }
-    for (int c = 0; c < kFeatures; ++c) {
-      const double m = mean[static_cast<size_t>(c)];
-      const double spread = std::sqrt(std::max(square[static_cast<size_t>(c)] - m * m, 0.0)) + 1e-6;
-      const double group = c < kPathFeatures ? 1.0 / kPathFeatures
-                                             : options_.legs_weight / (kFeatures - kPathFeatures);
-      weights_.push_back(static_cast<float>(group / (spread * spread)));
-    }
-  }
+  if (weights_.empty()) Weigh();
+  const int64_t T = motion.num_frames(), step = options_.frame_step;
+  // Windows of the longest database motion's length (the whole motion when it fits), each half
+  // over the last, the last ending with the motion; a window's choice also weighs how near its leg
+  // places come to the last window's over their common frames, and the legs are blended there.
+  const int64_t W = std::min(T, longest_);
+  const int64_t hop = std::max(step, (W / 2) / step * step);
+  std::vector<int64_t> starts = {0};
+  while (starts.back() + W < T) starts.push_back(std::min(starts.back() + hop, T - W));
+  const std::vector<float> features = LegMatchFeatures(*skeleton_, motion, options_.sigma_seconds);
   LegMatchReport one;
-  const int64_t T = motion.num_frames();
-  const int64_t step = options_.frame_step;
-  // Windows that lie inside one database motion, starting every `step` frames of it.
-  const auto windows = [&](int64_t m) {
-    const int64_t length = length_[static_cast<size_t>(m)];
-    return length >= T ? (length - T) / step + 1 : 0;
-  };
-  int64_t best_motion = -1, best_window = 0;
-  double best = std::numeric_limits<double>::infinity();
-  if (options_.random) {
-    int64_t all = 0;
-    for (int64_t m = 0; m < motions(); ++m) all += windows(m);
-    if (all > 0) {
-      Rng rng(MixSeed(options_.seed, draws_++));
-      int64_t pick =
-          std::min(all - 1, static_cast<int64_t>(rng.Uniform() * static_cast<double>(all)));
-      for (int64_t m = 0; m < motions() && best_motion < 0; ++m) {
-        if (pick < windows(m)) best_motion = m, best_window = pick;
-        pick -= windows(m);
-      }
-    }
-  } else {
-    const std::vector<float> all = LegMatchFeatures(*skeleton_, motion, options_.sigma_seconds);
-    std::vector<float> q;
-    for (int64_t t = 0; t < T; t += step)
-      q.insert(q.end(), all.begin() + t * kFeatures, all.begin() + (t + 1) * kFeatures);
-    const int64_t compared = static_cast<int64_t>(q.size() / kFeatures);
-    const float* w = weights_.data();
-    for (int64_t m = 0; m < motions(); ++m) {
-      const float* base =
-          &features_[static_cast<size_t>(first_compared_[static_cast<size_t>(m)] * kFeatures)];
-      for (int64_t k = 0; k < windows(m); ++k) {
-        double cost = 0;  // abandoned once it exceeds the best
-        for (int64_t j = 0; j < compared && cost < best; ++j) {
-          const float* a = &q[static_cast<size_t>(j * kFeatures)];
-          const float* b = base + (k + j) * kFeatures;
-          float sum = 0;
-          for (int c = 0; c < kFeatures; ++c) sum += w[c] * (a[c] - b[c]) * (a[c] - b[c]);
-          cost += sum;
-        }
-        if (cost < best) best = cost, best_motion = m, best_window = k;
-      }
-    }
-    if (best_motion >= 0) one.cost = best / static_cast<double>(compared);
-  }
-  if (best_motion < 0) {
-    one.kept = 1;
-    if (report) report->Add(one);
-    return motion;
-  }
-  const int64_t first = first_frame_[static_cast<size_t>(best_motion)] + best_window * step;
   Motion out = motion;
   const auto legs = LegJoints(*skeleton_);
-  for (int64_t f = 0; f < T; ++f) {
-    const float* row = &legs_[static_cast<size_t>((first + f) * 24)];
-    for (const auto& leg : legs)
-      for (int joint : leg) {
-        for (int c = 0; c < 3; ++c)
-          out.poses[static_cast<size_t>((f * kNumJoints + joint) * 3 + c)] = row[c];
-        row += 3;
+  Choice last;
+  for (size_t i = 0; i < starts.size(); ++i) {
+    const int64_t s = starts[i];
+    Choice chosen;
+    if (options_.random) {
+      chosen = Drawn(W);
+    } else {
+      std::vector<float> query, joined;
+      for (int64_t t = 0; t < W; t += step) {
+        query.insert(query.end(), features.begin() + (s + t) * kFeatures,
+                     features.begin() + (s + t + 1) * kFeatures);
+        if (i > 0 && s + t < starts[i - 1] + W) {
+          const auto places = PlacesAt(first_frame_[static_cast<size_t>(last.motion)] + last.start +
+                                       (s + t - starts[i - 1]));
+          joined.insert(joined.end(), places.begin(), places.end());
+        }
       }
-    if (options_.match_pelvis) {
-      // The matched pelvis's tilt under the motion's own heading, and its height.
-      const float* p = &pelvis_[static_cast<size_t>((first + f) * 3)];
-      const Mat3 matched = AxisAngleToMatrix({p[0], p[1], p[2]});
-      const double turn = HeadingZYX(motion.LocalRotation(f, 0)) - HeadingZYX(matched);
-      out.SetLocalRotation(f, 0, RotZ(turn) * matched);
-      Vec3 position = motion.Translation(f);
-      position.z = height_[static_cast<size_t>(first + f)];
-      out.SetTranslation(f, position);
+      chosen = Nearest(query, joined, W);
     }
+    const int64_t first = first_frame_[static_cast<size_t>(chosen.motion)] + chosen.start;
+    // Over the frames shared with the last window, its legs fade into this one's.
+    const int64_t shared = i > 0 ? starts[i - 1] + W - s : 0;
+    for (int64_t t = 0; t < W; ++t) {
+      const int64_t f = s + t;
+      const double weight =
+          t < shared ? static_cast<double>(t + 1) / static_cast<double>(shared + 1) : 1.0;
+      const float* row = &legs_[static_cast<size_t>((first + t) * 24)];
+      for (const auto& leg : legs)
+        for (int joint : leg) {
+          const Quat q = AxisAngleToQuat({row[0], row[1], row[2]});
+          row += 3;
+          const Quat blended =
+              weight < 1 ? Slerp(AxisAngleToQuat(MatrixToAxisAngle(out.LocalRotation(f, joint))), q,
+                                 weight)
+                         : q;
+          out.SetLocalRotation(f, joint, QuatToMatrix(blended));
+        }
+      if (options_.match_pelvis) {
+        // The matched pelvis's tilt under the motion's own heading, and its height.
+        const float* p = &pelvis_[static_cast<size_t>((first + t) * 3)];
+        const Mat3 matched = AxisAngleToMatrix({p[0], p[1], p[2]});
+        const double turn = HeadingZYX(motion.LocalRotation(f, 0)) - HeadingZYX(matched);
+        Mat3 pelvis = RotZ(turn) * matched;
+        Vec3 position = out.Translation(f);
+        const double z = height_[static_cast<size_t>(first + t)];
+        if (weight < 1) {
+          pelvis = QuatToMatrix(
+              Slerp(MatrixToQuat(out.LocalRotation(f, 0)), MatrixToQuat(pelvis), weight));
+          position.z += weight * (z - position.z);
+        } else {
+          position.z = z;
+        }
+        out.SetLocalRotation(f, 0, pelvis);
+        out.SetTranslation(f, position);
+      }
+    }
+    one.cost += chosen.cost / static_cast<double>(starts.size());
+    last = chosen;
   }
   one.matched = 1;
+  one.windows = static_cast<int64_t>(starts.size());
   one.degrees = LegChangeDegrees(*skeleton_, motion, out);
   if (report) report->Add(one);
   return out;

@@ -1,6 +1,7 @@
 // Legs by motion matching: a post-process that gives a generated motion the legs of the training
 // motion whose pelvis path and slow leg posture are nearest, over the generated motion's whole
-// length (Clavet 2016, "Motion matching and the road to next-gen animation"; Holden et al. 2020,
+// length (or, longer than every training motion, in overlapping windows blended where they meet)
+// (Clavet 2016, "Motion matching and the road to next-gen animation"; Holden et al. 2020,
 // "Learned motion matching"). SINC's generations glide: the pelvis travels while the legs barely
 // swing, and a learned clean-up cannot give them a gait, since a denoiser returns the mean of
 // what its input leaves open and the mean of a gait's phases is a still leg (docs/EXPERIMENTS.md).
@@ -13,7 +14,9 @@
 // model generated is the input; this is not the model: the evaluation reports both.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -44,7 +47,8 @@ Result<LegMatchOptions> LegMatchOptionsFromJson(const nlohmann::json& params,
 
 struct LegMatchReport {
   int64_t matched = 0;  // motions given a database window's legs
-  int64_t kept = 0;     // motions longer than every database motion, left as they were
+  int64_t windows = 0;  // windows matched (more than one a motion when it is longer than every
+                        // database motion)
   double cost = 0;      // the matched windows' costs per compared frame, summed
   double degrees = 0;   // the leg joints' mean change of local rotation, summed per motion
   void Add(const LegMatchReport& other);
@@ -66,24 +70,42 @@ class LegDatabase {
   int64_t frames() const { return static_cast<int64_t>(height_.size()); }
   int64_t motions() const { return static_cast<int64_t>(length_.size()); }
 
-  // The motion with the legs of its nearest window (the options' `random`: a random window);
-  // unchanged, and counted as kept, when it is longer than every database motion. InvalidArgument
-  // when its frame rate is not the database's or it is not a valid motion, FailedPrecondition when
-  // the database is empty.
+  // The motion with the legs of its nearest window (the options' `random`: a random window). A
+  // motion longer than every database motion is matched in windows of the longest one's length,
+  // each starting half a window after the last (the last ending with the motion), each chosen
+  // also by how near its knees and ankles come to the last window's over their common frames, and
+  // blended into it there (slerp). InvalidArgument when its frame rate is not the database's or it
+  // is not a valid motion, FailedPrecondition when the database is empty.
   Result<Motion> Match(const Motion& motion, LegMatchReport* report = nullptr);
 
  private:
+  static constexpr int kPlaces = 12;  // the knees' and ankles' places, 3 each
+  struct Choice {
+    int64_t motion = -1, start = 0;  // a database motion and its window's first frame
+    double cost = std::numeric_limits<double>::infinity();  // per compared frame once chosen
+  };
+  // The knees' and ankles' places relative to the pelvis, heading removed, at a database frame.
+  std::array<float, kPlaces> PlacesAt(int64_t frame) const;
+  void Weigh();
+  // The nearest window of T frames to `query` (compared frames' features); `joined` holds, for
+  // its first compared frames, the last window's leg places that the window is to continue.
+  Choice Nearest(const std::vector<float>& query, const std::vector<float>& joined,
+                 int64_t T) const;
+  Choice Drawn(int64_t T);  // a random window of T frames
+
   const Skeleton* skeleton_;
   LegMatchOptions options_;
   double fps_ = 0;
+  int64_t longest_ = 0;
   // Only what a match reads: per motion its length and first frame, per frame the legs' and the
-  // pelvis's local rotations and the pelvis height, and the features of every `frame_step`-th
-  // frame (the only frames a window starting every frame_step frames compares).
+  // pelvis's local rotations and the pelvis height, and, of every `frame_step`-th frame (the only
+  // frames a window starting every frame_step frames compares), the features and the leg places.
   std::vector<int64_t> length_, first_frame_, first_compared_;
   std::vector<float> legs_;      // [frames, 8, 3] axis-angle: per side hip, knee, ankle, toe
   std::vector<float> pelvis_;    // [frames, 3] axis-angle
   std::vector<float> height_;    // [frames] metres
   std::vector<float> features_;  // [compared frames, 16], unscaled
+  std::vector<float> places_;    // [compared frames, 12]
   std::vector<float> weights_;   // per feature: group weight / spread^2
   uint64_t draws_ = 0;           // random windows drawn so far
 };
