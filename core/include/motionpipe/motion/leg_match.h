@@ -49,7 +49,7 @@ struct LegMatchReport {
   int64_t matched = 0;  // motions given a database window's legs
   int64_t windows = 0;  // windows matched (more than one a motion when it is longer than every
                         // database motion)
-  double cost = 0;      // the matched windows' costs per compared frame, summed
+  double cost = 0;      // per motion its windows' mean cost per compared frame, summed (0: random)
   double degrees = 0;   // the leg joints' mean change of local rotation, summed per motion
   void Add(const LegMatchReport& other);
   double MeanCost() const { return matched > 0 ? cost / static_cast<double>(matched) : 0.0; }
@@ -110,7 +110,7 @@ class LegDatabase {
   uint64_t draws_ = 0;           // random windows drawn so far
 };
 
-// Per-frame features [T, 16] of a motion (the header's list), for tests and tools.
+// Per-frame features [T, 16] of a motion (the header's list), before the database's scaling.
 std::vector<float> LegMatchFeatures(const Skeleton& skeleton, const Motion& motion,
                                     double sigma_seconds);
 
