@@ -348,13 +348,14 @@ Result<Motion> LegDatabase::Match(const Motion& motion, LegMatchReport* report) 
       const float* row = &legs_[static_cast<size_t>((first + t) * 24)];
       for (const auto& leg : legs)
         for (int joint : leg) {
-          const Quat q = AxisAngleToQuat({row[0], row[1], row[2]});
+          if (weight < 1) {  // slerp from what the last window wrote
+            const Quat q = Slerp(MatrixToQuat(out.LocalRotation(f, joint)),
+                                 AxisAngleToQuat({row[0], row[1], row[2]}), weight);
+            out.SetLocalRotation(f, joint, QuatToMatrix(q));
+          } else {
+            std::copy(row, row + 3, &out.poses[static_cast<size_t>((f * kNumJoints + joint) * 3)]);
+          }
           row += 3;
-          const Quat blended =
-              weight < 1 ? Slerp(AxisAngleToQuat(MatrixToAxisAngle(out.LocalRotation(f, joint))), q,
-                                 weight)
-                         : q;
-          out.SetLocalRotation(f, joint, QuatToMatrix(blended));
         }
       if (options_.match_pelvis) {
         // The matched pelvis's tilt under the motion's own heading, and its height.
