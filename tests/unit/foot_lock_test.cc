@@ -16,11 +16,12 @@ namespace {
 constexpr int kLeftHip = 1, kLeftKnee = 4, kLeftAnkle = 7, kRightAnkle = 8;
 
 // A body standing with its pelvis at `pelvis_x(frame)` (default still), 30 frames at 30 fps, whose
-// left ankle is put where `left_ankle(frame)` says (the right ankle stays under the pelvis), solved
-// by the pose solver's IK.
+// left ankle is put where `left_ankle(frame)` says (the right ankle stays under the pelvis), its
+// left foot pointing along `left_toe_dir` (default level, forward), solved by the pose solver's IK.
 Motion Standing(
     const std::function<Vec3(int)>& left_ankle,
-    const std::function<double(int)>& pelvis_x = [](int) { return 0.0; }) {
+    const std::function<double(int)>& pelvis_x = [](int) { return 0.0; },
+    const Vec3& left_toe_dir = {1, 0, 0}) {
   const Skeleton& skeleton = Skeleton::Smpl22();
   constexpr int kFrames = 30;
   Motion motion = Motion::Rest(kFrames, 30.0, skeleton.RestPelvisHeight());
@@ -31,7 +32,7 @@ Motion Standing(
     for (int side = 0; side < 2; ++side) {
       FootTarget& foot = t.feet[static_cast<size_t>(side)];
       foot.ankle = side == 0 ? left_ankle(frame) : Vec3{pelvis_x(frame) + 0.02, -0.1, 0.03};
-      foot.toe_dir = {1, 0, 0};
+      foot.toe_dir = side == 0 ? left_toe_dir : Vec3{1, 0, 0};
       foot.knee_pole = {1, 0, 0};
     }
     for (auto& hand : t.hands)
@@ -89,6 +90,43 @@ TEST(FootLock, HoldsASlidingContactFootAtOnePlaceAndLeavesTheRestOfTheBody) {
     EXPECT_LT(Norm(JointAt(joints, frame, kRightAnkle) - JointAt(before, frame, kRightAnkle)),
               1e-6);
   }
+}
+
+// A foot pivoting on its toe (the heel lifted above the contact height, the toe on the floor)
+// that slides: only the toe is in contact, and it is the toe that must stand still. The leg
+// carries the ankle so that the toe reaches its place; the foot keeps its pitch.
+TEST(FootLock, AToeHeldWithoutItsAnkleStandsAtItsPlace) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  constexpr int kLeftToe = 10;
+  const Vec3 pitched = (1.0 / std::hypot(1.0, 0.8)) * Vec3{1, 0, -0.8};
+  const Motion sliding = Standing(
+      [](int frame) {
+        return Vec3{0.01 * frame - 0.1, 0.1, 0.1};
+      },
+      [](int) { return 0.0; }, pitched);
+  const std::vector<float> before = ComputeJoints(skeleton, sliding);
+  Vec3 place{0, 0, 0};
+  for (int frame = 0; frame < sliding.num_frames(); ++frame) {
+    ASSERT_GT(JointAt(before, frame, kLeftAnkle).z, 0.05) << frame;  // the heel is up
+    ASSERT_LT(JointAt(before, frame, kLeftToe).z, 0.05) << frame;    // the toe is down
+    place = place +
+            (1.0 / static_cast<double>(sliding.num_frames())) * JointAt(before, frame, kLeftToe);
+  }
+  FootLockReport report;
+  const Motion locked = LockFeet(skeleton, sliding, {}, &report);
+  EXPECT_EQ(report.unreached, 0);
+  const std::vector<float> joints = ComputeJoints(skeleton, locked);
+  for (int frame = 0; frame < locked.num_frames(); ++frame) {
+    const Vec3 toe = JointAt(joints, frame, kLeftToe);
+    EXPECT_NEAR(toe.x, place.x, 1e-4) << frame;
+    EXPECT_NEAR(toe.y, place.y, 1e-4) << frame;
+    EXPECT_NEAR(toe.z, JointAt(before, frame, kLeftToe).z, 1e-3) << frame;
+    // The foot's direction (ankle to toe) is the motion's own.
+    const Vec3 foot = toe - JointAt(joints, frame, kLeftAnkle);
+    const Vec3 own = JointAt(before, frame, kLeftToe) - JointAt(before, frame, kLeftAnkle);
+    EXPECT_GT(Dot(foot, own) / (Norm(foot) * Norm(own)), 0.9999) << frame;
+  }
+  EXPECT_EQ(EvaluateMotionPlausibility(skeleton, locked).foot_skate_ratio, 0.0);
 }
 
 TEST(FootLock, TheKneeStillBendsOnlyAboutItsHinge) {

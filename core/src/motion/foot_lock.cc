@@ -184,9 +184,15 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       const Vec3 H = P[static_cast<size_t>(hip)], K = P[static_cast<size_t>(knee)],
                  A = P[static_cast<size_t>(ankle)];
       Mat3 g_hip = G[static_cast<size_t>(hip)], g_knee = G[static_cast<size_t>(knee)];
+      const Vec3 T = P[static_cast<size_t>(toe)];
       Vec3 ankle_at = A;
-      if (w_ankle > 0) {
-        const Vec3 wanted_goal = Goal(holds[0], f, A);
+      if (w_ankle > 0 || w_toe > 0) {
+        // The ankle's goal: its place, by its hold's weight. Where it is not fully held and the
+        // toe is (the heel lifts, the foot pivots on its toe), the toe's hold carries the ankle
+        // along, the foot keeping its world orientation, so that the toe stands at its place.
+        Vec3 wanted_goal = Goal(holds[0], f, A);
+        if (w_toe > 0 && w_ankle < 1)
+          wanted_goal = wanted_goal + (1.0 - w_ankle) * (Goal(holds[1], f, T) - T);
         const double l1 = Norm(K - H), l2 = Norm(A - K);
         // Out of the leg's reach, the goal comes horizontally towards the hip, at its own height:
         // a foot that cannot reach its place slides (and the skate counts it) rather than lift
@@ -226,7 +232,6 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       // The foot keeps its world orientation; a held toe turns it to point at the toe's place.
       Mat3 g_ankle = G[static_cast<size_t>(ankle)];
       if (w_toe > 0) {
-        const Vec3 T = P[static_cast<size_t>(toe)];
         const Vec3 to_goal = Goal(holds[1], f, T) - ankle_at;
         if (Norm(to_goal) > 1e-6) g_ankle = RotationBetween(T - A, to_goal) * g_ankle;
       }

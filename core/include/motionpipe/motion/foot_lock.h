@@ -3,7 +3,9 @@
 // of frames is held at one horizontal place over that run (the run's mean), and the leg reaches it
 // by two-bone IK: the knee folds in its own bending plane, the hip swings by the smallest rotation,
 // the ankle keeps the foot's world orientation (turned, where the toe is held too, to point at the
-// toe's place). A place out of the leg's reach is approached horizontally, at the joint's own
+// toe's place); a toe held while its ankle is not (the heel lifts, the foot pivots on its toe)
+// carries the ankle along, the foot's orientation kept, so that the toe stands at its place. A
+// place out of the leg's reach is approached horizontally, at the joint's own
 // height, so that a foot that cannot reach it slides rather than floats. Only the hips', knees'
 // and ankles' local rotations change; the pelvis, its path and
 // the upper body are the motion's own. What the model generated is the input; this is not the
@@ -44,7 +46,7 @@ struct FootLockReport {
   int64_t runs = 0;            // contact runs held
   int64_t unreached = 0;       // held ankle frames the leg could not reach (> 1 cm short)
   double shift = 0;            // m: horizontal distances the held joints were moved, summed
-  double max_reach_error = 0;  // m: the largest distance an ankle stayed from its place
+  double max_reach_error = 0;  // m: the largest distance an ankle stayed from its goal
 
   // Another motion's counts added to these (a stage's total over its motions).
   void Add(const FootLockReport& other);
