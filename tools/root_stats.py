@@ -31,6 +31,15 @@ error (per frame, the leg joints' local rotations relative to the reference's, a
 orientation and translation) is put back on the reference's motions whole, for the legs alone and
 the pelvis alone, and split in time by a Gaussian of 0.1, 0.33 and 1 s into its slower part (the
 smoothed error) and its faster part (the rest); the skate (as the evaluation's) of each.
+
+With --unlocked STAGE_DIR, each stage is a foot_lock stage's output and STAGE_DIR its input: its
+sliding contact foot-frames (the evaluation's count, pooled), for the ankles and the toes, split by
+the lock's runs of contact on the unlocked motions (core's test with the default options): both
+frames inside one run (held, yet the leg did not bring the joint to its place), one frame in a run
+(the run's edge, where the hold fades), neither (the test took the joint for a swing: faster than
+1 m/s or above 5 cm); and the toes' frames inside a run whose ankle was not held.
+
+    /usr/bin/python3 tools/root_stats.py --unlocked out/demo-29/match_sinc out/demo-29/lock_match_sinc
 """
 import argparse
 import glob
@@ -267,6 +276,52 @@ def row(stage_dir, motion_list):
             np.mean(skating), np.mean(grounded), *np.sqrt(squares / max(contacts, 1)), *np.mean(knees, axis=0))
 
 
+LOCK_MAX_SPEED, LOCK_MIN_FRAMES = 1.0, 2  # core's FootLockOptions defaults
+RESIDUAL_KINDS = ("both frames in one held run", "one frame held (a run's edge)", "neither frame held")
+
+
+def held_runs(path, fps):
+    """Per frame [T] the index of the foot_lock test's run of contact holding the joint (-1: none):
+    below CONTACT_HEIGHT, slower than LOCK_MAX_SPEED by a central difference, runs of at least
+    LOCK_MIN_FRAMES frames (core's FindHold with the default options)."""
+    frames = len(path)
+    a, b = np.maximum(np.arange(frames) - 1, 0), np.minimum(np.arange(frames) + 1, frames - 1)
+    speed = np.linalg.norm(path[b, :2] - path[a, :2], axis=-1) * fps / np.maximum(b - a, 1)
+    tested = (path[:, 2] < CONTACT_HEIGHT) & (speed < LOCK_MAX_SPEED)
+    run, count, begin = -np.ones(frames, int), 0, 0
+    while begin < frames:
+        end = begin
+        while end < frames and tested[end]:
+            end += 1
+        if end - begin >= LOCK_MIN_FRAMES:
+            run[begin:end], count = count, count + 1
+        begin = end + 1 if end == begin else end
+    return run
+
+
+def lock_residual(stage_dir, stage_motions, unlocked):
+    """Where a foot_lock stage's sliding contact foot-frames are (pooled fractions of its contact
+    foot-frames, as the evaluation counts them): per joint (ankle, toe) by the lock's runs on the
+    unlocked motions, and of the toes' frames inside a run, those whose ankle was not held."""
+    offsets = leg_offsets()
+    counts, contacts, toes_alone = np.zeros((len(RESIDUAL_KINDS), 2)), 0, 0
+    for (_, trans, rotations, fps), (_, before_trans, before_rotations, _) in zip(stage_motions, unlocked):
+        after, before = feet(trans, rotations, offsets), feet(before_trans, before_rotations, offsets)
+        touching = contact(after, grounded=False)
+        sliding = touching & (np.linalg.norm(np.diff(after[..., :2], axis=0), axis=-1) * fps > SKATE_SPEED)
+        contacts += touching.sum()
+        runs = [held_runs(before[:, joint], fps) for joint in range(before.shape[1])]
+        for joint in range(before.shape[1]):  # feet()'s order: left ankle, left foot, right ankle, right foot
+            run, is_toe = runs[joint], joint % 2
+            for f in np.flatnonzero(sliding[:, joint]):
+                kind = 0 if run[f] >= 0 and run[f] == run[f + 1] else (1 if max(run[f], run[f + 1]) >= 0 else 2)
+                counts[kind, is_toe] += 1
+                toes_alone += kind == 0 and is_toe and min(runs[joint - 1][f], runs[joint - 1][f + 1]) < 0
+    if contacts == 0:
+        sys.exit(f"{stage_dir}: no contact foot-frame")
+    return counts / contacts, toes_alone / contacts
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stages", nargs="+", help="edit, generate or foot_lock stage output directories (out/JOB/STAGE)")
@@ -276,6 +331,10 @@ def main():
                         help="also the leg joints' angle to the motions of the same ids in this stage "
                              "(e.g. mdt_probe --write's target_roundtrip), and the skate of those "
                              "motions carrying each stage's error, by body part and by speed")
+    parser.add_argument("--unlocked", metavar="STAGE_DIR",
+                        help="each stage is a foot_lock stage and STAGE_DIR its input: where its "
+                             "sliding contact foot-frames lie relative to the lock's runs of contact "
+                             "(found as core's test does with the default options)")
     args = parser.parse_args()
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
@@ -305,6 +364,15 @@ def main():
         for stage in args.stages:
             figures = error_band_skates(stage, loaded[stage], references[stage])
             print(f"{stage:<40} " + " ".join(f"{x:>6.3f}" for x in figures))
+    if args.unlocked:
+        print(f"{'stage':<40} sliding, of the contact foot-frames, by the lock's runs on {args.unlocked}: "
+              f"ankles / toes; then toes held without their ankle")
+        for stage in args.stages:
+            unlocked = same_ids(stage, loaded[stage], args.unlocked, stage_files(args.unlocked),
+                                "--unlocked pairs motions by id", "motion")
+            by_kind, toes_alone = lock_residual(stage, loaded[stage], unlocked)
+            print(f"{stage:<40} " + "  ".join(f"{kind}: {a:.3f} / {t:.3f}" for kind, (a, t) in
+                                              zip(RESIDUAL_KINDS, by_kind)) + f"  toe alone: {toes_alone:.3f}")
 
 
 if __name__ == "__main__":

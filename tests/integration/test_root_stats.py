@@ -176,6 +176,34 @@ class RootStatsTest(unittest.TestCase):
         self.assertNotEqual(result.returncode, 0)
         self.assertIn(self.path("singles") + ": no span c", result.stderr)
 
+    def test_unlocked_places_the_sliding_foot_frames_by_the_locks_runs(self):
+        # Upright and rigid on the floor (as above): every foot joint is in contact. Slower than the
+        # lock's 1 m/s, the whole motion is one run of contact for each joint, and a lock output
+        # that still slides does so inside its runs; at 2 m/s the lock's test holds nothing.
+        legs = 0.3936 + 0.4324
+        def slide(speed):
+            walk = np.zeros((6, 3))
+            walk[:, 0] = speed / 10.0 * np.arange(6)
+            walk[:, 2] = legs + 0.01
+            return walk
+        upright = [np.pi / 2, 0.0, 0.0]
+        for name, speed, kind in [("slow", 0.5, "both frames in one held run"), ("fast", 2.0, "neither frame held")]:
+            write_edits(self.path(name + "_before"), [slide(speed)], pelvis=upright, ids=["a"])
+            write_edits(self.path(name + "_after"), [slide(speed)], pelvis=upright, ids=["a"])
+            result = run("--unlocked", self.path(name + "_before"), self.path(name + "_after"))
+            self.assertEqual(result.returncode, 0, result.stderr)
+            line = result.stdout.splitlines()[-1]
+            self.assertTrue(line.startswith(self.path(name + "_after")), line)
+            for other in ("both frames in one held run", "one frame held (a run's edge)", "neither frame held"):
+                expected = "0.500 / 0.500" if other == kind else "0.000 / 0.000"  # ankles / toes
+                self.assertIn(f"{other}: {expected}", line, name)
+            self.assertTrue(line.endswith("toe alone: 0.000"), line)
+        # The motions are paired by id: an id the unlocked stage lacks is named.
+        write_edits(self.path("other"), [slide(0.5)], pelvis=upright, ids=["b"])
+        result = run("--unlocked", self.path("other"), self.path("slow_after"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn(self.path("other") + ": no motion a", result.stderr)
+
     def test_what_is_not_an_edit_output_is_named(self):
         os.makedirs(self.path("empty"))
         result = run(self.path("empty"))
