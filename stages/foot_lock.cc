@@ -59,6 +59,7 @@ class FootLockStage : public StageExecutor {
                           {"unreached_ankle_frames", layout.unreached},
                           {"mean_shift_m", layout.MeanShift()},
                           {"max_reach_error_m", layout.max_reach_error},
+                          {"max_pelvis_lowered_m", layout.max_lowered},
                           {"options", FootLockOptionsToJson(options)}};
       all.Add(layout);
       layout = FootLockReport{};

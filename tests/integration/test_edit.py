@@ -503,8 +503,9 @@ class EditTest(EngineTest):
         self.assertTrue(np.array_equal(edits("planted_never"), edits("guided")))
         self.assertFalse(np.array_equal(edits("planted"), edits("guided")))
         self.assertTrue(np.isfinite(edits("planted")).all())
-        # foot_lock: the same edits with only the legs' rotations changed (hips, knees, ankles),
-        # scored as a row of their own, never skating more than the raw edits.
+        # foot_lock: the same edits with only the legs' rotations changed (hips, knees, ankles) and
+        # the pelvis at most 10 cm lower (where a held foot is out of reach), scored as a row of
+        # their own, never skating more than the raw edits.
         def by_clip(pattern):
             into = {}
             for path in glob.glob(os.path.join(pattern, "task-*", "edited.npz")):
@@ -518,7 +519,9 @@ class EditTest(EngineTest):
         def only_legs_changed(raw, locked):
             self.assertEqual(sorted(locked), sorted(raw))
             for clip, (poses, trans) in locked.items():
-                self.assertTrue(np.array_equal(trans, raw[clip][1]), clip)
+                self.assertTrue(np.array_equal(trans[:, :2], raw[clip][1][:, :2]), clip)
+                lowered = raw[clip][1][:, 2] - trans[:, 2]
+                self.assertTrue(((lowered >= 0) & (lowered <= 0.1 + 1e-6)).all(), (clip, lowered.min(), lowered.max()))
                 self.assertLess(np.abs(rotation_matrices(poses[:, others]) - rotation_matrices(raw[clip][0][:, others])).max(), 1e-5)
         raw, locked = by_clip(os.path.join(job, "edit_mdt")), by_clip(self.path("judges", "judges-*", "locked"))
         only_legs_changed(raw, locked)

@@ -276,6 +276,7 @@ TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
   FootLockReport report;
   FootLockOptions options;
   options.max_speed = 2;
+  options.lower_pelvis = 0;  // the pelvis is the motion's own
   const Motion locked = LockFeet(skeleton, dragging, options, &report);
   EXPECT_GT(report.unreached, 0);
   EXPECT_GT(report.max_reach_error, 0.01);
@@ -287,6 +288,60 @@ TEST(FootLock, AnAnkleOutOfReachIsCountedNotStretched) {
         << frame;
   // Bone lengths are the skeleton's by construction (rotations only).
   EXPECT_LT(EvaluateMotionPlausibility(skeleton, locked).bone_length_error, 1e-5);
+}
+
+// A foot dragged under a pelvis that walks 0.75 m at 0.78 m/s, a little too far for the leg to
+// reach the run's place from its ends: with lower_pelvis the pelvis comes down, smoothly and no
+// further than allowed, until the ankle reaches; the pelvis's path across the floor and the upper
+// body's pose are the motion's.
+TEST(FootLock, ThePelvisComesDownForAFootOutOfReach) {
+  const Skeleton& skeleton = Skeleton::Smpl22();
+  const auto pelvis_x = [](int frame) { return 0.026 * frame - 0.3; };
+  const Motion dragging = Standing(
+      [&](int frame) {
+        return Vec3{pelvis_x(frame), 0.1, 0.03};
+      },
+      pelvis_x);
+  FootLockOptions options;
+  options.max_speed = 2;
+  options.lower_pelvis = 0;
+  FootLockReport kept;
+  LockFeet(skeleton, dragging, options, &kept);
+  ASSERT_GT(kept.unreached, 0);  // out of reach with the pelvis where it was
+  options.lower_pelvis = 0.1;
+  FootLockReport report;
+  const Motion locked = LockFeet(skeleton, dragging, options, &report);
+  EXPECT_EQ(report.unreached, 0);
+  EXPECT_GT(report.max_lowered, 0.0);
+  EXPECT_LE(report.max_lowered, 0.1);
+  EXPECT_EQ(EvaluateMotionPlausibility(skeleton, locked).foot_skate_ratio, 0.0);
+  const std::vector<float> before = ComputeJoints(skeleton, dragging);
+  const std::vector<float> after = ComputeJoints(skeleton, locked);
+  double previous_step = 0;
+  for (int frame = 0; frame < locked.num_frames(); ++frame) {
+    const Vec3 was = dragging.Translation(frame), now = locked.Translation(frame);
+    EXPECT_EQ(now.x, was.x);
+    EXPECT_EQ(now.y, was.y);
+    const double down = was.z - now.z;
+    EXPECT_GE(down, 0.0) << frame;
+    EXPECT_LE(down, 0.1 + 1e-9) << frame;
+    // The head comes down with the pelvis, by as much.
+    EXPECT_NEAR(Norm(JointAt(after, frame, 15) - (JointAt(before, frame, 15) - Vec3{0, 0, down})),
+                0.0, 1e-5)
+        << frame;
+    // The ankle stays at its own height.
+    EXPECT_NEAR(JointAt(after, frame, kLeftAnkle).z, JointAt(before, frame, kLeftAnkle).z, 1e-5)
+        << frame;
+    // Smoothly: the lowering's frame-to-frame change itself changes by under 5 mm a frame.
+    if (frame > 0) {
+      const double step =
+          down - (dragging.Translation(frame - 1).z - locked.Translation(frame - 1).z);
+      if (frame > 1) {
+        EXPECT_LT(std::abs(step - previous_step), 0.005) << frame;
+      }
+      previous_step = step;
+    }
+  }
 }
 
 TEST(FootLock, OptionsFromAMapNameTheBadKey) {

@@ -99,7 +99,8 @@ nlohmann::json FootLockOptionsToJson(const FootLockOptions& o) {
   return {{"contact_height", o.contact_height},
           {"max_speed", o.max_speed},
           {"min_frames", o.min_frames},
-          {"blend_seconds", o.blend_seconds}};
+          {"blend_seconds", o.blend_seconds},
+          {"lower_pelvis", o.lower_pelvis}};
 }
 
 Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const std::string& origin,
@@ -114,6 +115,7 @@ Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const s
     o.max_speed = p.value("max_speed", o.max_speed);
     o.min_frames = p.value("min_frames", o.min_frames);
     o.blend_seconds = p.value("blend_seconds", o.blend_seconds);
+    o.lower_pelvis = p.value("lower_pelvis", o.lower_pelvis);
   } catch (const nlohmann::json::exception& e) {
     return InvalidArgument(origin + ": " + e.what());
   }
@@ -121,6 +123,8 @@ Result<FootLockOptions> FootLockOptionsFromJson(const nlohmann::json& p, const s
   if (!(o.max_speed > 0)) return InvalidArgument(origin + ".max_speed: must be > 0 m/s");
   if (o.min_frames < 1) return InvalidArgument(origin + ".min_frames: must be >= 1");
   if (!(o.blend_seconds >= 0)) return InvalidArgument(origin + ".blend_seconds: must be >= 0");
+  if (!(o.lower_pelvis >= 0 && o.lower_pelvis <= 0.5))
+    return InvalidArgument(origin + ".lower_pelvis: must be in [0, 0.5] m");
   return o;
 }
 
@@ -130,6 +134,7 @@ void FootLockReport::Add(const FootLockReport& other) {
   unreached += other.unreached;
   shift += other.shift;
   max_reach_error = std::max(max_reach_error, other.max_reach_error);
+  max_lowered = std::max(max_lowered, other.max_lowered);
 }
 
 Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOptions& options,
@@ -153,18 +158,14 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
                            position[static_cast<size_t>(f)].data());
   }
   FootLockReport counts;
+  // Each side's holds: [side][0] the ankle's, [side][1] the toe's.
+  std::array<std::array<Hold, 2>, 2> holds;
   for (size_t side = 0; side < feet.size(); ++side) {
-    const auto& foot = feet[side];
-    const int ankle = foot[0], toe = foot[1];
-    const int knee = parents[static_cast<size_t>(ankle)];
-    const int hip = parents[static_cast<size_t>(knee)];
-    const int pelvis = parents[static_cast<size_t>(hip)];
-    std::array<Hold, 2> holds;
     for (int k = 0; k < 2; ++k) {
+      const int joint = feet[side][static_cast<size_t>(k)];
       std::vector<Vec3> path(static_cast<size_t>(frames));
       for (int64_t f = 0; f < frames; ++f)
-        path[static_cast<size_t>(f)] =
-            position[static_cast<size_t>(f)][static_cast<size_t>(foot[k])];
+        path[static_cast<size_t>(f)] = position[static_cast<size_t>(f)][static_cast<size_t>(joint)];
       std::vector<char> given;
       if (contacts) {
         given.resize(static_cast<size_t>(frames));
@@ -172,27 +173,95 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
           given[static_cast<size_t>(f)] =
               (*contacts)[static_cast<size_t>(f * 4) + side * 2 + static_cast<size_t>(k)] != 0;
       }
-      holds[static_cast<size_t>(k)] =
+      holds[side][static_cast<size_t>(k)] =
           FindHold(path, motion.fps, options, contacts ? &given : nullptr, &counts);
     }
+  }
+  // The ankle's goal at a frame, in the world: its place, by its hold's weight; where it is not
+  // fully held and the toe is (the heel lifts, the foot pivots on its toe), the toe's hold carries
+  // the ankle along, the foot keeping its world orientation, so that the toe stands at its place.
+  const auto ankle_goal = [&](size_t side, int64_t f) {
+    const auto& P = position[static_cast<size_t>(f)];
+    const Vec3 A = P[static_cast<size_t>(feet[side][0])], T = P[static_cast<size_t>(feet[side][1])];
+    const double w_ankle = holds[side][0].weight[static_cast<size_t>(f)];
+    Vec3 goal = Goal(holds[side][0], f, A);
+    if (holds[side][1].weight[static_cast<size_t>(f)] > 0 && w_ankle < 1)
+      goal = goal + (1.0 - w_ankle) * (Goal(holds[side][1], f, T) - T);
+    return goal;
+  };
+  const auto held = [&](size_t side, int64_t f) {
+    return holds[side][0].weight[static_cast<size_t>(f)] > 0 ||
+           holds[side][1].weight[static_cast<size_t>(f)] > 0;
+  };
+  // With lower_pelvis, the pelvis comes down (at most that far) where a held foot's goal is out of
+  // its leg's reach, by what brings it within reach, smoothly: the drop each frame needs, widened
+  // by twice the blend and averaged twice over the blend's width on each side, is at least the
+  // need at every frame and has no step. Every foot that is not held keeps its place in the world.
+  std::vector<double> lowered(static_cast<size_t>(frames), 0.0);
+  if (options.lower_pelvis > 0) {
+    std::vector<double> need(static_cast<size_t>(frames), 0.0);
     for (int64_t f = 0; f < frames; ++f) {
-      const double w_ankle = holds[0].weight[static_cast<size_t>(f)];
-      const double w_toe = holds[1].weight[static_cast<size_t>(f)];
-      if (w_ankle <= 0 && w_toe <= 0) continue;
+      for (size_t side = 0; side < feet.size(); ++side) {
+        if (!held(side, f)) continue;
+        const auto& P = position[static_cast<size_t>(f)];
+        const int ankle = feet[side][0], knee = parents[static_cast<size_t>(ankle)],
+                  hip = parents[static_cast<size_t>(knee)];
+        const Vec3 H = P[static_cast<size_t>(hip)], K = P[static_cast<size_t>(knee)],
+                   A = P[static_cast<size_t>(ankle)];
+        const double reach = (Norm(K - H) + Norm(A - K)) * 0.9999;
+        const Vec3 goal = ankle_goal(side, f);
+        const double across = std::hypot(goal.x - H.x, goal.y - H.y);
+        const double drop = across < reach
+                                ? (H.z - goal.z) - std::sqrt(reach * reach - across * across)
+                                : options.lower_pelvis;
+        need[static_cast<size_t>(f)] =
+            std::max(need[static_cast<size_t>(f)], std::clamp(drop, 0.0, options.lower_pelvis));
+      }
+    }
+    const auto r = std::max<int64_t>(1, std::lround(options.blend_seconds * motion.fps));
+    const auto window = [&](const std::vector<double>& in, int64_t radius, bool widest) {
+      std::vector<double> result(in.size(), 0.0);
+      for (int64_t f = 0; f < frames; ++f) {
+        double acc = 0;
+        for (int64_t g = f - radius; g <= f + radius; ++g) {
+          const double v = in[static_cast<size_t>(std::clamp<int64_t>(g, 0, frames - 1))];
+          acc = widest ? std::max(acc, v) : acc + v / static_cast<double>(2 * radius + 1);
+        }
+        result[static_cast<size_t>(f)] = acc;
+      }
+      return result;
+    };
+    lowered = window(window(window(need, 2 * r, true), r, false), r, false);
+    for (int64_t f = 0; f < frames; ++f) {
+      const double d = lowered[static_cast<size_t>(f)];
+      counts.max_lowered = std::max(counts.max_lowered, d);
+      if (d <= 0) continue;
+      Vec3 t = out.Translation(f);
+      t.z -= d;
+      out.SetTranslation(f, t);
+    }
+  }
+  for (size_t side = 0; side < feet.size(); ++side) {
+    const auto& foot = feet[side];
+    const int ankle = foot[0], toe = foot[1];
+    const int knee = parents[static_cast<size_t>(ankle)];
+    const int hip = parents[static_cast<size_t>(knee)];
+    const int pelvis = parents[static_cast<size_t>(hip)];
+    for (int64_t f = 0; f < frames; ++f) {
+      const double w_ankle = holds[side][0].weight[static_cast<size_t>(f)];
+      const double w_toe = holds[side][1].weight[static_cast<size_t>(f)];
+      const double down = lowered[static_cast<size_t>(f)];
+      if (!held(side, f) && down <= 0) continue;
       const auto& G = global[static_cast<size_t>(f)];
       const auto& P = position[static_cast<size_t>(f)];
-      const Vec3 H = P[static_cast<size_t>(hip)], K = P[static_cast<size_t>(knee)],
-                 A = P[static_cast<size_t>(ankle)];
+      // The leg as it hangs from the (lowered) pelvis; the goals are in the world.
+      const Vec3 lower{0, 0, down};
+      const Vec3 H = P[static_cast<size_t>(hip)] - lower, K = P[static_cast<size_t>(knee)] - lower,
+                 A = P[static_cast<size_t>(ankle)] - lower, T = P[static_cast<size_t>(toe)] - lower;
       Mat3 g_hip = G[static_cast<size_t>(hip)], g_knee = G[static_cast<size_t>(knee)];
-      const Vec3 T = P[static_cast<size_t>(toe)];
       Vec3 ankle_at = A;
-      if (w_ankle > 0 || w_toe > 0) {
-        // The ankle's goal: its place, by its hold's weight. Where it is not fully held and the
-        // toe is (the heel lifts, the foot pivots on its toe), the toe's hold carries the ankle
-        // along, the foot keeping its world orientation, so that the toe stands at its place.
-        Vec3 wanted_goal = Goal(holds[0], f, A);
-        if (w_toe > 0 && w_ankle < 1)
-          wanted_goal = wanted_goal + (1.0 - w_ankle) * (Goal(holds[1], f, T) - T);
+      {
+        const Vec3 wanted_goal = ankle_goal(side, f);
         const double l1 = Norm(K - H), l2 = Norm(A - K);
         // Out of the leg's reach, the goal comes horizontally towards the hip, at its own height:
         // a foot that cannot reach its place slides (and the skate counts it) rather than lift
@@ -232,7 +301,7 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       // The foot keeps its world orientation; a held toe turns it to point at the toe's place.
       Mat3 g_ankle = G[static_cast<size_t>(ankle)];
       if (w_toe > 0) {
-        const Vec3 to_goal = Goal(holds[1], f, T) - ankle_at;
+        const Vec3 to_goal = Goal(holds[side][1], f, P[static_cast<size_t>(toe)]) - ankle_at;
         if (Norm(to_goal) > 1e-6) g_ankle = RotationBetween(T - A, to_goal) * g_ankle;
       }
       out.SetLocalRotation(f, ankle, Transpose(g_knee) * g_ankle);
