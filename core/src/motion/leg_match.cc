@@ -31,6 +31,30 @@ std::array<std::array<int, 4>, 2> LegJoints(const Skeleton& skeleton) {
   return legs;
 }
 
+// The knees' and ankles' places relative to the pelvis, heading removed (the features' leg
+// columns before the low-pass; the database's join between windows), by forward kinematics from
+// the pelvis's local rotation and each leg's hip and knee rotations (left hip, left knee, right
+// hip, right knee).
+std::array<float, 3 * kPlacedJoints> LegPlaces(const Skeleton& skeleton, const Mat3& pelvis,
+                                               const std::array<Mat3, 4>& hips_and_knees) {
+  std::array<float, 3 * kPlacedJoints> out{};
+  const auto& offsets = skeleton.rest_offsets();
+  const Mat3 unturned = RemoveHeading(pelvis);
+  size_t c = 0, r = 0;
+  for (const auto& leg : LegJoints(skeleton)) {
+    Mat3 global = unturned;
+    Vec3 place = global * offsets[static_cast<size_t>(leg[0])];
+    for (size_t k = 1; k <= 2; ++k) {  // knee, ankle
+      global = global * hips_and_knees[r++];
+      place = place + global * offsets[static_cast<size_t>(leg[k])];
+      out[c++] = static_cast<float>(place.x);
+      out[c++] = static_cast<float>(place.y);
+      out[c++] = static_cast<float>(place.z);
+    }
+  }
+  return out;
+}
+
 // x filtered along time by a Gaussian of sigma frames, the ends repeated ([T, width] rows).
 void Smooth(std::vector<float>& x, int64_t frames, int width, int column, int columns,
             double sigma) {
@@ -80,11 +104,6 @@ std::vector<float> LegMatchFeatures(const Skeleton& skeleton, const Motion& moti
   const int64_t frames = motion.num_frames();
   std::vector<float> out(static_cast<size_t>(frames * kFeatures), 0.0f);
   if (frames == 0) return out;
-  const std::vector<float> joints = ComputeJoints(skeleton, motion);
-  const auto joint = [&](int64_t f, int j) {
-    const float* p = &joints[static_cast<size_t>((f * kNumJoints + j) * 3)];
-    return Vec3{p[0], p[1], p[2]};
-  };
   std::vector<double> heading(static_cast<size_t>(frames));
   for (int64_t f = 0; f < frames; ++f) {
     heading[static_cast<size_t>(f)] = HeadingZYX(motion.LocalRotation(f, 0));
@@ -112,15 +131,11 @@ std::vector<float> LegMatchFeatures(const Skeleton& skeleton, const Motion& moti
     row[2] = static_cast<float>(
         derivative(f, [&](int64_t g) { return heading[static_cast<size_t>(g)]; }));
     row[3] = static_cast<float>(motion.Translation(f).z);
-    const Vec3 pelvis = joint(f, 0);
-    int c = kPathFeatures;
-    for (const auto& leg : legs)
-      for (int k = 1; k <= 2; ++k) {  // knee, ankle
-        const Vec3 p = unturn * (joint(f, leg[static_cast<size_t>(k)]) - pelvis);
-        row[c++] = static_cast<float>(p.x);
-        row[c++] = static_cast<float>(p.y);
-        row[c++] = static_cast<float>(p.z);
-      }
+    const auto places =
+        LegPlaces(skeleton, motion.LocalRotation(f, 0),
+                  {motion.LocalRotation(f, legs[0][0]), motion.LocalRotation(f, legs[0][1]),
+                   motion.LocalRotation(f, legs[1][0]), motion.LocalRotation(f, legs[1][1])});
+    std::copy(places.begin(), places.end(), row + kPathFeatures);
   }
   Smooth(out, frames, 3 * kPlacedJoints, kPathFeatures, kFeatures, sigma_seconds * motion.fps);
   return out;
@@ -169,28 +184,14 @@ LegDatabase::LegDatabase(const Skeleton& skeleton, const LegMatchOptions& option
     : skeleton_(&skeleton), options_(options) {}
 
 std::array<float, LegDatabase::kPlaces> LegDatabase::PlacesAt(int64_t frame) const {
-  // The knees' and ankles' places relative to the pelvis, heading removed: the features' leg
-  // columns before the low-pass (LegMatchFeatures computes the same through ComputeJoints).
-  std::array<float, kPlaces> out{};
   const float* p = &pelvis_[static_cast<size_t>(frame * 3)];
-  const Mat3 pelvis = RemoveHeading(AxisAngleToMatrix({p[0], p[1], p[2]}));
-  const float* legs = &legs_[static_cast<size_t>(frame * 24)];
-  const auto& offsets = skeleton_->rest_offsets();
-  size_t c = 0;
-  for (const auto& leg : LegJoints(*skeleton_)) {
-    Mat3 global = pelvis;
-    Vec3 place = global * offsets[static_cast<size_t>(leg[0])];
-    for (size_t k = 1; k <= 2; ++k) {  // knee, ankle
-      const float* r = legs + 3 * (k - 1);
-      global = global * AxisAngleToMatrix({r[0], r[1], r[2]});
-      place = place + global * offsets[static_cast<size_t>(leg[k])];
-      out[c++] = static_cast<float>(place.x);
-      out[c++] = static_cast<float>(place.y);
-      out[c++] = static_cast<float>(place.z);
-    }
-    legs += 12;
-  }
-  return out;
+  const float* legs = &legs_[static_cast<size_t>(frame * 24)];  // per side hip, knee, ankle, toe
+  const auto rotation = [&](int side, int k) {
+    const float* r = legs + 12 * side + 3 * k;
+    return AxisAngleToMatrix({r[0], r[1], r[2]});
+  };
+  return LegPlaces(*skeleton_, AxisAngleToMatrix({p[0], p[1], p[2]}),
+                   {rotation(0, 0), rotation(0, 1), rotation(1, 0), rotation(1, 1)});
 }
 
 Status LegDatabase::Add(const Motion& motion, const std::string& origin) {
