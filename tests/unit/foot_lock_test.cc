@@ -355,6 +355,9 @@ TEST(FootLock, OptionsFromAMapNameTheBadKey) {
   const auto negative = FootLockOptionsFromJson(nlohmann::json{{"max_speed", -1}}, "stage.params");
   ASSERT_FALSE(negative.ok());
   EXPECT_EQ(negative.status().message(), "stage.params.max_speed: must be > 0 m/s");
+  const auto deep = FootLockOptionsFromJson(nlohmann::json{{"lower_pelvis", 0.8}}, "stage.params");
+  ASSERT_FALSE(deep.ok());
+  EXPECT_EQ(deep.status().message(), "stage.params.lower_pelvis: must be in [0, 0.5] m");
   const auto text = FootLockOptionsFromJson(nlohmann::json{{"min_frames", "two"}}, "x");
   ASSERT_FALSE(text.ok());
   EXPECT_EQ(text.status().message().rfind("x: ", 0), 0u) << text.status().message();
@@ -370,6 +373,7 @@ TEST(FootLock, OptionsFromAMapNameTheBadKey) {
   changed.max_speed = 2.5;
   changed.min_frames = 3;
   changed.blend_seconds = 0.2;
+  changed.lower_pelvis = 0.05;
   const auto back = FootLockOptionsFromJson(FootLockOptionsToJson(changed), "x");
   ASSERT_TRUE(back.ok()) << back.status().message();
   EXPECT_EQ(FootLockOptionsToJson(*back), FootLockOptionsToJson(changed));
