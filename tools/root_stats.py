@@ -302,11 +302,13 @@ def held_runs(path, fps):
 def lock_residual(stage_dir, stage_motions, unlocked):
     """Where a foot_lock stage's sliding contact foot-frames are (pooled fractions of its contact
     foot-frames, as the evaluation counts them): per joint (ankle, toe) by the lock's runs on the
-    unlocked motions, and of the toes' frames inside a run, those whose ankle was not held."""
+    unlocked motions (paired by id), and of the toes' frames inside a run, those whose ankle is
+    outside a run of its own at either frame."""
     offsets = leg_offsets()
     counts, contacts, toes_alone = np.zeros((len(RESIDUAL_KINDS), 2)), 0, 0
-    for (_, trans, rotations, fps), (_, before_trans, before_rotations, _) in zip(stage_motions, unlocked):
-        after, before = feet(trans, rotations, offsets), feet(before_trans, before_rotations, offsets)
+    unlocked = {i: (trans, rotations) for i, trans, rotations, _ in unlocked}
+    for i, trans, rotations, fps in stage_motions:
+        after, before = feet(trans, rotations, offsets), feet(*unlocked[i], offsets)
         touching = contact(after, grounded=False)
         sliding = touching & (np.linalg.norm(np.diff(after[..., :2], axis=0), axis=-1) * fps > SKATE_SPEED)
         contacts += touching.sum()

@@ -188,14 +188,16 @@ class RootStatsTest(unittest.TestCase):
             return walk
         upright = [np.pi / 2, 0.0, 0.0]
         for name, speed, kind in [("slow", 0.5, "both frames in one held run"), ("fast", 2.0, "neither frame held")]:
-            write_edits(self.path(name + "_before"), [slide(speed)], pelvis=upright, ids=["a"])
-            write_edits(self.path(name + "_after"), [slide(speed)], pelvis=upright, ids=["a"])
+            # Beside it a body standing still (contact, never sliding), in the other order in the
+            # unlocked stage: motions pair by id, and half the contact frames are its.
+            write_edits(self.path(name + "_before"), [slide(0.0), slide(speed)], pelvis=upright, ids=["z", "a"])
+            write_edits(self.path(name + "_after"), [slide(speed), slide(0.0)], pelvis=upright, ids=["a", "z"])
             result = run("--unlocked", self.path(name + "_before"), self.path(name + "_after"))
             self.assertEqual(result.returncode, 0, result.stderr)
             line = result.stdout.splitlines()[-1]
             self.assertTrue(line.startswith(self.path(name + "_after")), line)
             for other in ("both frames in one held run", "one frame held (a run's edge)", "neither frame held"):
-                expected = "0.500 / 0.500" if other == kind else "0.000 / 0.000"  # ankles / toes
+                expected = "0.250 / 0.250" if other == kind else "0.000 / 0.000"  # ankles / toes
                 self.assertIn(f"{other}: {expected}", line, name)
             self.assertTrue(line.endswith("toe alone: 0.000"), line)
         # The motions are paired by id: an id the unlocked stage lacks is named.
