@@ -93,6 +93,67 @@ Vec3 Goal(const Hold& hold, int64_t frame, const Vec3& own) {
   return {own.x + w * (place.x - own.x), own.y + w * (place.y - own.y), own.z};
 }
 
+// A leg reaches at most its length, a hair short of straight (acos stays defined).
+constexpr double kReachMargin = 0.9999;
+
+// The pelvis's drop over the motion from each frame's need: widened by 2r frames, then averaged
+// twice over r frames on each side (the ends repeated). It is at least the need at every frame
+// (every value the averages read at frame f lies within 2r of f) and has no step.
+std::vector<double> SmoothLowering(const std::vector<double>& need, int64_t r) {
+  const auto frames = static_cast<int64_t>(need.size());
+  const auto window = [&](const std::vector<double>& in, int64_t radius, bool widest) {
+    std::vector<double> result(in.size(), 0.0);
+    for (int64_t f = 0; f < frames; ++f) {
+      double acc = 0;
+      for (int64_t g = f - radius; g <= f + radius; ++g) {
+        const double v = in[static_cast<size_t>(std::clamp<int64_t>(g, 0, frames - 1))];
+        acc = widest ? std::max(acc, v) : acc + v / static_cast<double>(2 * radius + 1);
+      }
+      result[static_cast<size_t>(f)] = acc;
+    }
+    return result;
+  };
+  return window(window(window(need, 2 * r, true), r, false), r, false);
+}
+
+struct Reached {
+  Mat3 g_hip, knee_local;  // the hip's global rotation, the knee's local one
+  Vec3 ankle;              // where the ankle ends
+};
+
+// Two-bone IK: the hip (H, global rotation g_hip) and knee (K, g_knee) that bring the ankle (A)
+// to `wanted`. Out of the leg's reach, the goal comes horizontally towards the hip, at its own
+// height: a foot that cannot reach its place slides (and the skate counts it) rather than lift
+// off the floor along the hip-to-goal line.
+Reached ReachAnkle(const Vec3& H, const Vec3& K, const Vec3& A, const Mat3& g_hip,
+                   const Mat3& g_knee, const Vec3& wanted) {
+  const double l1 = Norm(K - H), l2 = Norm(A - K);
+  Vec3 goal = wanted;
+  const double reach = (l1 + l2) * kReachMargin, drop = goal.z - H.z;
+  const double across = std::hypot(goal.x - H.x, goal.y - H.y);
+  const double across_max = std::sqrt(std::max(0.0, reach * reach - drop * drop));
+  if (across > across_max) {
+    goal.x = H.x + (goal.x - H.x) * across_max / across;
+    goal.y = H.y + (goal.y - H.y) * across_max / across;
+  }
+  const double d = std::clamp(Norm(goal - H), std::abs(l1 - l2) + 1e-6, reach);
+  // The knee's bend (angle between thigh and shin) that puts the ankle at distance d from the
+  // hip, by the law of cosines; the knee turns about its bending plane's normal.
+  const Vec3 thigh = (1.0 / l1) * (K - H), shin = (1.0 / l2) * (A - K);
+  const double bend = std::acos(std::clamp(Dot(thigh, shin), -1.0, 1.0));
+  const double wanted_bend =
+      std::acos(std::clamp((d * d - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1.0, 1.0));
+  Vec3 normal = Cross(thigh, shin);
+  // A straight leg has no bending plane: SMPL's knee flexes about its parent's x axis.
+  if (Norm(normal) < 1e-6) normal = g_hip * Vec3{1, 0, 0};
+  const Mat3 fold = AxisAngleToMatrix(((wanted_bend - bend) / Norm(normal)) * normal);
+  const Mat3 knee_local = Transpose(g_hip) * (fold * g_knee);
+  const Vec3 folded = K + fold * (A - K);
+  // The hip swings by the smallest rotation that points the folded leg at the goal.
+  const Mat3 swing = RotationBetween(folded - H, goal - H);
+  return {swing * g_hip, knee_local, H + swing * (folded - H)};
+}
+
 }  // namespace
 
 nlohmann::json FootLockOptionsToJson(const FootLockOptions& o) {
@@ -208,7 +269,7 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
                   hip = parents[static_cast<size_t>(knee)];
         const Vec3 H = P[static_cast<size_t>(hip)], K = P[static_cast<size_t>(knee)],
                    A = P[static_cast<size_t>(ankle)];
-        const double reach = (Norm(K - H) + Norm(A - K)) * 0.9999;
+        const double reach = (Norm(K - H) + Norm(A - K)) * kReachMargin;
         const Vec3 goal = ankle_goal(side, f);
         const double across = std::hypot(goal.x - H.x, goal.y - H.y);
         const double drop = across < reach
@@ -218,20 +279,8 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
             std::max(need[static_cast<size_t>(f)], std::clamp(drop, 0.0, options.lower_pelvis));
       }
     }
-    const auto r = std::max<int64_t>(1, std::lround(options.blend_seconds * motion.fps));
-    const auto window = [&](const std::vector<double>& in, int64_t radius, bool widest) {
-      std::vector<double> result(in.size(), 0.0);
-      for (int64_t f = 0; f < frames; ++f) {
-        double acc = 0;
-        for (int64_t g = f - radius; g <= f + radius; ++g) {
-          const double v = in[static_cast<size_t>(std::clamp<int64_t>(g, 0, frames - 1))];
-          acc = widest ? std::max(acc, v) : acc + v / static_cast<double>(2 * radius + 1);
-        }
-        result[static_cast<size_t>(f)] = acc;
-      }
-      return result;
-    };
-    lowered = window(window(window(need, 2 * r, true), r, false), r, false);
+    lowered =
+        SmoothLowering(need, std::max<int64_t>(1, std::lround(options.blend_seconds * motion.fps)));
     for (int64_t f = 0; f < frames; ++f) {
       const double d = lowered[static_cast<size_t>(f)];
       counts.max_lowered = std::max(counts.max_lowered, d);
@@ -258,46 +307,16 @@ Motion LockFeet(const Skeleton& skeleton, const Motion& motion, const FootLockOp
       const Vec3 lower{0, 0, down};
       const Vec3 H = P[static_cast<size_t>(hip)] - lower, K = P[static_cast<size_t>(knee)] - lower,
                  A = P[static_cast<size_t>(ankle)] - lower, T = P[static_cast<size_t>(toe)] - lower;
-      Mat3 g_hip = G[static_cast<size_t>(hip)], g_knee = G[static_cast<size_t>(knee)];
-      Vec3 ankle_at = A;
-      {
-        const Vec3 wanted_goal = ankle_goal(side, f);
-        const double l1 = Norm(K - H), l2 = Norm(A - K);
-        // Out of the leg's reach, the goal comes horizontally towards the hip, at its own height:
-        // a foot that cannot reach its place slides (and the skate counts it) rather than lift
-        // off the floor along the hip-to-goal line.
-        Vec3 goal = wanted_goal;
-        const double reach = (l1 + l2) * 0.9999, drop = goal.z - H.z;
-        const double across = std::hypot(goal.x - H.x, goal.y - H.y);
-        const double across_max = std::sqrt(std::max(0.0, reach * reach - drop * drop));
-        if (across > across_max) {
-          goal.x = H.x + (goal.x - H.x) * across_max / across;
-          goal.y = H.y + (goal.y - H.y) * across_max / across;
-        }
-        const double d = std::clamp(Norm(goal - H), std::abs(l1 - l2) + 1e-6, reach);
-        // The knee's bend (angle between thigh and shin) that puts the ankle at distance d from
-        // the hip, by the law of cosines; the knee turns about its bending plane's normal.
-        const Vec3 thigh = (1.0 / l1) * (K - H), shin = (1.0 / l2) * (A - K);
-        const double bend = std::acos(std::clamp(Dot(thigh, shin), -1.0, 1.0));
-        const double wanted =
-            std::acos(std::clamp((d * d - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1.0, 1.0));
-        Vec3 normal = Cross(thigh, shin);
-        // A straight leg has no bending plane: SMPL's knee flexes about its parent's x axis.
-        if (Norm(normal) < 1e-6) normal = g_hip * Vec3{1, 0, 0};
-        const Mat3 fold = AxisAngleToMatrix(((wanted - bend) / Norm(normal)) * normal);
-        const Mat3 knee_local = Transpose(g_hip) * (fold * g_knee);
-        const Vec3 folded = K + fold * (A - K);
-        // The hip swings by the smallest rotation that points the folded leg at the goal.
-        const Mat3 swing = RotationBetween(folded - H, goal - H);
-        g_hip = swing * g_hip;
-        g_knee = g_hip * knee_local;
-        ankle_at = H + swing * (folded - H);
-        const double missed = Norm(ankle_at - wanted_goal);
-        counts.max_reach_error = std::max(counts.max_reach_error, missed);
-        if (w_ankle >= 1 && missed > 0.01) ++counts.unreached;
-        out.SetLocalRotation(f, hip, Transpose(G[static_cast<size_t>(pelvis)]) * g_hip);
-        out.SetLocalRotation(f, knee, knee_local);
-      }
+      const Vec3 wanted_goal = ankle_goal(side, f);
+      const Reached leg = ReachAnkle(H, K, A, G[static_cast<size_t>(hip)],
+                                     G[static_cast<size_t>(knee)], wanted_goal);
+      const Mat3 g_knee = leg.g_hip * leg.knee_local;
+      const Vec3 ankle_at = leg.ankle;
+      const double missed = Norm(ankle_at - wanted_goal);
+      counts.max_reach_error = std::max(counts.max_reach_error, missed);
+      if (w_ankle >= 1 && missed > 0.01) ++counts.unreached;
+      out.SetLocalRotation(f, hip, Transpose(G[static_cast<size_t>(pelvis)]) * leg.g_hip);
+      out.SetLocalRotation(f, knee, leg.knee_local);
       // The foot keeps its world orientation; a held toe turns it to point at the toe's place.
       Mat3 g_ankle = G[static_cast<size_t>(ankle)];
       if (w_toe > 0) {
