@@ -14,6 +14,7 @@
 #include "motionpipe/formats/clip.h"
 #include "motionpipe/render/motion_render.h"
 #include "motionpipe/sinc/texts.h"
+#include "post_process.h"
 #include "report.h"
 
 namespace motionpipe::cli {
@@ -165,6 +166,7 @@ struct EditArgs {
   uint64_t seed = 1;
   double fps = 30;
   bool body_parts = false;
+  PostProcessArgs post;
 };
 
 int RunEdit(const EditArgs& a) {
@@ -191,8 +193,11 @@ int RunEdit(const EditArgs& a) {
   if (!edited.ok()) return Fail(edited.status());
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-  if (Status s = WriteMotion(a.out, *edited, {a.text},
-                             "motionpipe:edit:" + (*generator)->Name() + ":" + source.source);
+  auto final_motion = ApplyPostProcesses(a.post, host, *edited);
+  if (!final_motion.ok()) return Fail(final_motion.status());
+  if (Status s = WriteMotion(
+          a.out, *final_motion, {a.text},
+          "motionpipe:edit:" + (*generator)->Name() + a.post.Suffix() + ":" + source.source);
       !s.ok()) {
     return Fail(s);
   }
@@ -234,6 +239,7 @@ void AddEdit(CLI::App& app, int* exit_code) {
   cmd->add_flag(
       "--body-parts", a.body_parts,
       "MDM checkpoints: keep the body parts the text does not involve from the source (MDM-BP)");
+  AddPostProcessOptions(cmd, &a.post);
   cmd->add_option("--plugins", a.plugin_dirs, "Extra plugin directories");
   cmd->callback([exit_code] { *exit_code = RunEdit(a); });
 }
@@ -245,6 +251,7 @@ struct GenerateArgs {
   double seconds = 4, fps = 30;
   uint64_t seed = 1;
   bool compositing = false;
+  PostProcessArgs post;
 };
 
 int RunGenerate(const GenerateArgs& a) {
@@ -261,10 +268,12 @@ int RunGenerate(const GenerateArgs& a) {
   request.seconds = a.seconds;
   request.fps = a.fps;
   request.seed = a.seed;
-  auto motion = (*generator)->Generate(request);
+  auto generated = (*generator)->Generate(request);
+  if (!generated.ok()) return Fail(generated.status());
+  auto motion = ApplyPostProcesses(a.post, host, *generated);
   if (!motion.ok()) return Fail(motion.status());
-  if (Status s =
-          WriteMotion(a.out, *motion, a.texts, "motionpipe:generate:" + (*generator)->Name());
+  if (Status s = WriteMotion(a.out, *motion, a.texts,
+                             "motionpipe:generate:" + (*generator)->Name() + a.post.Suffix());
       !s.ok()) {
     return Fail(s);
   }
@@ -296,6 +305,7 @@ void AddGenerate(CLI::App& app, int* exit_code) {
   cmd->add_flag("--compositing", a.compositing,
                 "Single-action checkpoints: generate each action alone and compose them by the "
                 "labeler's body parts");
+  AddPostProcessOptions(cmd, &a.post);
   cmd->add_option("--plugins", a.plugin_dirs, "Extra plugin directories");
   cmd->callback([exit_code] { *exit_code = RunGenerate(a); });
 }

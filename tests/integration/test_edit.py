@@ -638,6 +638,50 @@ class EditTest(EngineTest):
         self.assertTrue(np.isfinite(outs[0]).all())
         self.assertTrue(np.array_equal(outs[0], outs[1]))
         self.assertFalse(np.array_equal(outs[0], outs[2]))
+        # The same edit post-processed as the pipeline's stages do it: cleaned by the clean-up's
+        # checkpoint, given the legs of the nearest window of the corpus's training triplets,
+        # planted; only the legs and the pelvis height change, and the raw and the final
+        # plausibility are printed.
+        judged = glob.glob(self.path("judges", "judges-*"))[0]
+        post = self.path("post.npz")
+        printed = self.cli("edit", "--model", model, "--source", CMU, "--text", "raise the right arm higher", "--sampler", "ddim",
+                           "--steps", "3", "--seed", "3", "--out", post, "--clean-legs", os.path.join(judged, "cleanup"),
+                           "--match-legs", os.path.join(job, "corpus"), "--foot-lock", timeout=300).stdout
+        self.assertIn("clean_legs: the legs cleaned by", printed)
+        self.assertRegex(printed, r"match_legs: database of \d+ motions")
+        self.assertRegex(printed, r"match_legs: \d+ window\(s\), cost \d+\.\d\d per compared frame")
+        self.assertRegex(printed, r"foot_lock: \d+ foot-joint frames held")
+        self.assertRegex(printed, r"plausibility, raw: foot skate \d\.\d{3} of contact frames")
+        self.assertRegex(printed, r"plausibility, clean_legs \+ match_legs \+ foot_lock: foot skate \d\.\d{3}")
+        feet = [1, 2, 4, 5, 7, 8, 10, 11]  # hips, knees, ankles, toes
+        upper = [j for j in range(22) if j not in feet]
+        with np.load(post) as z, np.load(self.path("a.npz")) as raw_edit:
+            self.assertEqual(z["poses"].shape, raw_edit["poses"].shape)
+            self.assertTrue(np.array_equal(z["poses"][:, upper], raw_edit["poses"][:, upper]))
+            self.assertFalse(np.array_equal(z["poses"][:, feet], raw_edit["poses"][:, feet]))
+            self.assertTrue(np.array_equal(z["trans"][:, :2], raw_edit["trans"][:, :2]))
+            self.assertIn("+ clean_legs + match_legs + foot_lock:", str(z["sources"][0]))
+        # Nothing asked, nothing changed: the raw edit and its plausibility.
+        plain = self.cli("edit", "--model", model, "--source", CMU, "--text", "raise the right arm higher", "--sampler", "ddim",
+                         "--steps", "3", "--seed", "3", "--out", post, timeout=300).stdout
+        self.assertRegex(plain, r"plausibility: foot skate \d\.\d{3}")
+        with np.load(post) as z, np.load(self.path("a.npz")) as raw_edit:
+            self.assertTrue(np.array_equal(z["poses"], raw_edit["poses"]))
+        # Wrong post-process inputs are errors that name them, and nothing is written.
+        os.remove(post)
+        refused = self.cli("edit", "--model", model, "--source", CMU, "--text", "x", "--out", post,
+                           "--clean-legs", model, check=False)
+        self.assertEqual(refused.returncode, 1)
+        self.assertIn("is a mdt_editor checkpoint, not a leg_cleanup one", refused.stderr)
+        refused = self.cli("edit", "--model", model, "--source", CMU, "--text", "x", "--out", post,
+                           "--match-legs", self.path("nowhere.bvh"), check=False)
+        self.assertEqual(refused.returncode, 1)
+        self.assertIn("nowhere.bvh", refused.stderr)
+        refused = self.cli("edit", "--model", model, "--source", CMU, "--text", "x", "--out", post,
+                           "--match-legs", os.path.join(job, "corpus"), "--match-split", "nosuch", check=False)
+        self.assertEqual(refused.returncode, 1)
+        self.assertIn("no triplets of split 'nosuch'", refused.stderr)
+        self.assertFalse(os.path.exists(post))
         # MDM-BP keeps the body parts the text does not involve: the left leg's rotations are the source's.
         bp = self.path("bp.npz")
         self.cli("edit", "--model", os.path.join(job, "mdm"), "--body-parts", "--source", self.path("a.npz"),

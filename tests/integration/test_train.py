@@ -22,6 +22,8 @@ from harness import MOTIONPIPE, EngineTest, torch_load
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "bench", "reference"))
 from similarity_ref import rotation_matrices  # noqa: E402
 
+CMU = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "data", "mocap", "cmu", "131_01.bvh")
+
 PIPELINE = """
 name: train_test
 output_root: OUT
@@ -197,6 +199,20 @@ class TrainStageTest(EngineTest):
             self.assertEqual(z["poses"].shape, (75, 22, 3))
             self.assertTrue(np.isfinite(z["poses"]).all() and np.isfinite(z["trans"]).all())
             self.assertEqual(str(z["texts"][0]), "walk forward while waving the right hand")
+        # Post-processed: the legs of a real clip's nearest window (a BVH as the database), planted;
+        # the upper body and the pelvis's path are the raw generation's, and both plausibilities
+        # are printed.
+        post = self.path("walk_post.npz")
+        printed = self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "walk forward while waving the right hand",
+                           "--seconds", "2.5", "--out", post, "--match-legs", CMU, "--foot-lock").stdout
+        self.assertIn("match_legs: database of 1 motions, 249 frames at 30 fps", printed)
+        self.assertRegex(printed, r"plausibility, match_legs \+ foot_lock: foot skate \d\.\d{3}")
+        feet = [1, 2, 4, 5, 7, 8, 10, 11]  # hips, knees, ankles, toes
+        upper = [j for j in range(22) if j not in feet]
+        with np.load(clip) as raw, np.load(post) as z:
+            self.assertTrue(np.array_equal(z["poses"][:, upper], raw["poses"][:, upper]))
+            self.assertFalse(np.array_equal(z["poses"][:, feet], raw["poses"][:, feet]))
+            self.assertTrue(np.array_equal(z["trans"][:, :2], raw["trans"][:, :2]))
         bvh = self.path("pair.bvh")
         self.cli("generate", "--model", os.path.join(two, "sinc"), "--text", "walk forward", "--text", "wave the right hand",
                  "--seconds", "2", "--fps", "20", "--out", bvh)
