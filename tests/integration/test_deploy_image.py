@@ -106,6 +106,29 @@ class ContainerImage(unittest.TestCase):
         self.assertIn("motionpipe_plugins", ninja.group(1).split(), "the build stage builds only " + ninja.group(1))
         self.assertIn("cp build/plugins/*.so", build)
 
+    def test_the_build_stage_installs_what_the_build_needs_and_leaves_the_host_tree_out(self):
+        # `scripts/setup --build-only`: the packages every find_package of a build without tests
+        # and benchmarks needs, and no npm step (whose registry certificate a builder may not
+        # trust: the first build of this image here failed there). The context leaves a host's
+        # build tree out: its CMakeCache.txt names another source directory, which `cmake -S . -B
+        # build` in the image refuses.
+        build = " ".join(self.stages[0]["run"])
+        self.assertIn("scripts/setup --build-only", build)
+        with open(os.path.join(ROOT, "scripts", "setup")) as f:
+            setup = f.read()
+        listed = re.search(r"BUILD_PACKAGES=\(\n(.*?)\n\)", setup, re.S)
+        self.assertIsNotNone(listed)
+        packages = set(re.sub(r"#.*", "", listed.group(1)).split())
+        for package in ("libtorch-dev", "libzmq3-dev", "cppzmq-dev", "libprotobuf-dev", "protobuf-compiler",
+                        "libyaml-cpp-dev", "prometheus-cpp-dev", "libsqlite3-dev", "libcli11-dev", "libcurl4-openssl-dev",
+                        "nlohmann-json3-dev", "zlib1g-dev"):
+            self.assertIn(package, packages)
+        self.assertFalse(packages & {"libgtest-dev", "nodejs", "npm", "slurmd", "prometheus", "python3-torch"}, packages)
+        with open(os.path.join(ROOT, ".dockerignore")) as f:
+            ignored = {line.strip().rstrip("/") for line in f if line.strip() and not line.startswith("#")}
+        for path in ("build", "out", "tools/k8s-validate/node_modules"):
+            self.assertIn(path, ignored)
+
     def test_the_runtime_stage_has_every_library_the_binaries_need(self):
         plugins = sorted(glob.glob(os.path.join(PLUGINS, "*.so")))
         self.assertGreaterEqual(len(plugins), 6, PLUGINS)
