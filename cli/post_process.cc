@@ -1,6 +1,5 @@
 #include "post_process.h"
 
-#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 
@@ -41,25 +40,6 @@ void AddPostProcessOptions(CLI::App* cmd, PostProcessArgs* args) {
 
 namespace {
 
-// Triplet files given as files or directories: DIR's own (TripletFilesIn), else its result
-// directory's, else those of each directory it holds (a stage's task directories).
-std::vector<std::string> TripletFilesOf(const std::string& dir) {
-  std::vector<std::string> files = TripletFilesIn(dir);
-  if (!files.empty()) return files;
-  files = TripletFilesIn((fs::path(dir) / layout::kResultDirName).string());
-  if (!files.empty()) return files;
-  std::vector<std::string> subdirs;
-  std::error_code ec;
-  for (const auto& entry : fs::directory_iterator(dir, ec))
-    if (entry.is_directory()) subdirs.push_back(entry.path().string());
-  std::sort(subdirs.begin(), subdirs.end());
-  for (const std::string& sub : subdirs) {
-    const std::vector<std::string> found = TripletFilesIn(sub);
-    files.insert(files.end(), found.begin(), found.end());
-  }
-  return files;
-}
-
 bool IsTripletFile(const std::string& path) {
   const std::string name = fs::path(path).filename().string();
   return name.rfind("triplets", 0) == 0 && fs::path(path).extension() == ".npz";
@@ -72,18 +52,18 @@ Status FillDatabase(const PostProcessArgs& args, double fps, LegDatabase* databa
     std::error_code ec;
     const bool dir = fs::is_directory(path, ec);
     if (dir || IsTripletFile(path)) {
-      const std::vector<std::string> files = dir ? TripletFilesOf(path) : std::vector{path};
+      // A stage's directory (its result's triplets, else its tasks'), or a folder or file of them.
+      const std::vector<std::string> files =
+          dir ? StageTripletFiles(layout::StageOutputDirs(path)) : std::vector{path};
       if (files.empty()) return NotFound(path + ": --match-legs: holds no triplet files");
       for (const std::string& file : files) {
-        MP_ASSIGN_OR_RETURN(const TripletColumns c, ReadTripletColumns(file, {0, -1, true, false}));
-        for (int64_t r = 0; r < c.rows; ++r) {
-          if (c.splits[static_cast<size_t>(r)] != args.match_split) continue;
-          for (bool source : {true, false}) {
-            const std::string origin = file + ", triplet " + c.ids[static_cast<size_t>(r)];
-            MP_RETURN_IF_ERROR(database->Add(ToModelRate(SideMotion(c, r, source), fps), origin));
-            ++motions;
-          }
-        }
+        MP_ASSIGN_OR_RETURN(const int64_t triplets,
+                            VisitTripletSides(file, args.match_split, 0,
+                                              [&](const Motion& motion, const std::string& origin) {
+                                                return database->Add(ToModelRate(motion, fps),
+                                                                     origin);
+                                              }));
+        motions += 2 * triplets;
       }
       continue;
     }

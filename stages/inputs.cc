@@ -2,7 +2,6 @@
 
 #include <glob.h>
 
-#include <algorithm>
 #include <filesystem>
 
 #include "motionpipe/base/job_layout.h"
@@ -34,21 +33,7 @@ std::vector<std::string> StageDirs(const TaskContext& ctx, const std::string& st
   glob_t matches{};
   if (::glob(stage.c_str(), 0, nullptr, &matches) == 0) {
     for (size_t k = 0; k < matches.gl_pathc; ++k) {
-      const std::string match = matches.gl_pathv[k];
-      std::error_code ec;
-      std::vector<std::string> tasks;
-      for (const auto& entry : fs::directory_iterator(match, ec)) {
-        const std::string name = entry.path().filename().string();
-        if (entry.is_directory() && (name == layout::kResultDirName || name.rfind("task-", 0) == 0))
-          tasks.push_back(entry.path().string());
-      }
-      // result/ sorts after task-*: put it first, as for an input stage.
-      std::sort(tasks.begin(), tasks.end(), [](const std::string& a, const std::string& b) {
-        const bool ra = fs::path(a).filename() == layout::kResultDirName,
-                   rb = fs::path(b).filename() == layout::kResultDirName;
-        return ra != rb ? ra : a < b;
-      });
-      if (tasks.empty()) tasks.push_back(match);  // a task directory itself
+      const std::vector<std::string> tasks = layout::StageOutputDirs(matches.gl_pathv[k]);
       dirs.insert(dirs.end(), tasks.begin(), tasks.end());
     }
   }
@@ -62,25 +47,12 @@ std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string&
     stages.clear();
     for (const auto& input : ctx.spec.inputs()) stages.push_back(input.stage());
   }
-  std::vector<std::string> files;
-  const auto add = [&](const std::string& dir) {
-    const std::vector<std::string> found = TripletFilesIn(dir);
-    files.insert(files.end(), found.begin(), found.end());
-    return !found.empty();
-  };
+  std::vector<std::string> dirs;
   for (const std::string& name : stages) {
-    bool from_result = false;  // a result directory with triplets: its tasks hold them as shards
-    for (const std::string& dir : StageDirs(ctx, name)) {
-      if (fs::path(dir).filename() == layout::kResultDirName) {
-        from_result = add(dir) || from_result;
-      } else if (!from_result) {
-        add(dir);
-      }
-    }
+    const std::vector<std::string> found = StageDirs(ctx, name);
+    dirs.insert(dirs.end(), found.begin(), found.end());
   }
-  std::sort(files.begin(), files.end());
-  files.erase(std::unique(files.begin(), files.end()), files.end());
-  return files;
+  return StageTripletFiles(dirs);
 }
 
 std::string FindCheckpoint(const TaskContext& ctx, const std::string& stage) {

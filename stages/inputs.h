@@ -21,9 +21,9 @@ std::vector<std::string> StringList(const json& v);
 // every match's result and task directories (a match that holds none is taken as it is).
 std::vector<std::string> StageDirs(const TaskContext& ctx, const std::string& stage);
 
-// Triplet files of `stage` (StageDirs; every input when empty), sorted. A stage with a result
-// directory holding triplets (a corpus) is read from there only: its task directories hold the
-// same triplets as shards.
+// Triplet files of `stage` (StageDirs; every input when empty), sorted: StageTripletFiles' rule (a
+// stage with a result directory holding triplets, a corpus, is read from there only: its task
+// directories hold the same triplets as shards).
 std::vector<std::string> TripletFiles(const TaskContext& ctx, const std::string& stage = "");
 
 // A checkpoint named by a stage parameter: an input stage's name, or a path pattern (anything with

@@ -56,18 +56,13 @@ class MatchLegsStage : public StageExecutor {
     LegDatabase database(Skeleton::Smpl22(), options);
     int64_t triplets = 0;
     for (const std::string& path : TripletFiles(ctx, database_stage)) {
-      auto columns = ReadTripletColumns(path, {0, -1, true, false});
-      if (!columns.ok()) return TaskReport::BadInput("match_legs: " + columns.status().message());
-      for (int64_t r = 0; r < columns->rows && (limit <= 0 || triplets < limit); ++r) {
-        if (columns->splits[static_cast<size_t>(r)] != split) continue;
-        ++triplets;
-        for (bool source : {true, false}) {
-          const std::string origin = path + ", triplet " + columns->ids[static_cast<size_t>(r)] +
-                                     (source ? " (source)" : " (target)");
-          if (Status s = database.Add(SideMotion(*columns, r, source), origin); !s.ok())
-            return TaskReport::BadInput("match_legs: " + s.message());
-        }
-      }
+      if (limit > 0 && triplets >= limit) break;
+      const auto visited = VisitTripletSides(path, split, limit > 0 ? limit - triplets : 0,
+                                             [&](const Motion& motion, const std::string& origin) {
+                                               return database.Add(motion, origin);
+                                             });
+      if (!visited.ok()) return TaskReport::BadInput("match_legs: " + visited.status().message());
+      triplets += *visited;
     }
     if (triplets == 0)
       return TaskReport::BadInput("match_legs: no triplets of split '" + split + "' in " +

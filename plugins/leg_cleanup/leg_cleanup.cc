@@ -345,11 +345,7 @@ void CleanupDataset::AddTriplets(const nlohmann::json& config,
     if (paths.empty())
       throw std::invalid_argument("leg_cleanup: data.triplets: no triplet files in " + given);
   }
-  for (const auto& dir : given.empty() ? input_dirs : std::vector<std::string>{}) {
-    const std::vector<std::string> found = TripletFilesIn(dir);
-    paths.insert(paths.end(), found.begin(), found.end());
-    if (!found.empty()) break;  // a corpus's result holds every triplet; its tasks, shards
-  }
+  if (given.empty()) paths = StageTripletFiles(input_dirs);  // a corpus's result, not its shards
   if (paths.empty())
     throw std::invalid_argument(
         "leg_cleanup: no triplet files in the inputs (give a corpus stage as input, "

@@ -73,10 +73,7 @@ EditDataset::EditDataset(const EditDataOptions& options, const std::vector<std::
   // The triplet files: those the curves name, or (filter: none) every triplets file of the inputs.
   std::vector<std::string> paths;
   if (options_.filter == "none") {
-    for (const auto& dir : input_dirs) {
-      const std::vector<std::string> found = TripletFilesIn(dir);
-      paths.insert(paths.end(), found.begin(), found.end());
-    }
+    paths = StageTripletFiles(input_dirs);  // a corpus's result, not its tasks' same triplets too
     if (paths.empty())
       throw std::invalid_argument(
           "data.filter: none needs an input with triplet files (a corpus stage)");

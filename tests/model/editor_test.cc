@@ -14,6 +14,7 @@
 #include "../../plugins/mdt_editor/diffusion.h"
 #include "../../plugins/mdt_editor/edit_data.h"
 #include "../../plugins/mdt_editor/foot_contact.h"
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/features/motionfix207.h"
 #include "motionpipe/formats/motionfix.h"
 
@@ -855,6 +856,42 @@ TEST(Editor, DataLimitKeepsTheSplitsFirstTripletsInFileAndRowOrder) {
   EXPECT_EQ(EditDataset(EditDataOptions::FromContext(context), context.input_dirs).size(), 4);
   context.config["limit"] = -1;
   EXPECT_THROW(EditDataOptions::FromContext(context), std::invalid_argument);
+}
+
+// With filter: none the editor reads a corpus input's triplets once. A train stage's input
+// directories are the corpus's result and its tasks, and the result's files are the tasks' shards
+// again (hard links): reading every directory trained on each triplet twice and, since the
+// filter's curves name the result's files, gave half the rows a similarity curve.
+TEST(Editor, DataWithoutFilterReadsACorpusResultNotItsShardsAgain) {
+  namespace fs = std::filesystem;
+  const std::string corpus = ::testing::TempDir() + "/data_corpus";
+  fs::remove_all(corpus);
+  std::vector<std::string> input_dirs = {corpus + "/result"};
+  for (int task = 0; task < 2; ++task) {
+    std::vector<Triplet> triplets(3);
+    for (size_t r = 0; r < triplets.size(); ++r) {
+      triplets[r].id = "task" + std::to_string(task) + "r" + std::to_string(r);
+      triplets[r].text = "walk";
+      triplets[r].split = "train";
+      triplets[r].source = triplets[r].target = Motion::Rest(30, 30, 0.9);
+    }
+    const std::string name = "/motionfix/triplets-0000" + std::to_string(task) + ".npz";
+    const std::string dir = layout::TaskDir(corpus, task);
+    fs::create_directories(dir + "/motionfix");
+    fs::create_directories(corpus + "/result/motionfix");
+    ASSERT_TRUE(WriteTriplets(dir + name, triplets).ok());
+    fs::create_hard_link(dir + name, corpus + "/result" + name);
+    input_dirs.push_back(dir);
+  }
+  plugin::DataContext context;
+  context.input_dirs = input_dirs;
+  context.config = {{"filter", "none"}};
+  context.split = "train";
+  const EditDataset data(EditDataOptions::FromContext(context), context.input_dirs);
+  ASSERT_EQ(data.size(), 6);
+  for (int64_t i = 0; i < data.size(); ++i)
+    EXPECT_EQ(data.Id(i), "task" + std::to_string(i / 3) + "r" + std::to_string(i % 3)) << i;
+  fs::remove_all(corpus);
 }
 
 // Issue 15: the network's frame rate (EditorOptions::fps). Training motions and edit sources come

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "motionpipe/base/job_layout.h"
 #include "motionpipe/formats/amass.h"
 #include "motionpipe/formats/humanml3d.h"
 #include "motionpipe/formats/motionfix.h"
@@ -163,6 +164,95 @@ TEST(Triplets, TripletFilesInPrefersTheMotionfixFolderAndSorts) {
   touch(dir + "/motionfix/triplets-train.npz");
   EXPECT_EQ(TripletFilesIn(dir), (std::vector<std::string>{dir + "/motionfix/triplets-train.npz"}));
   fs::remove_all(dir);
+}
+
+// A stage's triplets are read once: from its result when that holds any (a corpus: the result's
+// files are its tasks' shards again), else from each task; stages are judged one by one, by the
+// directory they share; a result with no triplets (a filter's) leaves its tasks'.
+TEST(Triplets, StageTripletFilesReadAStageOnceResultFirst) {
+  namespace fs = std::filesystem;
+  const std::string job = ::testing::TempDir() + "/stage_triplet_files";
+  fs::remove_all(job);
+  const auto touch = [](const std::string& path) {
+    fs::create_directories(fs::path(path).parent_path());
+    std::ofstream(path) << "x";
+  };
+  for (const char* shard : {"00000", "00001"}) {
+    touch(job + "/corpus/task-" + shard + "/motionfix/triplets-" + shard + ".npz");
+    touch(job + "/corpus/result/motionfix/triplets-" + shard + ".npz");
+    touch(job + "/dataset/task-" + shard + "/triplets-" + shard + ".npz");
+  }
+  fs::create_directories(job + "/dataset/result");  // a result without triplets
+  const std::vector<std::string> corpus = layout::StageOutputDirs(job + "/corpus"),
+                                 dataset = layout::StageOutputDirs(job + "/dataset");
+  ASSERT_EQ(corpus.size(), 3u);
+  const std::vector<std::string> from_corpus = {
+      job + "/corpus/result/motionfix/triplets-00000.npz",
+      job + "/corpus/result/motionfix/triplets-00001.npz"};
+  EXPECT_EQ(StageTripletFiles(corpus), from_corpus);
+  std::vector<std::string> dirs = {job + "/corpus/task-00001", job + "/corpus/result"};
+  EXPECT_EQ(StageTripletFiles(dirs), from_corpus);  // in any order
+  dirs = {job + "/corpus/task-00001/", job + "/corpus/result/"};
+  EXPECT_EQ(StageTripletFiles(dirs).size(), 2u);  // a result named with a trailing slash
+  const std::vector<std::string> from_dataset = {job + "/dataset/task-00000/triplets-00000.npz",
+                                                 job + "/dataset/task-00001/triplets-00001.npz"};
+  EXPECT_EQ(StageTripletFiles(dataset), from_dataset);
+  dirs = dataset;
+  dirs.insert(dirs.end(), corpus.begin(), corpus.end());
+  std::vector<std::string> both = from_corpus;
+  both.insert(both.end(), from_dataset.begin(), from_dataset.end());
+  EXPECT_EQ(StageTripletFiles(dirs), both);
+  // A task directory alone (no result among the directories) is read.
+  EXPECT_EQ(StageTripletFiles({job + "/corpus/task-00001"}),
+            std::vector<std::string>{job + "/corpus/task-00001/motionfix/triplets-00001.npz"});
+  EXPECT_TRUE(StageTripletFiles({job + "/missing"}).empty());
+  fs::remove_all(job);
+}
+
+// Both sides of a split's triplets, in row order, named by file, triplet and side; `limit`
+// counts triplets; a visitor's error ends the visit and is returned; a bad file is named.
+TEST(Triplets, VisitTripletSidesReadsASplitsBothSidesInRowOrder) {
+  std::vector<Triplet> triplets(4);
+  for (size_t k = 0; k < triplets.size(); ++k) {
+    triplets[k].id = "t" + std::to_string(k);
+    triplets[k].text = "walk";
+    triplets[k].split = k == 1 ? "test" : "train";
+    triplets[k].source = testing::SmoothMotion(20 + static_cast<int64_t>(k), 1);
+    triplets[k].target = testing::SmoothMotion(30 + static_cast<int64_t>(k), 2);
+  }
+  const std::string path = ::testing::TempDir() + "/visit_triplets.npz";
+  ASSERT_TRUE(WriteTriplets(path, triplets).ok());
+  std::vector<std::string> origins;
+  std::vector<int64_t> frames;
+  const auto record = [&](const Motion& motion, const std::string& origin) {
+    origins.push_back(origin);
+    frames.push_back(motion.num_frames());
+    return Status::Ok();
+  };
+  auto visited = VisitTripletSides(path, "train", 0, record);
+  ASSERT_TRUE(visited.ok()) << visited.status().ToString();
+  EXPECT_EQ(*visited, 3);
+  EXPECT_EQ(frames, (std::vector<int64_t>{20, 30, 22, 32, 23, 33}));
+  EXPECT_EQ(origins[0], path + ", triplet 't0' (source)");
+  EXPECT_EQ(origins[3], path + ", triplet 't2' (target)");
+  origins.clear();
+  frames.clear();
+  visited = VisitTripletSides(path, "train", 2, record);
+  ASSERT_TRUE(visited.ok());
+  EXPECT_EQ(*visited, 2);
+  EXPECT_EQ(frames, (std::vector<int64_t>{20, 30, 22, 32}));
+  EXPECT_EQ(*VisitTripletSides(path, "val", 0, record), 0);
+  int calls = 0;
+  visited = VisitTripletSides(path, "train", 0, [&](const Motion&, const std::string& origin) {
+    ++calls;
+    return InvalidArgument(origin + ": refused");
+  });
+  ASSERT_FALSE(visited.ok());
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(visited.status().message(), path + ", triplet 't0' (source): refused");
+  const auto missing = VisitTripletSides(path + ".missing", "train", 0, record);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find(path + ".missing"), std::string::npos);
 }
 
 TEST(HumanML3D, JointsConvertFromYUpToZUp) {

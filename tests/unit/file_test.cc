@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "motionpipe/base/job_layout.h"
 #include "motionpipe/base/yaml.h"
@@ -72,6 +73,28 @@ TEST(FileLock, OneHolderAtATimeNamedByPid) {
   }
   EXPECT_TRUE(FileLock::Acquire(path).ok());  // released with its holder
   EXPECT_EQ(FileLock::Acquire(dir + "/no/such/dir/lock").status().code(), StatusCode::kIoError);
+}
+
+// A stage's output directories come in the order its inputs list them (result first, tasks by
+// name), whatever order the file system gives; other entries are not outputs; a directory with
+// neither is taken as it is (a task directory or a user's folder given directly).
+TEST(JobLayout, StageOutputDirsPutTheResultFirstThenTheTasks) {
+  namespace fs = std::filesystem;
+  const std::string stage = ::testing::TempDir() + "/stage_output_dirs";
+  fs::remove_all(stage);
+  for (const char* name : {"task-00001", "task-00010", "task-00000", "result", ".staging", "logs"})
+    fs::create_directories(stage + "/" + name);
+  std::ofstream(stage + "/task-00002") << "a file, not a task";
+  EXPECT_EQ(layout::StageOutputDirs(stage),
+            (std::vector<std::string>{stage + "/result", stage + "/task-00000",
+                                      stage + "/task-00001", stage + "/task-00010"}));
+  fs::remove_all(stage + "/result");
+  EXPECT_EQ(layout::StageOutputDirs(stage).front(), stage + "/task-00000");
+  EXPECT_EQ(layout::StageOutputDirs(stage + "/task-00001"),
+            std::vector<std::string>{stage + "/task-00001"});
+  EXPECT_EQ(layout::StageOutputDirs(stage + "/missing"),
+            std::vector<std::string>{stage + "/missing"});
+  fs::remove_all(stage);
 }
 
 // Issue 16: the job's on-disk names have one home; these are the names jobs already on disk use

@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <set>
+#include <utility>
+
+#include "motionpipe/base/job_layout.h"
 
 namespace motionpipe {
 
@@ -189,6 +193,31 @@ std::vector<std::string> TripletFilesIn(const std::string& dir) {
   return files;
 }
 
+std::vector<std::string> StageTripletFiles(const std::vector<std::string>& dirs) {
+  namespace fs = std::filesystem;
+  // A directory's stage directory and whether it is that stage's result ("a/result/" too).
+  const auto place = [](const std::string& dir) {
+    fs::path path = fs::path(dir).lexically_normal();
+    if (!path.has_filename()) path = path.parent_path();
+    return std::make_pair(path.parent_path().string(), path.filename() == layout::kResultDirName);
+  };
+  std::set<std::string> from_result;  // the stage directories whose result holds triplets
+  for (const std::string& dir : dirs) {
+    const auto [stage, result] = place(dir);
+    if (result && !TripletFilesIn(dir).empty()) from_result.insert(stage);
+  }
+  std::vector<std::string> files;
+  for (const std::string& dir : dirs) {
+    const auto [stage, result] = place(dir);
+    if (!result && from_result.count(stage)) continue;  // the result holds this task's triplets
+    const std::vector<std::string> found = TripletFilesIn(dir);
+    files.insert(files.end(), found.begin(), found.end());
+  }
+  std::sort(files.begin(), files.end());
+  files.erase(std::unique(files.begin(), files.end()), files.end());
+  return files;
+}
+
 Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
   const auto& side = source ? c.source : c.target;
   const int64_t begin = side.offsets[static_cast<size_t>(row)],
@@ -198,6 +227,23 @@ Motion SideMotion(const TripletColumns& c, int64_t row, bool source) {
   m.poses.assign(side.poses + begin * side.joints * 3, side.poses + end * side.joints * 3);
   m.trans.assign(side.trans + begin * 3, side.trans + end * 3);
   return m;
+}
+
+Result<int64_t> VisitTripletSides(
+    const std::string& path, const std::string& split, int64_t limit,
+    const std::function<Status(const Motion& motion, const std::string& origin)>& visit) {
+  MP_ASSIGN_OR_RETURN(const TripletColumns c, ReadTripletColumns(path, {0, -1, true, false}));
+  int64_t visited = 0;
+  for (int64_t r = 0; r < c.rows && (limit <= 0 || visited < limit); ++r) {
+    if (c.splits[static_cast<size_t>(r)] != split) continue;
+    ++visited;
+    for (bool source : {true, false}) {
+      const std::string origin = path + ", triplet '" + c.ids[static_cast<size_t>(r)] +
+                                 (source ? "' (source)" : "' (target)");
+      MP_RETURN_IF_ERROR(visit(SideMotion(c, r, source), origin));
+    }
+  }
+  return visited;
 }
 
 }  // namespace motionpipe

@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace motionpipe::layout {
 
@@ -16,6 +17,10 @@ std::string TaskDirName(int64_t index);
 std::string TaskDir(const std::string& stage_dir, int64_t index = 0);
 // "result": a reduce stage's combined output.
 inline constexpr const char* kResultDirName = "result";
+// A stage's output directories in the order a stage's inputs list them: <stage_dir>/result first,
+// then its task directories in name order; <stage_dir> itself when it holds neither (a task
+// directory, or a user's folder, given directly).
+std::vector<std::string> StageOutputDirs(const std::string& stage_dir);
 
 // A checkpoint: <task_dir>/model, holding model.json (plugin name and config) and model.pt.
 std::string CheckpointDir(const std::string& task_dir);

@@ -14,6 +14,7 @@
 //   edit_kind       <U (N,)        optional: the kind of edit (procedural corpus ground truth)
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -52,6 +53,12 @@ Result<std::vector<Triplet>> ReadTriplets(const std::string& path);
 // dataset stages write), else DIR/triplets*.npz; empty when it holds neither. The one rule by which
 // the filter, the editors' data and the evaluation stages find triplets in a directory.
 std::vector<std::string> TripletFilesIn(const std::string& dir);
+
+// The triplet files of stages' output directories (each stage's as layout::StageOutputDirs lists
+// them, stages one after another): a stage's result directory's when it holds any (a corpus's
+// result holds every triplet, its tasks the same files as shards), else each of its directories'
+// (TripletFilesIn). Directories are of one stage when they share a parent. Sorted, no repeats.
+std::vector<std::string> StageTripletFiles(const std::vector<std::string>& dirs);
 
 }  // namespace motionpipe
 
@@ -100,5 +107,13 @@ Result<int64_t> CountTriplets(const std::string& path);
 // Row `row`'s source or target motion (poses and trans at the file's rate) of columns read with
 // motions.
 Motion SideMotion(const TripletColumns& c, int64_t row, bool source);
+
+// Calls `visit` with both sides (source, then target; at the file's rate) of each triplet of
+// `split` in the triplets file `path`, in row order, with an origin naming the file, the triplet
+// and the side; at most `limit` triplets (0: all). Returns how many triplets it visited; the
+// first error of reading the file or of `visit` ends it.
+Result<int64_t> VisitTripletSides(
+    const std::string& path, const std::string& split, int64_t limit,
+    const std::function<Status(const Motion& motion, const std::string& origin)>& visit);
 
 }  // namespace motionpipe
