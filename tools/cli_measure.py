@@ -37,11 +37,11 @@ def main():
     parser.add_argument("job", help="a demo job's directory (sinc, mdt, cleanup, corpus, gen_sinc)")
     parser.add_argument("n", type=int, nargs="?", default=32, help="test spans generated")
     a = parser.parse_args()
-    generated = glob.glob(os.path.join(a.job, "gen_sinc", "task-00000", "generated.npz"))
-    if not generated:
-        sys.exit(f"{a.job}: no gen_sinc/task-00000/generated.npz (not a demo job?)")
+    generated = os.path.join(a.job, "gen_sinc", "task-00000", "generated.npz")
+    if not os.path.isfile(generated):
+        sys.exit(f"{generated}: not found (not a demo job?)")
     rows = {}
-    with tempfile.TemporaryDirectory() as tmp, np.load(generated[0]) as z:
+    with tempfile.TemporaryDirectory() as tmp, np.load(generated) as z:
         for i in range(min(a.n, len(z["ids"]))):
             text = str(z["texts"][z["text_offsets"][i]])
             seconds = (z["offsets"][i + 1] - z["offsets"][i]) / float(z["fps"][i])

@@ -867,6 +867,7 @@ TEST(Editor, DataWithoutFilterReadsACorpusResultNotItsShardsAgain) {
   const std::string corpus = ::testing::TempDir() + "/data_corpus";
   fs::remove_all(corpus);
   std::vector<std::string> input_dirs = {corpus + "/result"};
+  fs::create_directories(corpus + "/result/motionfix");
   for (int task = 0; task < 2; ++task) {
     std::vector<Triplet> triplets(3);
     for (size_t r = 0; r < triplets.size(); ++r) {
@@ -878,7 +879,6 @@ TEST(Editor, DataWithoutFilterReadsACorpusResultNotItsShardsAgain) {
     const std::string name = "/motionfix/triplets-0000" + std::to_string(task) + ".npz";
     const std::string dir = layout::TaskDir(corpus, task);
     fs::create_directories(dir + "/motionfix");
-    fs::create_directories(corpus + "/result/motionfix");
     ASSERT_TRUE(WriteTriplets(dir + name, triplets).ok());
     fs::create_hard_link(dir + name, corpus + "/result" + name);
     input_dirs.push_back(dir);

@@ -201,17 +201,18 @@ std::vector<std::string> StageTripletFiles(const std::vector<std::string>& dirs)
     if (!path.has_filename()) path = path.parent_path();
     return std::make_pair(path.parent_path().string(), path.filename() == layout::kResultDirName);
   };
-  std::set<std::string> from_result;  // the stage directories whose result holds triplets
+  std::vector<std::vector<std::string>> found;  // each directory's files, listed once
+  std::set<std::string> from_result;            // the stages whose result holds triplets
   for (const std::string& dir : dirs) {
+    found.push_back(TripletFilesIn(dir));
     const auto [stage, result] = place(dir);
-    if (result && !TripletFilesIn(dir).empty()) from_result.insert(stage);
+    if (result && !found.back().empty()) from_result.insert(stage);
   }
   std::vector<std::string> files;
-  for (const std::string& dir : dirs) {
-    const auto [stage, result] = place(dir);
+  for (size_t k = 0; k < dirs.size(); ++k) {
+    const auto [stage, result] = place(dirs[k]);
     if (!result && from_result.count(stage)) continue;  // the result holds this task's triplets
-    const std::vector<std::string> found = TripletFilesIn(dir);
-    files.insert(files.end(), found.begin(), found.end());
+    files.insert(files.end(), found[k].begin(), found[k].end());
   }
   std::sort(files.begin(), files.end());
   files.erase(std::unique(files.begin(), files.end()), files.end());
