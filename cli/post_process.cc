@@ -56,15 +56,12 @@ Status FillDatabase(const PostProcessArgs& args, double fps, LegDatabase* databa
       const std::vector<std::string> files =
           dir ? StageTripletFiles(layout::StageOutputDirs(path)) : std::vector{path};
       if (files.empty()) return NotFound(path + ": --match-legs: holds no triplet files");
-      for (const std::string& file : files) {
-        MP_ASSIGN_OR_RETURN(const int64_t triplets,
-                            VisitTripletSides(file, args.match_split, 0,
-                                              [&](const Motion& motion, const std::string& origin) {
-                                                return database->Add(ToModelRate(motion, fps),
-                                                                     origin);
-                                              }));
-        motions += 2 * triplets;
-      }
+      MP_ASSIGN_OR_RETURN(
+          const int64_t triplets,
+          AddTripletSides(
+              files, args.match_split, 0,
+              [&](const Motion& motion) { return ToModelRate(motion, fps); }, database));
+      motions += 2 * triplets;
       continue;
     }
     MP_ASSIGN_OR_RETURN(const std::vector<Clip> clips, LoadMotionFile(path, fps));

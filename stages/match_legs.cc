@@ -54,16 +54,11 @@ class MatchLegsStage : public StageExecutor {
     const std::string split = p.value("split", std::string("train"));
     const int64_t limit = p.value("limit", int64_t{0});
     LegDatabase database(Skeleton::Smpl22(), options);
-    int64_t triplets = 0;
-    for (const std::string& path : TripletFiles(ctx, database_stage)) {
-      if (limit > 0 && triplets >= limit) break;
-      const auto visited = VisitTripletSides(path, split, limit > 0 ? limit - triplets : 0,
-                                             [&](const Motion& motion, const std::string& origin) {
-                                               return database.Add(motion, origin);
-                                             });
-      if (!visited.ok()) return TaskReport::BadInput("match_legs: " + visited.status().message());
-      triplets += *visited;
-    }
+    const auto added = AddTripletSides(
+        TripletFiles(ctx, database_stage), split, limit,
+        [](const Motion& motion) { return motion; }, &database);
+    if (!added.ok()) return TaskReport::BadInput("match_legs: " + added.status().message());
+    const int64_t triplets = *added;
     if (triplets == 0)
       return TaskReport::BadInput("match_legs: no triplets of split '" + split + "' in " +
                                   (database_stage.empty() ? "the inputs" : database_stage));

@@ -3,12 +3,15 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
 #include "motionpipe/base/random.h"
 #include "motionpipe/corpus/script.h"
 #include "motionpipe/corpus/synthesizer.h"
+#include "motionpipe/formats/motionfix.h"
 #include "motionpipe/motion/foot_lock.h"
 #include "motionpipe/motion/plausibility.h"
 
@@ -221,6 +224,99 @@ TEST(LegMatch, AMotionLongerThanTheDatabasesIsMatchedInBlendedWindows) {
       EvaluateMotionPlausibility(Smpl(), LockFeet(Smpl(), still)).foot_skate_ratio;
   EXPECT_LT(EvaluateMotionPlausibility(Smpl(), LockFeet(Smpl(), *matched)).foot_skate_ratio,
             0.45 * still_skate);
+}
+
+// Triplet files read several at once fill the database as adding each side in the files' and
+// rows' order does: the same frames and the same matches to the bit; `limit` counts triplets over
+// the files; a bad file is named, and one past the limit is never taken.
+TEST(LegMatch, TripletFilesFillTheDatabaseAsAddingEachSideInOrder) {
+  const std::string dir = ::testing::TempDir() + "/leg_match_triplet_files";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::vector<std::string> files;
+  uint64_t seed = 300;
+  for (int f = 0; f < 5; ++f) {
+    std::vector<Triplet> triplets(3);
+    for (size_t k = 0; k < triplets.size(); ++k) {
+      Triplet& t = triplets[k];
+      t.id = "f" + std::to_string(f) + "t" + std::to_string(k);
+      t.text = "walk";
+      t.split = (f == 2 || k == 1) ? "test" : "train";  // file 2 holds no training triplet
+      t.source = Walk(seed++, 2.0 + 0.5 * static_cast<double>(k));
+      t.target = Walk(seed++, 3.0);
+    }
+    files.push_back(dir + "/triplets-" + std::to_string(f) + ".npz");
+    ASSERT_TRUE(WriteTriplets(files.back(), triplets).ok());
+  }
+  const auto identity = [](const Motion& motion) { return motion; };
+  const Motion query = StillLegs(SliceFrames(Walk(9, 4.0), 0, 90));
+  const auto matched = [&](LegDatabase& db) {
+    LegMatchReport report;
+    auto out = db.Match(query, &report);
+    EXPECT_TRUE(out.ok()) << out.status().message();
+    return std::make_pair(out.ok() ? out->poses : std::vector<float>{}, report.cost);
+  };
+  LegMatchOptions drawn;  // the random control numbers the windows in the database's order
+  drawn.random = true;
+  for (const auto& [limit, options] :
+       {std::pair{int64_t{0}, LegMatchOptions{}}, std::pair{int64_t{3}, LegMatchOptions{}},
+        std::pair{int64_t{0}, drawn}}) {
+    LegDatabase one_by_one(Smpl(), options);
+    int64_t visited = 0;
+    for (const std::string& file : files) {
+      if (limit > 0 && visited >= limit) break;
+      auto n = VisitTripletSides(file, "train", limit > 0 ? limit - visited : 0,
+                                 [&](const Motion& motion, const std::string& origin) {
+                                   return one_by_one.Add(motion, origin);
+                                 });
+      ASSERT_TRUE(n.ok()) << n.status().message();
+      visited += *n;
+    }
+    LegDatabase at_once(Smpl(), options);
+    auto added = AddTripletSides(files, "train", limit, identity, &at_once);
+    ASSERT_TRUE(added.ok()) << added.status().message();
+    EXPECT_EQ(*added, limit > 0 ? limit : 8);  // 2 training triplets in 4 of the files
+    EXPECT_EQ(*added, visited);
+    EXPECT_EQ(at_once.motions(), 2 * visited);
+    EXPECT_EQ(at_once.frames(), one_by_one.frames());
+    const auto a = matched(one_by_one), b = matched(at_once);
+    EXPECT_EQ(a.second, b.second) << "limit " << limit << ", random " << options.random;
+    EXPECT_EQ(a.first, b.first) << "limit " << limit << ", random " << options.random;
+  }
+  // A file that is not a triplets file, third in the list: named; past a limit reached by the
+  // first file, never taken.
+  {
+    std::ofstream bad(dir + "/triplets-bad.npz");
+    bad << "not a zip archive";
+  }
+  std::vector<std::string> with_bad = files;
+  with_bad.insert(with_bad.begin() + 2, dir + "/triplets-bad.npz");
+  LegDatabase refused(Smpl(), {});
+  auto error = AddTripletSides(with_bad, "train", 0, identity, &refused);
+  ASSERT_FALSE(error.ok());
+  EXPECT_NE(error.status().message().find("triplets-bad.npz"), std::string::npos)
+      << error.status().message();
+  EXPECT_EQ(refused.motions(), 8);  // both sides of the two files' 2 training triplets before it
+  LegDatabase limited(Smpl(), {});
+  auto within = AddTripletSides(with_bad, "train", 2, identity, &limited);
+  ASSERT_TRUE(within.ok()) << within.status().message();
+  EXPECT_EQ(*within, 2);
+  // A side the database refuses is named by file, triplet and side: here every 2-s source is
+  // given another rate, so the first side sets 20 fps and the next, at 30, is refused.
+  LegDatabase rates(Smpl(), {});
+  auto refused_rate = AddTripletSides(
+      files, "train", 0,
+      [](const Motion& motion) {
+        Motion m = motion;
+        if (m.num_frames() == 60) m.fps = 20;
+        return m;
+      },
+      &rates);
+  ASSERT_FALSE(refused_rate.ok());
+  EXPECT_NE(refused_rate.status().message().find("triplets-0.npz, triplet 'f0t0' (target)"),
+            std::string::npos)
+      << refused_rate.status().message();
+  std::filesystem::remove_all(dir);
 }
 
 TEST(LegMatch, OptionsAreReadWithTheirKeysAndChecked) {

@@ -1,6 +1,7 @@
 #include "motionpipe/formats/motionfix.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <set>
@@ -79,6 +80,49 @@ void Extract(const LoadedSide& side, size_t index, double fps, Motion* motion,
     joints->assign(side.joints.begin() + begin * kNumJoints * 3,
                    side.joints.begin() + end * kNumJoints * 3);
   }
+}
+
+// VisitTripletSides over `files`, several at once (a file to a thread): `prepare(file, motion,
+// origin)` sees each side on the thread reading file number `file` (two files may be prepared at
+// once, never one file on two threads); `take(file, sides)`, called one file at a time in the
+// files' order once a file is read, is told how many of its prepared sides, from its first,
+// belong to the visit (all but those past `limit` triplets in all); a file read past the limit or
+// after an error is never taken. Returns the triplets taken; the first error in the files' order
+// ends it, as a sequential visit's would.
+Result<int64_t> VisitTripletFileSides(
+    const std::vector<std::string>& files, const std::string& split, int64_t limit,
+    const std::function<Status(size_t file, const Motion& motion, const std::string& origin)>&
+        prepare,
+    const std::function<Status(size_t file, int64_t sides)>& take) {
+  int64_t taken = 0;
+  Status error = Status::Ok();
+  std::atomic<bool> done{false};  // set in order: a file that sees it comes after the last taken
+  const int64_t n = static_cast<int64_t>(files.size());
+#pragma omp parallel for ordered schedule(dynamic, 1) if (n > 1)
+  for (int64_t i = 0; i < n; ++i) {
+    const size_t file = static_cast<size_t>(i);
+    Result<int64_t> visited = int64_t{0};
+    if (!done.load())
+      visited = VisitTripletSides(files[file], split, limit,
+                                  [&](const Motion& motion, const std::string& origin) {
+                                    return prepare(file, motion, origin);
+                                  });
+#pragma omp ordered
+    {
+      if (!done.load()) {
+        if (!visited.ok()) {
+          error = visited.status();
+        } else {
+          const int64_t count = limit > 0 ? std::min(*visited, limit - taken) : *visited;
+          error = take(file, 2 * count);
+          taken += count;
+        }
+        if (!error.ok() || (limit > 0 && taken >= limit)) done.store(true);
+      }
+    }
+  }
+  if (!error.ok()) return error;
+  return taken;
 }
 
 }  // namespace
@@ -245,6 +289,25 @@ Result<int64_t> VisitTripletSides(
     }
   }
   return visited;
+}
+
+Result<int64_t> AddTripletSides(const std::vector<std::string>& files, const std::string& split,
+                                int64_t limit, const std::function<Motion(const Motion&)>& convert,
+                                LegDatabase* database) {
+  std::vector<std::vector<LegDatabase::Rows>> prepared(files.size());
+  return VisitTripletFileSides(
+      files, split, limit,
+      [&](size_t file, const Motion& motion, const std::string& origin) -> Status {
+        MP_ASSIGN_OR_RETURN(LegDatabase::Rows rows, database->Prepare(convert(motion), origin));
+        prepared[file].push_back(std::move(rows));
+        return Status::Ok();
+      },
+      [&](size_t file, int64_t sides) -> Status {
+        std::vector<LegDatabase::Rows> rows = std::move(prepared[file]);
+        for (int64_t r = 0; r < sides; ++r)
+          MP_RETURN_IF_ERROR(database->Append(std::move(rows[static_cast<size_t>(r)])));
+        return Status::Ok();
+      });
 }
 
 }  // namespace motionpipe

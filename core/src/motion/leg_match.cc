@@ -183,49 +183,79 @@ void LegMatchReport::Add(const LegMatchReport& other) {
 LegDatabase::LegDatabase(const Skeleton& skeleton, const LegMatchOptions& options)
     : skeleton_(&skeleton), options_(options) {}
 
-std::array<float, LegDatabase::kPlaces> LegDatabase::PlacesAt(int64_t frame) const {
-  const float* p = &pelvis_[static_cast<size_t>(frame * 3)];
-  const float* legs = &legs_[static_cast<size_t>(frame * 24)];  // per side hip, knee, ankle, toe
-  const auto rotation = [&](int side, int k) {
+std::array<float, LegDatabase::kPlaces> LegDatabase::PlacesOf(const float* pelvis,
+                                                              const float* legs) const {
+  const auto rotation = [&](int side, int k) {  // legs: per side hip, knee, ankle, toe
     const float* r = legs + 12 * side + 3 * k;
     return AxisAngleToMatrix({r[0], r[1], r[2]});
   };
-  return LegPlaces(*skeleton_, AxisAngleToMatrix({p[0], p[1], p[2]}),
+  return LegPlaces(*skeleton_, AxisAngleToMatrix({pelvis[0], pelvis[1], pelvis[2]}),
                    {rotation(0, 0), rotation(0, 1), rotation(1, 0), rotation(1, 1)});
+}
+
+std::array<float, LegDatabase::kPlaces> LegDatabase::PlacesAt(int64_t frame) const {
+  return PlacesOf(&pelvis_[static_cast<size_t>(frame * 3)],
+                  &legs_[static_cast<size_t>(frame * 24)]);
 }
 
 Status LegDatabase::Add(const Motion& motion, const std::string& origin) {
   if (!weights_.empty())
     return FailedPrecondition("leg matching: " + origin + " added after the first match");
+  MP_ASSIGN_OR_RETURN(Rows rows, Prepare(motion, origin));
+  return Append(std::move(rows));
+}
+
+Result<LegDatabase::Rows> LegDatabase::Prepare(const Motion& motion,
+                                               const std::string& origin) const {
   if (Status s = ValidateMotion(motion, origin); !s.ok()) return InvalidArgument(s.message());
-  if (length_.empty()) fps_ = motion.fps;
-  if (!SameFrameRate(motion.fps, fps_))
-    return InvalidArgument(origin + ": at " + std::to_string(motion.fps) +
-                           " fps where the database's first motion is at " + std::to_string(fps_) +
-                           " (resample them to one rate)");
   const int64_t T = motion.num_frames(), step = options_.frame_step;
-  const int64_t first = frames();
-  length_.push_back(T);
-  first_frame_.push_back(first);
-  first_compared_.push_back(static_cast<int64_t>(features_.size() / kFeatures));
+  Rows rows;
+  rows.origin = origin;
+  rows.fps = motion.fps;
+  rows.frames = T;
   const std::vector<float> f = LegMatchFeatures(*skeleton_, motion, options_.sigma_seconds);
   for (int64_t t = 0; t < T; t += step)
-    features_.insert(features_.end(), f.begin() + t * kFeatures, f.begin() + (t + 1) * kFeatures);
+    rows.features.insert(rows.features.end(), f.begin() + t * kFeatures,
+                         f.begin() + (t + 1) * kFeatures);
   const auto legs = LegJoints(*skeleton_);
+  rows.legs.reserve(static_cast<size_t>(T * 24));
   for (int64_t t = 0; t < T; ++t) {
     for (const auto& leg : legs)
       for (int joint : leg)
         for (int c = 0; c < 3; ++c)
-          legs_.push_back(motion.poses[static_cast<size_t>((t * kNumJoints + joint) * 3 + c)]);
+          rows.legs.push_back(motion.poses[static_cast<size_t>((t * kNumJoints + joint) * 3 + c)]);
     for (int c = 0; c < 3; ++c)
-      pelvis_.push_back(motion.poses[static_cast<size_t>(t * kNumJoints * 3 + c)]);
-    height_.push_back(static_cast<float>(motion.Translation(t).z));
+      rows.pelvis.push_back(motion.poses[static_cast<size_t>(t * kNumJoints * 3 + c)]);
+    rows.height.push_back(static_cast<float>(motion.Translation(t).z));
   }
   for (int64_t t = 0; t < T; t += step) {
-    const auto places = PlacesAt(first + t);
-    places_.insert(places_.end(), places.begin(), places.end());
+    const auto places =
+        PlacesOf(&rows.pelvis[static_cast<size_t>(t * 3)], &rows.legs[static_cast<size_t>(t * 24)]);
+    rows.places.insert(rows.places.end(), places.begin(), places.end());
   }
-  longest_ = std::max(longest_, T);
+  return rows;
+}
+
+Status LegDatabase::Append(Rows rows) {
+  if (!weights_.empty())
+    return FailedPrecondition("leg matching: " + rows.origin + " added after the first match");
+  if (length_.empty()) fps_ = rows.fps;
+  if (!SameFrameRate(rows.fps, fps_))
+    return InvalidArgument(rows.origin + ": at " + std::to_string(rows.fps) +
+                           " fps where the database's first motion is at " + std::to_string(fps_) +
+                           " (resample them to one rate)");
+  length_.push_back(rows.frames);
+  first_frame_.push_back(frames());
+  first_compared_.push_back(static_cast<int64_t>(features_.size() / kFeatures));
+  const auto append = [](std::vector<float>& to, const std::vector<float>& from) {
+    to.insert(to.end(), from.begin(), from.end());
+  };
+  append(features_, rows.features);
+  append(places_, rows.places);
+  append(legs_, rows.legs);
+  append(pelvis_, rows.pelvis);
+  append(height_, rows.height);
+  longest_ = std::max(longest_, rows.frames);
   return Status::Ok();
 }
 

@@ -21,6 +21,7 @@
 
 #include "motionpipe/base/status.h"
 #include "motionpipe/formats/npz.h"
+#include "motionpipe/motion/leg_match.h"
 #include "motionpipe/motion/motion.h"
 
 namespace motionpipe {
@@ -115,5 +116,14 @@ Motion SideMotion(const TripletColumns& c, int64_t row, bool source);
 Result<int64_t> VisitTripletSides(
     const std::string& path, const std::string& split, int64_t limit,
     const std::function<Status(const Motion& motion, const std::string& origin)>& visit);
+
+// Both sides of the `split` triplets of `files` (at most `limit` triplets in all, 0: all), each as
+// `convert` gives it (e.g. at the model's rate), added to `database` in the files' and rows' order,
+// the database as Add one side at a time would fill it; the sides' rows are prepared (converted,
+// features and leg places) several files at once (OpenMP, a file to a thread). Returns the
+// triplets added; the first error in that order ends it, naming the file, triplet and side.
+Result<int64_t> AddTripletSides(const std::vector<std::string>& files, const std::string& split,
+                                int64_t limit, const std::function<Motion(const Motion&)>& convert,
+                                LegDatabase* database);
 
 }  // namespace motionpipe

@@ -63,8 +63,25 @@ class LegDatabase {
   LegDatabase(const Skeleton& skeleton, const LegMatchOptions& options);
 
   // InvalidArgument naming `origin` when the motion is not valid or not at the rate of the first
-  // motion added; FailedPrecondition once a motion has been matched.
+  // motion added; FailedPrecondition once a motion has been matched. Add(m, o) is
+  // Append(Prepare(m, o)).
   Status Add(const Motion& motion, const std::string& origin);
+
+  // One motion's rows of the database, computed apart from it: Prepare reads only the skeleton and
+  // the options, so threads may prepare motions at once (the costly part: the features and the
+  // leg places) and append them in the order the database is to hold them.
+  struct Rows {
+    std::string origin;
+    double fps = 0;
+    int64_t frames = 0;
+    std::vector<float> legs, pelvis, height;  // every frame (the members' layouts below)
+    std::vector<float> features, places;      // every frame_step-th frame
+  };
+  // InvalidArgument naming `origin` when the motion is not valid.
+  Result<Rows> Prepare(const Motion& motion, const std::string& origin) const;
+  // InvalidArgument when the rows are not at the first motion's rate, FailedPrecondition once a
+  // motion has been matched.
+  Status Append(Rows rows);
 
   double fps() const { return fps_; }
   int64_t frames() const { return static_cast<int64_t>(height_.size()); }
@@ -86,6 +103,8 @@ class LegDatabase {
   };
   // The knees' and ankles' places relative to the pelvis, heading removed, at a database frame.
   std::array<float, kPlaces> PlacesAt(int64_t frame) const;
+  // The same from a frame's pelvis (3) and legs (24) axis-angles as the database stores them.
+  std::array<float, kPlaces> PlacesOf(const float* pelvis, const float* legs) const;
   void Weigh();
   // The nearest window of T frames to `query` (compared frames' features); `joined` holds, for
   // its first compared frames, the last window's leg places that the window is to continue.
