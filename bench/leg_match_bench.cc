@@ -88,7 +88,8 @@ std::vector<std::string> TripletFilesOf(const std::vector<std::string>& paths) {
 struct Fingerprint {
   std::vector<float> poses;
   int64_t frames = 0;
-  bool operator==(const Fingerprint&) const = default;
+  double match_seconds = 0;  // per query, not compared
+  bool operator==(const Fingerprint& o) const { return poses == o.poses && frames == o.frames; }
 };
 
 Fingerprint Fill(const std::vector<std::string>& files, const std::string& split, bool one_by_one,
@@ -112,11 +113,13 @@ Fingerprint Fill(const std::vector<std::string>& files, const std::string& split
   *seconds = bench::Since(started);
   Fingerprint print;
   print.frames = db.frames();
+  const auto matching = bench::Clock::now();
   for (const Motion& query : queries) {
     const auto matched = db.Match(query);
     if (!matched.ok()) Usage(matched.status().message());
     print.poses.insert(print.poses.end(), matched->poses.begin(), matched->poses.end());
   }
+  print.match_seconds = bench::Since(matching) / static_cast<double>(queries.size());
   return print;
 }
 
@@ -132,6 +135,15 @@ std::vector<Motion> Queries(const std::vector<std::string>& files, const std::st
       });
   if (!visited.ok() || queries.empty()) Usage(files.front() + ": no " + split + " triplets");
   return queries;
+}
+
+std::string QueryFrames(const std::vector<Motion>& queries) {
+  int64_t least = queries.front().num_frames(), most = least;
+  for (const Motion& q : queries) {
+    least = std::min(least, q.num_frames());
+    most = std::max(most, q.num_frames());
+  }
+  return least == most ? std::to_string(least) : std::to_string(least) + "-" + std::to_string(most);
 }
 
 }  // namespace
@@ -172,9 +184,10 @@ int main(int argc, char** argv) {
       reference = std::min(reference, s);
     }
     const char* kind = random ? "random" : "nearest";
-    std::printf("%-42s %8lld %10.2f %s\n",
+    std::printf("%-42s %8lld %10.2f %s   (a match: %.3f s a %s-frame query)\n",
                 (std::string("one side at a time (") + kind + ")").c_str(),
-                static_cast<long long>(expected.frames), reference, "1.00x");
+                static_cast<long long>(expected.frames), reference, "1.00x", expected.match_seconds,
+                QueryFrames(queries).c_str());
     std::vector<int> counts = {1};
     if (threads > 1) counts.push_back(threads);
     for (const int n : counts) {
