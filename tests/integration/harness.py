@@ -82,6 +82,10 @@ class Process:
 class EngineTest(unittest.TestCase):
     """Base class: a temporary directory and a registry of processes torn down after each test."""
 
+    # The coordinator's and workers' heartbeat: a worker silent for 3 of them is lost. Short, so
+    # that tests of loss and restart are quick; a test class that checks no loss may lengthen it.
+    HEARTBEAT = "300ms"
+
     def setUp(self):
         self.dir = tempfile.mkdtemp(prefix="motionpipe_engine_")
         self.processes = []
@@ -112,16 +116,16 @@ class EngineTest(unittest.TestCase):
         self.workers_endpoint = f"tcp://{host}:{self.worker_port}"
         self.control = f"tcp://127.0.0.1:{self.control_port}"
         args = [MOTIONPIPE, "coordinator", "--bind", self.workers_endpoint, "--control", self.control,
-                "--journal", journal or self.path("journal.sqlite"), "--heartbeat", "300ms"]
+                "--journal", journal or self.path("journal.sqlite"), "--heartbeat", self.HEARTBEAT]
         if metrics_port:
             args += ["--metrics", f"127.0.0.1:{metrics_port}"]
         proc = self.spawn(args + list(extra), f"coordinator-{len(self.processes)}", env=env)
         self.wait_until(lambda: self.try_status() is not None, 10, "the coordinator to answer")
         return proc
 
-    def worker(self, name, extra=(), endpoint=None, credit=2, heartbeat="300ms", env=None):
+    def worker(self, name, extra=(), endpoint=None, credit=2, heartbeat=None, env=None):
         args = [MOTIONPIPE, "worker", "--coordinator", endpoint or self.workers_endpoint, "--name", name,
-                "--credit", str(credit), "--heartbeat", heartbeat]
+                "--credit", str(credit), "--heartbeat", heartbeat or self.HEARTBEAT]
         return self.spawn(args + list(extra), f"worker-{name}-{len(self.processes)}", env=env)
 
     def cli(self, *args, check=True, timeout=120):

@@ -17,6 +17,11 @@ stages:
 
 
 class TwoHosts(EngineTest):
+    # No test here loses a worker, and each reads the workers' counts from the status, which drops
+    # a lost one: at 300 ms (lost after 0.9 s silent) both workers were once dropped with four
+    # heavy processes beside the suite on 2 cores. Lost after 3 s silent instead.
+    HEARTBEAT = "1s"
+
     def test_coordinator_and_workers_on_separate_addresses(self):
         self.coordinator(host="127.0.0.2")  # workers reach it at another loopback address
         for name in ("a", "b"):
