@@ -360,16 +360,24 @@ class EditorGenerator : public plugin::Generator {
     };
   }
 
-  Result<std::vector<Motion>> Edit(const std::vector<plugin::GenerateRequest>& requests) {
-    torch::NoGradGuard no_grad;
+  // A batch's texts, its sources (normalised, padded along time with their last frame) and its
+  // lengths, at the network's rate and as asked.
+  struct EditBatch {
+    std::vector<std::string> texts;
+    std::vector<int64_t> lengths;                          // at the network's rate
+    std::vector<int64_t> requested;                        // at the request's rate
+    torch::Tensor source, source_padding, target_padding;  // [ts, n, d], [n, ts], [n, tt]
+    int64_t tt = 0;                                        // the longest edit's network frames
+  };
+
+  Result<EditBatch> Batch(const std::vector<plugin::GenerateRequest>& requests) const {
     const EditorOptions& o = model_->options();
     const auto n = static_cast<int64_t>(requests.size());
     const auto scale = 2.0 * (model_->stddev() + 1e-5);
-    // Sources (normalised) and target lengths.
+    EditBatch batch;
     std::vector<torch::Tensor> sources;
-    std::vector<int64_t> lengths;    // at the network's rate
-    std::vector<int64_t> requested;  // at the request's rate
-    std::vector<std::string> texts;
+    std::vector<int64_t>& lengths = batch.lengths;
+    std::vector<std::string>& texts = batch.texts;
     for (const auto& r : requests) {
       if (r.texts.size() != 1) return InvalidArgument("an edit takes one instruction text");
       if (r.sampler != requests[0].sampler || r.steps != requests[0].steps)
@@ -395,21 +403,22 @@ class EditorGenerator : public plugin::Generator {
       if (body_parts_) frames = r.source->num_frames();  // inpainting keeps the source's timing
       if (frames < 2 || frames > 10000)
         return InvalidArgument(std::to_string(frames) + " frames is not a sensible length");
-      requested.push_back(frames);
+      batch.requested.push_back(frames);
       // MDM-BP's inpainting keeps the source's frames, at the network's rate too.
       lengths.push_back(body_parts_
                             ? sources.back().size(0)
                             : FramesCovering(frames, r.source ? r.source->fps : r.fps, o.fps));
     }
-    const int64_t tt = *std::max_element(lengths.begin(), lengths.end());
-    auto target_padding = torch::zeros({n, tt}, torch::kBool);
+    const int64_t tt = batch.tt = *std::max_element(lengths.begin(), lengths.end());
+    torch::Tensor& target_padding = batch.target_padding = torch::zeros({n, tt}, torch::kBool);
     for (int64_t i = 0; i < n; ++i) {
       if (lengths[static_cast<size_t>(i)] < tt)
         target_padding[i]
             .narrow(0, lengths[static_cast<size_t>(i)], tt - lengths[static_cast<size_t>(i)])
             .fill_(true);
     }
-    torch::Tensor source, source_padding;
+    torch::Tensor& source = batch.source;
+    torch::Tensor& source_padding = batch.source_padding;
     if (!sources.empty()) {
       int64_t ts = 1;
       for (const auto& s : sources) ts = std::max(ts, s.size(0));
@@ -426,6 +435,61 @@ class EditorGenerator : public plugin::Generator {
         }
       }
     }
+    return batch;
+  }
+
+  // The sampled features x [tt, n, diffusion dim] as motions at their requests' rates and lengths;
+  // with the contact head's probabilities `stands`, each planted where they say.
+  Result<std::vector<Motion>> DecodeEdits(torch::Tensor x, const torch::Tensor& stands,
+                                          const EditBatch& batch,
+                                          const std::vector<plugin::GenerateRequest>& requests) {
+    const EditorOptions& o = model_->options();
+    const auto n = static_cast<int64_t>(requests.size());
+    const auto scale = 2.0 * (model_->stddev() + 1e-5);
+    const std::vector<int64_t>& lengths = batch.lengths;
+    const std::vector<int64_t>& requested = batch.requested;
+    x = (model_->net()->Decode(x) * scale + model_->mean()).contiguous();
+    std::vector<Motion> out;
+    for (int64_t i = 0; i < n; ++i) {
+      const int64_t frames = lengths[static_cast<size_t>(i)];
+      FeatureMatrix features(frames, kEditFeatureDim);
+      const auto xi = x.select(1, i).narrow(0, 0, frames).contiguous();
+      std::memcpy(features.data.data(), xi.data_ptr<float>(),
+                  sizeof(float) * static_cast<size_t>(frames * kEditFeatureDim));
+      const auto& r = requests[static_cast<size_t>(i)];
+      const MotionAnchor anchor = r.source ? AnchorOf(*r.source) : MotionAnchor{};
+      const double rate = r.source ? r.source->fps : r.fps;
+      Motion m = DecodeMotionFix207(features, anchor, o.fps > 0 ? o.fps : rate);
+      if (o.fps > 0) {
+        MP_ASSIGN_OR_RETURN(
+            m, ResampleToFrames(m, rate, requested[static_cast<size_t>(i)], upsample_));
+      }
+      for (float v : m.poses) {
+        if (!std::isfinite(v)) return Internal("edit: the model produced NaN");
+      }
+      if (stands.defined()) {
+        const auto held =
+            ContactsAtRate(stands.select(1, i).narrow(0, 0, frames), o.fps, rate, m.num_frames());
+        FootLockReport one;
+        m = LockFeet(Skeleton::Smpl22(), m, foot_lock_, &one, &held);
+        planted_.Add(one);
+      }
+      out.push_back(std::move(m));
+    }
+    return out;
+  }
+
+  Result<std::vector<Motion>> Edit(const std::vector<plugin::GenerateRequest>& requests) {
+    torch::NoGradGuard no_grad;
+    const EditorOptions& o = model_->options();
+    const auto n = static_cast<int64_t>(requests.size());
+    const auto scale = 2.0 * (model_->stddev() + 1e-5);
+    MP_ASSIGN_OR_RETURN(const EditBatch batch, Batch(requests));
+    const std::vector<std::string>& texts = batch.texts;
+    const std::vector<int64_t>& lengths = batch.lengths;
+    const torch::Tensor &source = batch.source, &source_padding = batch.source_padding,
+                        &target_padding = batch.target_padding;
+    const int64_t tt = batch.tt;
     // A condition for branches stacked along the batch, each keeping or dropping the text and the
     // source (1 drops) for all n edits.
     const auto stacked = [&](const std::vector<int>& drop_text,
@@ -505,35 +569,7 @@ class EditorGenerator : public plugin::Generator {
           model_->net()->forward(x, torch::zeros({n}, torch::kInt64), target_padding, full);
       stands = torch::sigmoid(p.contacts.to(torch::kFloat32)).contiguous();
     }
-    x = (model_->net()->Decode(x) * scale + model_->mean()).contiguous();
-    std::vector<Motion> out;
-    for (int64_t i = 0; i < n; ++i) {
-      const int64_t frames = lengths[static_cast<size_t>(i)];
-      FeatureMatrix features(frames, kEditFeatureDim);
-      const auto xi = x.select(1, i).narrow(0, 0, frames).contiguous();
-      std::memcpy(features.data.data(), xi.data_ptr<float>(),
-                  sizeof(float) * static_cast<size_t>(frames * kEditFeatureDim));
-      const auto& r = requests[static_cast<size_t>(i)];
-      const MotionAnchor anchor = r.source ? AnchorOf(*r.source) : MotionAnchor{};
-      const double rate = r.source ? r.source->fps : r.fps;
-      Motion m = DecodeMotionFix207(features, anchor, o.fps > 0 ? o.fps : rate);
-      if (o.fps > 0) {
-        MP_ASSIGN_OR_RETURN(
-            m, ResampleToFrames(m, rate, requested[static_cast<size_t>(i)], upsample_));
-      }
-      for (float v : m.poses) {
-        if (!std::isfinite(v)) return Internal("edit: the model produced NaN");
-      }
-      if (stands.defined()) {
-        const auto held =
-            ContactsAtRate(stands.select(1, i).narrow(0, 0, frames), o.fps, rate, m.num_frames());
-        FootLockReport one;
-        m = LockFeet(Skeleton::Smpl22(), m, foot_lock_, &one, &held);
-        planted_.Add(one);
-      }
-      out.push_back(std::move(m));
-    }
-    return out;
+    return DecodeEdits(x, stands, batch, requests);
   }
 
   // Sums only, so that an edit stage's tasks add up (the mean shift is planted_shift_m over
