@@ -299,6 +299,38 @@ Result<json> ComposedTruth(plugin::Generator& tmr, plugin::Generator& temos,
 // `synthetic_split`, default train: SyntheticPairAgreement), composed_truth (true: also the
 // yardsticks of ComposedTruth: each generated two-action span, or with `composed_split` every
 // two-action span of that split, composed from two real singles by labelled and by random parts).
+// A generate stage's motions with a span in the table (the first sample of each: extra samples,
+// "id#k", are skipped), each with its span, text and ground truth; the method and checkpoint its
+// summaries name.
+struct GeneratedMotions {
+  std::vector<Motion> generated, truth;
+  std::vector<std::string> texts, ids;
+  std::vector<int64_t> spans;  // each motion's span in the table
+};
+
+Result<GeneratedMotions> ReadGenerated(const TaskContext& ctx, const std::string& stage,
+                                       const sinc::SpanTable& table, std::string* method,
+                                       std::string* checkpoint) {
+  std::map<std::string, int64_t> span_of;
+  for (int64_t i = 0; i < table.size(); ++i) span_of[table.ids[static_cast<size_t>(i)]] = i;
+  GeneratedMotions out;
+  for (const std::string& dir : StageDirs(ctx, stage)) {
+    if (!fs::exists(dir + "/generated.npz")) continue;
+    MP_ASSIGN_OR_RETURN(std::vector<Clip> clips, ReadClips(dir + "/generated.npz"));
+    for (auto& clip : clips) {
+      const auto it = span_of.find(clip.id);
+      if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
+      out.ids.push_back(clip.id);
+      out.spans.push_back(it->second);
+      out.texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
+      out.generated.push_back(std::move(clip.motion));
+      out.truth.push_back(table.MotionOf(it->second));
+    }
+    ReadSummary(dir + "/generate.json", method, checkpoint);
+  }
+  return out;
+}
+
 class EvalGenerateStage : public StageExecutor {
  public:
   // One task.
@@ -333,29 +365,12 @@ class EvalGenerateStage : public StageExecutor {
     plugin::Generator& temos_encoder = temos_stage.empty() ? **tmr : **temos;
     auto table = InputSpans(ctx, p.value("singles", std::string()));
     if (!table.ok()) return TaskReport::BadInput("eval_generate: " + table.status().message());
-    std::map<std::string, int64_t> span_of;
-    for (int64_t i = 0; i < table->size(); ++i) span_of[table->ids[static_cast<size_t>(i)]] = i;
     // The generated motions (first sample of each span) and their ground truth.
-    const std::string generated_stage = p.value("generated", std::string());
-    std::vector<Motion> generated, truth;
-    std::vector<std::string> texts, ids;
-    std::vector<int64_t> spans;  // each motion's span in the table
     std::string method = p.value("method", std::string()), generated_checkpoint;
-    for (const std::string& dir : StageDirs(ctx, generated_stage)) {
-      if (!fs::exists(dir + "/generated.npz")) continue;
-      auto clips = ReadClips(dir + "/generated.npz");
-      if (!clips.ok()) return TaskReport::BadInput(clips.status().message());
-      for (auto& clip : *clips) {
-        const auto it = span_of.find(clip.id);
-        if (it == span_of.end()) continue;  // extra samples ("id#k") and unknown ids
-        ids.push_back(clip.id);
-        spans.push_back(it->second);
-        texts.push_back(clip.texts.empty() ? std::string() : clip.texts[0]);
-        generated.push_back(std::move(clip.motion));
-        truth.push_back(table->MotionOf(it->second));
-      }
-      ReadSummary(dir + "/generate.json", &method, &generated_checkpoint);
-    }
+    auto read = ReadGenerated(ctx, p.value("generated", std::string()), *table, &method,
+                              &generated_checkpoint);
+    if (!read.ok()) return TaskReport::BadInput(read.status().message());
+    auto& [generated, truth, texts, ids, spans] = *read;
     if (generated.size() < 2)
       return TaskReport::BadInput(
           "eval_generate: fewer than 2 generated motions with a ground truth in the inputs");
