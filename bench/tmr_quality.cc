@@ -178,53 +178,12 @@ const Checkpoint* FirstAtBar(const std::vector<Checkpoint>& run, double bar) {
   return nullptr;
 }
 
-}  // namespace
-
-void BenchTimeToQuality(const QualityArgs& a) {
-  const TemosSize& size = SizeNamed(a.size);
-  fs::create_directories(a.dir);
-  const std::string spans = EnsureSpans(a);
-  auto read = sinc::ReadSpans(spans);
-  if (!read.ok()) {
-    std::fprintf(stderr, "tmr_quality: %s\n", read.status().message().c_str());
-    std::exit(1);
-  }
-  auto table = std::make_shared<sinc::SpanTable>(std::move(*read));
-  nn::SetTorchThreads(static_cast<int>(a.threads));
-
-  // As the train stage: the seed, then the model, then the data (tokenizer and statistics).
-  torch::manual_seed(a.seed);
-  temos::Temos net(temos::TemosOptions::FromJson(ModelConfig(size)));
-  temos::SincDataOptions options;
-  options.spans = spans;
-  options.real_pairs = true;
-  options.synthetic_p = 0;
-  options.max_frames = kMaxFrames;
-  options.fps = kFps;
-  temos::SincDataset train(table, options);
-  net->text_encoder()->Fit(train.AllTexts());
-  const auto [mean, stddev] = train.ComputeStats();
-  train.SetStats(mean, stddev);
-  temos::SincDataOptions test_options = options;
-  test_options.split = "test";
-  test_options.real_pairs = false;
-  test_options.max_frames = 1 << 20;
-  test_options.augment_texts = false;
-  temos::SincDataset test_data(table, test_options);
-  test_data.SetStats(mean, stddev);
-  TestSet test;
-  {
-    std::vector<int64_t> all(static_cast<size_t>(test_data.size()));
-    std::iota(all.begin(), all.end(), 0);
-    const plugin::Batch b = test_data.Get(all, 0);
-    test.features = b.tensors.at("features");
-    test.padding = b.tensors.at("padding");
-    test.tokens = net->text_encoder()->TokenIds(b.texts);
-    for (const auto& t : b.texts) test.groups.push_back({t});
-  }
-  const int64_t latent = net->options().latent, vocab = net->text_encoder()->options().vocab;
-
-  // The reference's inputs: the initial weights, the test set and every step's batch.
+// The reference's inputs in a.dir: the initial weights, the test set and every step's batch as
+// `stream` draws it. Returns the first batch's loss with dropout off at the initial weights (the
+// same model's figure beside the reference's).
+double WriteReferenceInputs(const QualityArgs& a, temos::Temos& net, const TestSet& test,
+                            BatchStream& stream) {
+  const int64_t latent = net->options().latent;
   const std::string init = a.dir + "/init";
   fs::remove_all(init);
   fs::create_directories(init);
@@ -247,7 +206,6 @@ void BenchTimeToQuality(const QualityArgs& a) {
       NpyArray::Int64({test.tokens.size(0), test.tokens.size(1)},
                       std::vector<int64_t>(test_tokens.data_ptr<int64_t>(),
                                            test_tokens.data_ptr<int64_t>() + test_tokens.numel())));
-  BatchStream stream(train, a.seed);
   const int64_t max_tokens = net->text_encoder()->options().max_tokens;
   Stream s;
   double first_eval_loss = 0;
@@ -302,11 +260,15 @@ void BenchTimeToQuality(const QualityArgs& a) {
   SaveNpy(a.dir + "/frames.npy", NpyArray::Int64({n}, s.frames));
   SaveNpy(a.dir + "/token_length.npy", NpyArray::Int64({n}, s.token_length));
 
-  // Our trainer: the train stage's step (plugins/train Step: the forward pass under the step's
-  // precision) on the same stream, timed without the test encodings.
-  const nn::Precision precision = nn::EffectivePrecision(
-      a.bf16 ? nn::Precision::kBf16 : nn::Precision::kFloat32, nn::CpuHasNativeBf16());
-  const bool bf16 = precision == nn::Precision::kBf16;
+  return first_eval_loss;
+}
+
+// Our trainer: the train stage's step (plugins/train Step: the forward pass under `precision`) on
+// `stream`, timed without the test encodings; the test R@1 from the untrained weights on, every
+// a.every steps. *first_loss: the first step's training loss.
+std::vector<Checkpoint> TrainOurs(const QualityArgs& a, temos::Temos& net, const TestSet& test,
+                                  BatchStream& stream, nn::Precision precision,
+                                  double* first_loss) {
   std::vector<torch::Tensor> params;
   for (auto& p : net->parameters())
     if (p.requires_grad()) params.push_back(p);
@@ -323,9 +285,9 @@ void BenchTimeToQuality(const QualityArgs& a) {
     return TextToMotionR1(t, m);
   };
   cpp.push_back({0, 0, score()});  // the untrained yardstick: the same weights as the reference's
-  double seconds = 0, first_loss = 0;
+  double seconds = 0;
   net->train();
-  for (int64_t step = 0; step < n; ++step) {
+  for (int64_t step = 0; step < a.steps; ++step) {
     const StepBatch sb = stream.Of(step);
     const auto started = Clock::now();
     torch::manual_seed(MixSeed(a.seed, static_cast<uint64_t>(step)));
@@ -341,33 +303,97 @@ void BenchTimeToQuality(const QualityArgs& a) {
       static_cast<torch::optim::AdamWOptions&>(group.options()).lr(LearningRate(step));
     nn::AdamWStep(optimizer, kClip);
     seconds += Since(started);
-    if (step == 0) first_loss = losses.at("loss").item<double>();
-    if ((step + 1) % a.every == 0 || step + 1 == n) cpp.push_back({step + 1, seconds, score()});
+    if (step == 0) *first_loss = losses.at("loss").item<double>();
+    if ((step + 1) % a.every == 0 || step + 1 == a.steps)
+      cpp.push_back({step + 1, seconds, score()});
   }
 
+  return cpp;
+}
+
+// The PyTorch-Python reference (bench/reference/tmr_ref.py) trained on the inputs in a.dir and
+// scored as ours. *first_eval_loss: its first batch's loss with dropout off, initial weights.
+std::vector<Checkpoint> TrainReference(const QualityArgs& a, const TemosSize& size, int64_t latent,
+                                       int64_t vocab, bool bf16, double* first_eval_loss) {
   std::vector<Checkpoint> python;
-  double python_eval_loss = 0;
-  if (a.reference) {
-    for (const auto& entry : fs::directory_iterator(a.dir))  // an earlier run's embeddings
-      if (entry.path().filename().string().rfind("python_", 0) == 0) fs::remove(entry.path());
-    std::ostringstream command;
-    command << "OMP_NUM_THREADS=" << a.threads << " OPENBLAS_NUM_THREADS=" << a.threads
-            << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR << "/bench/reference/tmr_ref.py --dir "
-            << a.dir << " --latent " << latent << " --layers " << size.layers << " --heads "
-            << size.heads << " --ff " << size.ff << " --text-layers " << size.text_layers
-            << " --vocab " << vocab << " --steps " << n << " --every " << a.every << " --threads "
-            << a.threads << (bf16 ? " --bf16" : "") << " 2>&1";
-    const std::string out = Run(command.str());
-    const json result = json::parse(out.substr(out.rfind("\n{") + 1));
-    python_eval_loss = result.at("first_eval_loss").get<double>();
-    for (const auto& c : result.at("checkpoints")) {
-      const int64_t step = c.at("step").get<int64_t>();
-      const std::string prefix = a.dir + "/python_" + std::to_string(step);
-      python.push_back(
-          {step, c.at("seconds").get<double>(),
-           TextToMotionR1(LoadRows(prefix + "_text.npy"), LoadRows(prefix + "_motion.npy"))});
-    }
+  for (const auto& entry : fs::directory_iterator(a.dir))  // an earlier run's embeddings
+    if (entry.path().filename().string().rfind("python_", 0) == 0) fs::remove(entry.path());
+  std::ostringstream command;
+  command << "OMP_NUM_THREADS=" << a.threads << " OPENBLAS_NUM_THREADS=" << a.threads
+          << " /usr/bin/python3 " << MOTIONPIPE_SOURCE_DIR << "/bench/reference/tmr_ref.py --dir "
+          << a.dir << " --latent " << latent << " --layers " << size.layers << " --heads "
+          << size.heads << " --ff " << size.ff << " --text-layers " << size.text_layers
+          << " --vocab " << vocab << " --steps " << a.steps << " --every " << a.every
+          << " --threads " << a.threads << (bf16 ? " --bf16" : "") << " 2>&1";
+  const std::string out = Run(command.str());
+  const json result = json::parse(out.substr(out.rfind("\n{") + 1));
+  *first_eval_loss = result.at("first_eval_loss").get<double>();
+  for (const auto& c : result.at("checkpoints")) {
+    const int64_t step = c.at("step").get<int64_t>();
+    const std::string prefix = a.dir + "/python_" + std::to_string(step);
+    python.push_back(
+        {step, c.at("seconds").get<double>(),
+         TextToMotionR1(LoadRows(prefix + "_text.npy"), LoadRows(prefix + "_motion.npy"))});
   }
+  return python;
+}
+
+}  // namespace
+
+void BenchTimeToQuality(const QualityArgs& a) {
+  const TemosSize& size = SizeNamed(a.size);
+  fs::create_directories(a.dir);
+  const std::string spans = EnsureSpans(a);
+  auto read = sinc::ReadSpans(spans);
+  if (!read.ok()) {
+    std::fprintf(stderr, "tmr_quality: %s\n", read.status().message().c_str());
+    std::exit(1);
+  }
+  auto table = std::make_shared<sinc::SpanTable>(std::move(*read));
+  nn::SetTorchThreads(static_cast<int>(a.threads));
+
+  // As the train stage: the seed, then the model, then the data (tokenizer and statistics).
+  torch::manual_seed(a.seed);
+  temos::Temos net(temos::TemosOptions::FromJson(ModelConfig(size)));
+  temos::SincDataOptions options;
+  options.spans = spans;
+  options.real_pairs = true;
+  options.synthetic_p = 0;
+  options.max_frames = kMaxFrames;
+  options.fps = kFps;
+  temos::SincDataset train(table, options);
+  net->text_encoder()->Fit(train.AllTexts());
+  const auto [mean, stddev] = train.ComputeStats();
+  train.SetStats(mean, stddev);
+  temos::SincDataOptions test_options = options;
+  test_options.split = "test";
+  test_options.real_pairs = false;
+  test_options.max_frames = 1 << 20;
+  test_options.augment_texts = false;
+  temos::SincDataset test_data(table, test_options);
+  test_data.SetStats(mean, stddev);
+  TestSet test;
+  {
+    std::vector<int64_t> all(static_cast<size_t>(test_data.size()));
+    std::iota(all.begin(), all.end(), 0);
+    const plugin::Batch b = test_data.Get(all, 0);
+    test.features = b.tensors.at("features");
+    test.padding = b.tensors.at("padding");
+    test.tokens = net->text_encoder()->TokenIds(b.texts);
+    for (const auto& t : b.texts) test.groups.push_back({t});
+  }
+  const int64_t latent = net->options().latent, vocab = net->text_encoder()->options().vocab;
+
+  BatchStream stream(train, a.seed);
+  const double first_eval_loss = WriteReferenceInputs(a, net, test, stream);
+  const nn::Precision precision = nn::EffectivePrecision(
+      a.bf16 ? nn::Precision::kBf16 : nn::Precision::kFloat32, nn::CpuHasNativeBf16());
+  double first_loss = 0, python_eval_loss = 0;
+  const std::vector<Checkpoint> cpp = TrainOurs(a, net, test, stream, precision, &first_loss);
+  const std::vector<Checkpoint> python =
+      a.reference ? TrainReference(a, size, latent, vocab, precision == nn::Precision::kBf16,
+                                   &python_eval_loss)
+                  : std::vector<Checkpoint>{};
 
   std::printf(
       "\ntime to quality: the demo's TMR evaluator (10 fps, batch 32, lr 5e-4 on the 3,600-step "
