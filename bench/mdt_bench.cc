@@ -349,17 +349,17 @@ double MsPerCall(F&& f, int reps) {
 // what each saves, as a share of the step of its precision without the kernels of that precision
 // (the steps above run them): a float32 kernel of the float32 step, a bf16 one of the bf16 step
 // where this CPU has bf16 products (elsewhere the train stage runs bf16 as float32).
-void BenchFused(const Args& a, const Size& size, const StepMs& step_ms) {
-  const bool native_bf16 = nn::CpuHasNativeBf16();
-  struct Row {
-    std::string name;
-    double torch_ms, fused_ms;
-    int64_t calls;      // per training step
-    bool bf16 = true;   // a kernel of bf16 steps (else of float32 ones)
-    bool both = false;  // of either
-  };
-  std::vector<Row> table;
-  torch::manual_seed(3);
+// A fused kernel (or ATen's linear) against the LibTorch route it replaces, ms per call fwd+bwd.
+struct FusedRow {
+  std::string name;
+  double torch_ms, fused_ms;
+  int64_t calls;      // per training step
+  bool bf16 = true;   // a kernel of bf16 steps (else of float32 ones)
+  bool both = false;  // of either
+};
+
+// The element-wise kernels: tanh-GELU and adaLN's modulated LayerNorm and gated residual.
+void TimeElementwiseKernels(const Args& a, const Size& size, std::vector<FusedRow>& table) {
   const int64_t tokens = 2 * a.frames + 1, rows = a.batch * tokens;
   const std::string shape = std::to_string(tokens) + " x " + std::to_string(a.batch) + " x ";
   {
@@ -421,6 +421,11 @@ void BenchFused(const Args& a, const Size& size, const StepMs& step_ms) {
     table.push_back({"adaLN x + gate y" + what, MsPerCall([&] { gated(false); }, 20),
                      MsPerCall([&] { gated(true); }, 20), 2 * size.layers, bf16});
   }
+}
+
+// A DiT block's linears, clip + AdamW, and attention's float32 core.
+void TimeMatrixKernels(const Args& a, const Size& size, std::vector<FusedRow>& table) {
+  const int64_t tokens = 2 * a.frames + 1;
   // A DiT block's four linears under bf16 autocast: torch::nn::Linear::forward (matmul, then the
   // bias in a second pass) against ATen's linear (nn::ApplyLinear: one addmm).
   for (const auto& [in, out, what] :
@@ -480,6 +485,15 @@ void BenchFused(const Args& a, const Size& size, const StepMs& step_ms) {
                      MsPerCall([&] { attend(false); }, 10), MsPerCall([&] { attend(true); }, 10),
                      size.layers + size.cond_layers, false});
   }
+}
+
+void BenchFused(const Args& a, const Size& size, const StepMs& step_ms) {
+  const bool native_bf16 = nn::CpuHasNativeBf16();
+  using Row = FusedRow;
+  std::vector<Row> table;
+  torch::manual_seed(3);
+  TimeElementwiseKernels(a, size, table);
+  TimeMatrixKernels(a, size, table);
   // Whether a row runs in the step of a precision (bf16 = true: under bf16 autocast).
   const auto runs_in = [](const Row& row, bool bf16) { return row.both || row.bf16 == bf16; };
   const auto saved_in = [&](bool bf16) {
