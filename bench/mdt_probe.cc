@@ -172,7 +172,7 @@ void PrintYardsticks(const Probe& p) {
 // the examples of the fraction of contact foot-frames sliding faster than 0.15 m/s.
 double GroundedSkate(const Probe& p, const torch::Tensor& x) {
   const auto frames_of = p.batch.tensors.at("target_padding").logical_not().sum(1);
-  const auto raw = (x.to(torch::kFloat32) * (2.0 * (p.stddev + 1e-5)) + p.mean).contiguous();
+  const auto raw = (x.to(torch::kFloat32) * NormalisationScale(p.stddev) + p.mean).contiguous();
   const double fps = p.options.fps > 0 ? p.options.fps : 30.0;
   const Skeleton& skeleton = Skeleton::Smpl22();
   double sum = 0;
@@ -234,7 +234,7 @@ void PrintContactHead(Probe& p, const CosineSchedule& schedule) {
   const auto& target = p.batch.tensors.at("target");
   const auto& padding = p.batch.tensors.at("target_padding");
   const double fps = p.options.fps > 0 ? p.options.fps : 30.0;
-  const auto labels = ContactLabels(target * (2.0 * (p.stddev + 1e-5)) + p.mean, fps,
+  const auto labels = ContactLabels(target * NormalisationScale(p.stddev) + p.mean, fps,
                                     PlausibilityOptions{}.skate_speed)
                           .to(torch::kBool);
   const auto real = padding.logical_not().t().unsqueeze(2).expand_as(labels);
@@ -367,7 +367,7 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
 Status WriteMotions(const Probe& p, const torch::Tensor& x, const std::string& dir,
                     const std::string& what) {
   const auto frames_of = p.batch.tensors.at("target_padding").logical_not().sum(1);
-  const auto raw = (x.to(torch::kFloat32) * (2.0 * (p.stddev + 1e-5)) + p.mean).contiguous();
+  const auto raw = (x.to(torch::kFloat32) * NormalisationScale(p.stddev) + p.mean).contiguous();
   std::vector<Clip> clips;
   for (int64_t i = 0; i < p.n; ++i) {
     const int64_t index = p.indices[static_cast<size_t>(i)];

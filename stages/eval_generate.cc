@@ -289,16 +289,6 @@ Result<json> ComposedTruth(plugin::Generator& tmr, plugin::Generator& temos,
   return out;
 }
 
-// params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
-// evaluator), generated (the generate stage), singles (the spans and ground truth; default the
-// input that has them; each of these an input's name or a path pattern such as
-// "out/demo-1/gen_sinc"), batch (32), seed, diversity_pairs (300), method.
-// yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the
-// TMR's own retrieval on the test singles and two-action spans), synthetic_pairs (N > 0: also the
-// TMR's agreement of text and motion on N synthetic pairs of each kind and N real pairs of
-// `synthetic_split`, default train: SyntheticPairAgreement), composed_truth (true: also the
-// yardsticks of ComposedTruth: each generated two-action span, or with `composed_split` every
-// two-action span of that split, composed from two real singles by labelled and by random parts).
 // A generate stage's motions with a span in the table (the first sample of each: extra samples,
 // "id#k", are skipped), each with its span, text and ground truth; the method and checkpoint its
 // summaries name.
@@ -331,6 +321,16 @@ Result<GeneratedMotions> ReadGenerated(const TaskContext& ctx, const std::string
   return out;
 }
 
+// params: evaluator (TMR: retrieval), temos (TEMOS on real singles: the TEMOS score; default the
+// evaluator), generated (the generate stage), singles (the spans and ground truth; default the
+// input that has them; each of these an input's name or a path pattern such as
+// "out/demo-1/gen_sinc"), batch (32), seed, diversity_pairs (300), method.
+// yardstick ("untrained": the report's untrained generator), evaluator_quality (true: also the
+// TMR's own retrieval on the test singles and two-action spans), synthetic_pairs (N > 0: also the
+// TMR's agreement of text and motion on N synthetic pairs of each kind and N real pairs of
+// `synthetic_split`, default train: SyntheticPairAgreement), composed_truth (true: also the
+// yardsticks of ComposedTruth: each generated two-action span, or with `composed_split` every
+// two-action span of that split, composed from two real singles by labelled and by random parts).
 class EvalGenerateStage : public StageExecutor {
  public:
   // One task.

@@ -157,7 +157,7 @@ std::pair<torch::Tensor, torch::Tensor> Pad(const std::vector<FeatureMatrix>& fe
   for (int64_t i = 0; i < n; ++i) {
     const auto& f = features[static_cast<size_t>(i)];
     auto x = (torch::from_blob(const_cast<float*>(f.data.data()), {f.rows, f.cols}) - mean) /
-             (2.0 * (stddev + 1e-5));
+             NormalisationScale(stddev);
     out.select(1, i).narrow(0, 0, f.rows).copy_(x);
     if (f.rows < longest) {
       out.select(1, i)
@@ -261,7 +261,7 @@ torch::Tensor EditDataset::FrameCovariance(const torch::Tensor& mean, const torc
   int64_t count = 0;
   const auto n = static_cast<int64_t>(items_.size());
   const int64_t take = std::min(n, limit);
-  const auto scale = 2.0 * (stddev.to(torch::kFloat64) + 1e-5);
+  const auto scale = NormalisationScale(stddev.to(torch::kFloat64));
   for (int64_t k = 0; k < take; ++k) {
     const Item& item = items_[static_cast<size_t>(k * n / take)];
     for (bool source : {true, false}) {

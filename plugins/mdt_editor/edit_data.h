@@ -37,6 +37,12 @@ struct EditDataOptions {
 // Motions -> 207-d features (stored joint positions when present).
 FeatureMatrix EditFeatures(const Motion& motion, const float* joints);
 
+// The features' normalisation (REFERENCE.md 2): x' = (x - mean) / NormalisationScale(std), the
+// scale 2 (std + 1e-5) in the dtype of `stddev`; the network's outputs go back as x' scale + mean.
+inline torch::Tensor NormalisationScale(const torch::Tensor& stddev) {
+  return 2.0 * (stddev + 1e-5);
+}
+
 // The network's frame rate (EditorOptions::fps, issue 15: a step at 10 fps costs about a third of
 // one at 30). A motion at `fps` (<= 0 or the motion's own: unchanged): a whole-number ratio keeps
 // every k-th frame, as Resample by index, and the stored joints [T, 22, 3] of those frames when

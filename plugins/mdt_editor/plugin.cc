@@ -138,7 +138,7 @@ class EditorModel : public plugin::Model {
     if (options_.foot_contact_weight > 0 || options_.foot_velocity_weight > 0 ||
         p.contacts.defined()) {
       // The geometric losses read metres: the features' normalisation undone (REFERENCE.md 2).
-      const auto scale = 2.0 * (std_ + 1e-5);
+      const auto scale = NormalisationScale(std_);
       const auto predicted = p.x0 * scale + mean_, actual = target * scale + mean_;
       const auto& padding = batch.tensors.at("target_padding");
       const double fps = options_.fps > 0 ? options_.fps : 30.0;
@@ -373,7 +373,7 @@ class EditorGenerator : public plugin::Generator {
   Result<EditBatch> Batch(const std::vector<plugin::GenerateRequest>& requests) const {
     const EditorOptions& o = model_->options();
     const auto n = static_cast<int64_t>(requests.size());
-    const auto scale = 2.0 * (model_->stddev() + 1e-5);
+    const auto scale = NormalisationScale(model_->stddev());
     EditBatch batch;
     std::vector<torch::Tensor> sources;
     std::vector<int64_t>& lengths = batch.lengths;
@@ -445,7 +445,7 @@ class EditorGenerator : public plugin::Generator {
                                           const std::vector<plugin::GenerateRequest>& requests) {
     const EditorOptions& o = model_->options();
     const auto n = static_cast<int64_t>(requests.size());
-    const auto scale = 2.0 * (model_->stddev() + 1e-5);
+    const auto scale = NormalisationScale(model_->stddev());
     const std::vector<int64_t>& lengths = batch.lengths;
     const std::vector<int64_t>& requested = batch.requested;
     x = (model_->net()->Decode(x) * scale + model_->mean()).contiguous();
@@ -483,7 +483,7 @@ class EditorGenerator : public plugin::Generator {
     torch::NoGradGuard no_grad;
     const EditorOptions& o = model_->options();
     const auto n = static_cast<int64_t>(requests.size());
-    const auto scale = 2.0 * (model_->stddev() + 1e-5);
+    const auto scale = NormalisationScale(model_->stddev());
     MP_ASSIGN_OR_RETURN(const EditBatch batch, Batch(requests));
     const std::vector<std::string>& texts = batch.texts;
     const std::vector<int64_t>& lengths = batch.lengths;
