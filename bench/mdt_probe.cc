@@ -13,8 +13,9 @@
 // triplets a model was fitted to).
 // --write DIR also writes, as edit stages eval_edit can score (DIR/NAME/task-00000/edited.npz, at
 // the targets' lengths and rates), the targets through the feature and the network's frame rate
-// (target_roundtrip) and the x0 estimates from each target noised to step t (estimate_tT): what
-// the judges make of the network's own reconstruction of the answer.
+// (target_roundtrip), the sources aligned to them as the network reads them (source_aligned), and
+// the x0 estimates from each target noised to step t (estimate_tT): what the judges make of the
+// network's own reconstruction of the answer.
 #include <torch/torch.h>
 
 #include <algorithm>
@@ -66,7 +67,7 @@ struct Args {
   std::vector<std::string> dirs;  // the checkpoint, then the filter/corpus directories
   std::string split = "test", filter = "input";
   int64_t n = 64, ddim = 20, limit = 0;
-  bool sample = true;
+  bool sample = true, rank = false;
   double g_m = -1, g_t = -1;
   std::string write;  // a directory for the decoded estimates, or empty
 };
@@ -87,6 +88,8 @@ std::optional<Args> ParseArgs(int argc, char** argv) {
       args.ddim = std::stoll(argv[++i]);
     else if (a == "--no-sample")
       args.sample = false;
+    else if (a == "--rank")
+      args.rank = true;
     else if (a == "--guidance" && i + 1 < argc)
       std::sscanf(argv[++i], "%lf,%lf", &args.g_m, &args.g_t);
     else if (a == "--write" && i + 1 < argc)
@@ -361,6 +364,43 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
   }
 }
 
+// How many numbers a frame needs for its feet to stand: the targets through a rank-K linear code
+// of a frame (their projection onto the top K principal directions of the training split's
+// normalised frames, sources and targets, about the frames' mean), with their x0 MSE and skate.
+// A trunk d wide carries each frame as d numbers; if even the best linear code of K = d numbers
+// slides, precision is lost in the code, not the training.
+Status PrintRankFloor(const Args& a, const Probe& p) {
+  EditDataOptions data;
+  data.split = "train";
+  data.filter = a.filter;
+  data.limit = a.limit;
+  data.fps = p.options.fps;
+  EditDataset train(data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
+  if (train.size() < 2) return InvalidArgument("--rank: the training split has under 2 triplets");
+  const auto covariance = train.FrameCovariance(p.mean, p.stddev, 2000).to(torch::kFloat64);
+  const auto [values, vectors] = torch::linalg_eigh(covariance);  // ascending
+  const auto& target = p.batch.tensors.at("target");
+  const auto& padding = p.batch.tensors.at("target_padding");
+  const auto keep = padding.logical_not().t().unsqueeze(2).to(torch::kFloat64);
+  const auto x = target.to(torch::kFloat64);
+  const auto centre = (x * keep).sum(std::vector<int64_t>{0, 1}) / keep.sum();
+  const double total = values.sum().item<double>();
+  std::printf(
+      "rank-K code of a frame (the training split's principal directions, %lld triplets):\n"
+      "%6s %10s %10s %8s\n",
+      static_cast<long long>(std::min<int64_t>(train.size(), 2000)), "K", "variance", "x0 MSE",
+      "skate");
+  for (int64_t k : {16L, 32L, 64L, 96L, 128L, 160L, 192L, 207L}) {
+    const auto v = vectors.narrow(1, kEditFeatureDim - k, k);  // the K largest
+    const auto coded = centre + torch::matmul(torch::matmul(x - centre, v), v.t());
+    const auto as_float = coded.to(torch::kFloat32);
+    std::printf("%6lld %10.4f %10.4f %8.3f\n", static_cast<long long>(k),
+                values.narrow(0, kEditFeatureDim - k, k).sum().item<double>() / total,
+                Mse(as_float, target, padding).mean().item<double>(), GroundedSkate(p, as_float));
+  }
+  return Status::Ok();
+}
+
 // Normalised 207-d frames [T, N, 207] at the network's rate as the batch's motions: decoded from
 // each target's first frame (as the editor decodes from its source's) and resampled to the
 // target's own frame count and rate, written as an edit stage's output (dir/task-00000/edited.npz).
@@ -398,6 +438,10 @@ Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::strin
   const auto& target = p.batch.tensors.at("target");
   const auto& padding = p.batch.tensors.at("target_padding");
   MP_RETURN_IF_ERROR(WriteMotions(p, target, dir + "/target_roundtrip", "target_roundtrip"));
+  // The source as the network sees it beside its target (AlignSource: the "toward source"
+  // direction), decoded from the target's first frame: its leg rotations against the estimates'.
+  MP_RETURN_IF_ERROR(WriteMotions(p, AlignSource(p.c.source, p.c.source_padding, padding),
+                                  dir + "/source_aligned", "source_aligned"));
   const auto z0 = p.net->Encode(target);
   for (int64_t t : {0L, 60L, 150L, 200L, 250L, 299L}) {
     if (t >= p.options.diffusion_steps) continue;
@@ -408,8 +452,8 @@ Status WriteEstimates(Probe& p, const CosineSchedule& schedule, const std::strin
     MP_RETURN_IF_ERROR(WriteMotions(p, x0, dir + "/" + name, name));
   }
   std::printf(
-      "wrote %lld motions each to %s/{target_roundtrip,estimate_tT} (T = 0, 60, 150, 200, 250, "
-      "299)\n",
+      "wrote %lld motions each to %s/{target_roundtrip,source_aligned,estimate_tT} (T = 0, 60, "
+      "150, 200, 250, 299)\n",
       static_cast<long long>(p.n), dir.c_str());
   return Status::Ok();
 }
@@ -420,9 +464,10 @@ int main(int argc, char** argv) {
   bench::UseNativeBlasKernels(argv);
   const std::optional<Args> args = ParseArgs(argc, argv);
   if (!args) {
-    std::fprintf(stderr,
-                 "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
-                 "[--guidance gm,gt] [--no-sample] [--write DIR] [--filter none] [--limit N]\n");
+    std::fprintf(
+        stderr,
+        "usage: mdt_probe <checkpoint dir> <filter dir>... [--split S] [--n N] [--ddim K] "
+        "[--guidance gm,gt] [--no-sample] [--rank] [--write DIR] [--filter none] [--limit N]\n");
     return 2;
   }
   nn::SetTorchThreads(1);
@@ -442,6 +487,10 @@ int main(int argc, char** argv) {
   PrintX0ByStep(*probe, schedule);
   if (probe->options.contacts_weight > 0) PrintContactHead(*probe, schedule);
   if (args->sample) PrintSampledEdits(*probe, schedule, args->ddim, g_m, g_t);
+  if (args->rank) {
+    const Status ranked = PrintRankFloor(*args, *probe);
+    if (!ranked.ok()) return std::fprintf(stderr, "%s\n", ranked.message().c_str()), 1;
+  }
   if (!args->write.empty()) {
     const Status written = WriteEstimates(*probe, schedule, args->write);
     if (!written.ok()) return std::fprintf(stderr, "%s\n", written.message().c_str()), 1;
