@@ -40,6 +40,21 @@ frames inside one run (held, yet the leg did not bring the joint to its place), 
 1 m/s or above 5 cm); and the toes' frames inside a run whose ankle was not held.
 
     /usr/bin/python3 tools/root_stats.py --unlocked out/demo-29/match_sinc out/demo-29/lock_match_sinc
+
+With --seeds (and --against REF), the stages are one estimate made by models that differ only in
+their training seed (e.g. mdt_probe --write's estimate_t0 of each): is the legs' error each model's
+own (training noise: an average of models would cancel it) or the recipe's (the same in every
+seed)? For each stage the root mean square angle of the leg joints' error and of its faster part
+(the error minus its Gaussian smoothing by 0.1 s); the cosine between two stages' errors (1: the same
+error, 0: unrelated, -1: opposite) and between their faster parts, pooled and as the median over
+motions, averaged over the pairs of stages; and the skate of the stages' mean
+motion (the rotations' chordal mean, the translations' mean) beside each stage's. With --toward
+SOURCE_DIR (mdt_probe --write's source_aligned) also how far each estimate's legs lean towards the
+source: per motion the least-squares fraction of the error along the source's leg rotations minus
+the reference's (0 keeps nothing of the source, 1 is the source), and the skate of the reference
+carrying only that lean or only the rest of the error.
+
+    /usr/bin/python3 tools/root_stats.py --seeds --against P1/target_roundtrip --toward P1/source_aligned P1/estimate_t0 P2/estimate_t0 P3/estimate_t0
 """
 import argparse
 import glob
@@ -324,6 +339,82 @@ def lock_residual(stage_dir, stage_motions, unlocked):
     return counts / contacts, toes_alone / contacts
 
 
+def chordal_mean(rotations):
+    """The rotation nearest (Frobenius) the mean of rotation matrices [K, ..., 3, 3] over K."""
+    u, _, vt = np.linalg.svd(np.mean(rotations, axis=0))
+    u[..., :, -1] *= np.sign(np.linalg.det(u @ vt))[..., None]
+    return u @ vt
+
+
+def leg_errors(stage_dir, stage_motions, reference):
+    """{id: the leg joints' error [T, 6, 3]}, rotation vectors of R_ref^T R, on the shorter's frames."""
+    out = {}
+    for i, _, rotations, fps in stage_motions:
+        ref_rotations, ref_fps = reference[i][1], reference[i][2]
+        if fps != ref_fps:
+            sys.exit(f"{stage_dir}: motion {i} at {fps:g} fps, the reference's at {ref_fps:g}")
+        frames = min(len(rotations), len(ref_rotations))
+        out[i] = log_rotation(np.einsum("tjba,tjbc->tjac", ref_rotations[:frames, LEG_JOINTS],
+                                        rotations[:frames, LEG_JOINTS]))
+    return out
+
+
+def carrying_leg_error(reference, i, error, offsets):
+    """The skate of reference motion i with its leg joints turned by `error` [T, 6, 3]."""
+    trans, rotations, fps = reference[i]
+    frames = len(error)
+    carried = rotations[:frames].copy()
+    carried[:, LEG_JOINTS] = carried[:, LEG_JOINTS] @ rotation_matrices(error.reshape(-1, 3)).reshape(error.shape + (3,))
+    return skate(feet(trans[:frames], carried, offsets), fps, grounded=False)
+
+
+def seed_agreement(stages, loaded, reference):
+    """--seeds: per stage (rms error, rms faster part, skate), the mean over pairs of stages of the
+    cosine between their errors (1: the same error, 0: unrelated, -1: opposite; errors pooled, faster
+    parts pooled, faster parts' median over motions) and the skate of the mean motion."""
+    errors = [leg_errors(stage, loaded[stage], reference) for stage in stages]
+    ids = sorted(set.intersection(*(set(e) for e in errors)))
+    fast = [{i: e[i] - smoothed(e[i], 0.1 * reference[i][2]) for i in ids} for e in errors]
+    offsets = leg_offsets()
+    per_stage = []
+    for stage, e, f in zip(stages, errors, fast):
+        whole, faster = np.concatenate([e[i].ravel() for i in ids]), np.concatenate([f[i].ravel() for i in ids])
+        skates = [skate(feet(t, r, offsets), fps, grounded=False) for k, t, r, fps in loaded[stage] if k in ids]
+        # the root mean square angle over joints and frames (3 components each)
+        per_stage.append((np.degrees(np.sqrt(3 * np.mean(whole ** 2))), np.degrees(np.sqrt(3 * np.mean(faster ** 2))),
+                          np.mean(skates)))
+    pairs = [(a, b) for a in range(len(stages)) for b in range(a + 1, len(stages))]
+    def cosine(x, y):
+        return (x @ y) / max(np.sqrt((x @ x) * (y @ y)), 1e-30)
+    def pooled(parts, a, b):
+        return cosine(np.concatenate([parts[a][i].ravel() for i in ids]), np.concatenate([parts[b][i].ravel() for i in ids]))
+    correlations = (np.mean([pooled(errors, a, b) for a, b in pairs]), np.mean([pooled(fast, a, b) for a, b in pairs]),
+                    np.median([np.mean([cosine(fast[a][i].ravel(), fast[b][i].ravel()) for a, b in pairs]) for i in ids]))
+    by_id = [{i: (t, r) for i, t, r, _ in loaded[stage]} for stage in stages]
+    mean_skates = []
+    for i in ids:
+        frames = min(len(m[i][0]) for m in by_id)
+        trans = np.mean([m[i][0][:frames] for m in by_id], axis=0)
+        rotations = chordal_mean(np.stack([m[i][1][:frames] for m in by_id]))
+        mean_skates.append(skate(feet(trans, rotations, offsets), reference[i][2], grounded=False))
+    return per_stage, correlations, np.mean(mean_skates)
+
+
+def source_lean(stage_dir, stage_motions, reference, sources):
+    """--toward: the mean over motions of the legs' lean towards the source (the least-squares
+    fraction of the error along the source's leg rotations minus the reference's), and the skate of
+    the reference carrying the lean alone and the rest alone."""
+    errors = leg_errors(stage_dir, stage_motions, reference)
+    away = leg_errors(stage_dir + " (its sources)", [(i, *sources[i][:2], sources[i][2]) for i in errors], reference)
+    offsets, rows = leg_offsets(), []
+    for i, e in errors.items():
+        d = away[i][:len(e)]
+        lean = (e * d).sum() / max((d * d).sum(), 1e-12)
+        rows.append((lean, carrying_leg_error(reference, i, lean * d, offsets),
+                     carrying_leg_error(reference, i, e - lean * d, offsets)))
+    return np.mean(rows, axis=0)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stages", nargs="+", help="edit, generate or foot_lock stage output directories (out/JOB/STAGE)")
@@ -337,7 +428,17 @@ def main():
                         help="each stage is a foot_lock stage and STAGE_DIR its input: where its "
                              "sliding contact foot-frames lie relative to the lock's runs of contact "
                              "(found as core's test does with the default options)")
+    parser.add_argument("--seeds", action="store_true",
+                        help="with --against: the stages are one estimate from models of different "
+                             "training seeds; how much of their legs' error they share")
+    parser.add_argument("--toward", metavar="SOURCE_DIR",
+                        help="with --seeds: also how far each stage's legs lean towards these "
+                             "motions of the same ids (mdt_probe --write's source_aligned)")
     args = parser.parse_args()
+    if args.seeds and (not args.against or len(args.stages) < 2):
+        parser.error("--seeds needs --against and at least two stages")
+    if args.toward and not args.seeds:
+        parser.error("--toward goes with --seeds")
     print(f"{'stage':<40} {'motions':>7} {'|dz| end (m)':>12} {'z sd (m)':>9} {'|vz| (m/s)':>10} "
           f"{'accel xy (m/s2)':>15} {'|dz| tilt (m)':>13} {'skate':>6} {'skate grounded':>14} "
           f"{'contact speed: feet':>19} {'pelvis':>6} {'feet - pelvis (m/s)':>19} {'knee sd (deg)':>13} "
@@ -366,6 +467,22 @@ def main():
         for stage in args.stages:
             figures = error_band_skates(stage, loaded[stage], references[stage])
             print(f"{stage:<40} " + " ".join(f"{x:>6.3f}" for x in figures))
+    if args.seeds:
+        per_stage, (whole, faster, median), mean_skate = seed_agreement(
+            args.stages, loaded, {i: m for found in references.values() for i, m in found.items()})
+        print(f"{'stage':<40} legs' error against {args.against}: rms (deg), its faster-than-0.1 s part "
+              f"rms (deg), skate")
+        for stage, (rms, fast_rms, skating) in zip(args.stages, per_stage):
+            print(f"{stage:<40} {rms:>7.2f} {fast_rms:>7.2f} {skating:>7.3f}")
+        print(f"cosine between the stages' errors {whole:.3f}, their faster parts {faster:.3f} "
+              f"(median over motions {median:.3f}); skate of the stages' mean motion {mean_skate:.3f}")
+        if args.toward:
+            print(f"{'stage':<40} legs' lean towards {args.toward}, skate with the lean alone, "
+                  f"with the rest alone")
+            for stage in args.stages:
+                sources = against_motions(stage, loaded[stage], args.toward)
+                lean, lean_skate, rest_skate = source_lean(stage, loaded[stage], references[stage], sources)
+                print(f"{stage:<40} {lean:>7.3f} {lean_skate:>7.3f} {rest_skate:>7.3f}")
     if args.unlocked:
         print(f"{'stage':<40} sliding, of the contact foot-frames, by the lock's runs on {args.unlocked}: "
               f"ankles / toes; then toes held without their ankle")

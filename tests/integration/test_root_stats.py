@@ -99,6 +99,58 @@ class RootStatsTest(unittest.TestCase):
         self.assertNotEqual(result.returncode, 0)
         self.assertIn("motion sway at 10 fps, the reference's at 30", result.stderr)
 
+    def test_seeds_tell_a_shared_error_from_one_that_averages_out(self):
+        # The upright body of the test above, standing; three "seeds" bend both knees by 4 degrees
+        # every other frame: a and b on the even frames (the same error: cosine 1, their mean slides
+        # as each), c on the odd ones (errors on other frames: cosine 0; their faster parts, +-2
+        # degrees about the 2 degrees' mean, opposite: -1). The mean of a and c bends the knees 2
+        # degrees on every frame: it stands (skate 0). Each jitter moves the ankle about 3 cm a
+        # frame, so every contact frame slides.
+        legs, frames, fps = 0.3936 + 0.4324, 60, 30.0
+        stand = np.zeros((frames, 3))
+        stand[:, 2] = legs + 0.01
+        upright = [np.pi / 2, 0.0, 0.0]
+        even = np.radians(4.0) * (np.arange(frames) % 2 == 0)
+        write_edits(self.path("stand"), [stand], fps=fps, pelvis=upright, ids=["m"])
+        for name, knees in (("a", even), ("b", even), ("c", np.radians(4.0) - even)):
+            write_edits(self.path(name), [stand], fps=fps, pelvis=upright, knees=knees, ids=["m"])
+
+        def agreement(*stages):
+            result = run("--seeds", "--against", self.path("stand"), *map(self.path, stages))
+            self.assertEqual(result.returncode, 0, result.stderr)
+            line = result.stdout.splitlines()[-1]
+            self.assertTrue(line.startswith("cosine"), line)
+            words = line.replace(",", "").replace(")", "").split()
+            return float(words[5]), float(words[9]), float(words[-1]), result.stdout
+
+        whole, faster, mean_skate, out = agreement("a", "b")
+        self.assertAlmostEqual(whole, 1.0, places=6)
+        self.assertAlmostEqual(faster, 1.0, places=6)
+        self.assertEqual(mean_skate, 1.0)
+        whole, faster, mean_skate, out = agreement("a", "c")
+        self.assertAlmostEqual(whole, 0.0, places=6)
+        self.assertAlmostEqual(faster, -1.0, delta=0.01)  # the ends, where the smoothing repeats a frame
+        self.assertEqual(mean_skate, 0.0)
+        rows = [line.split() for line in out.splitlines() if line.startswith(self.path("a"))]
+        rms, fast_rms, skating = map(float, rows[-1][1:4])
+        self.assertAlmostEqual(rms, np.sqrt(2 * 4.0 ** 2 / 6 / 2), places=2)  # 2 of 6 leg joints, half the frames
+        self.assertEqual(skating, 1.0)
+        # --toward: knees bent 6 degrees where the source bends them 12: half way to the source, a
+        # constant lean that leaves the feet standing; the rest is nothing.
+        write_edits(self.path("source"), [stand], fps=fps, pelvis=upright, knees=np.full(frames, np.radians(12.0)), ids=["m"])
+        for name in ("d", "e"):
+            write_edits(self.path(name), [stand], fps=fps, pelvis=upright, knees=np.full(frames, np.radians(6.0)), ids=["m"])
+        result = run("--seeds", "--against", self.path("stand"), "--toward", self.path("source"),
+                     self.path("d"), self.path("e"))
+        self.assertEqual(result.returncode, 0, result.stderr)
+        lean, lean_skate, rest_skate = map(float, result.stdout.splitlines()[-1].split()[1:4])
+        self.assertAlmostEqual(lean, 0.5, places=4)
+        self.assertEqual((lean_skate, rest_skate), (0.0, 0.0))
+        # --seeds without a reference, or with one stage, is refused.
+        result = run("--seeds", self.path("a"), self.path("b"))
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("--seeds needs --against", result.stderr)
+
     def test_figures_of_known_trajectories(self):
         rising = np.zeros((5, 3))
         rising[:, 2] = [1.0, 1.1, 1.2, 1.3, 1.4]  # drift 0.4, sd 0.1414, |vz| 0.1 m a frame
