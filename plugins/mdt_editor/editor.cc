@@ -35,14 +35,14 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(j, "",
                    {"variant", "model", "aux", "features", "adaln_text", "diffusion", "loss",
                     "text_encoder_from", "freeze_text_encoder", "fps"});
-  RequireKnownKeys(
-      j.value("model", nlohmann::json::object()), "model.",
-      {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout", "text_encoder"});
+  RequireKnownKeys(j.value("model", nlohmann::json::object()), "model.",
+                   {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout",
+                    "text_encoder", "concat_source"});
   RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
   RequireKnownKeys(j.value("loss", nlohmann::json::object()), "loss.",
-                   {"velocity", "foot_contact", "foot_velocity", "contacts"});
+                   {"velocity", "foot_contact", "foot_velocity", "contacts", "legs"});
   RequireKnownKeys(j.value("diffusion", nlohmann::json::object()), "diffusion.",
                    {"steps", "drop_text", "drop_source", "drop_both", "guidance_motion",
                     "guidance_text", "preconditioning", "sigma_data", "snr_shift",
@@ -60,6 +60,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.ff = m.value("ff", o.ff);
   o.sim_hidden = m.value("sim_hidden", o.sim_hidden);
   o.dropout = m.value("dropout", o.dropout);
+  o.concat_source = m.value("concat_source", o.concat_source);
   const nlohmann::json a = j.value("aux", nlohmann::json::object());
   o.aux = a.value("mode", o.variant == "mdt" ? o.aux : std::string("none"));
   o.classes = a.value("classes", o.classes);
@@ -110,6 +111,8 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.contacts_weight =
       j.value("loss", nlohmann::json::object()).value("contacts", o.contacts_weight);
   if (!(o.contacts_weight >= 0)) throw std::invalid_argument("loss.contacts must be >= 0");
+  o.leg_weight = j.value("loss", nlohmann::json::object()).value("legs", o.leg_weight);
+  if (!(o.leg_weight > 0)) throw std::invalid_argument("loss.legs must be > 0");
   o.drop_text = d.value("drop_text", o.variant == "mdm" ? 0.1 : o.drop_text);
   o.drop_source = d.value("drop_source", o.variant == "mdm" ? 0.0 : o.drop_source);
   o.drop_both = d.value("drop_both", o.variant == "mdm" ? 0.0 : o.drop_both);
@@ -152,6 +155,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"ff", ff},
             {"sim_hidden", sim_hidden},
             {"dropout", dropout},
+            {"concat_source", concat_source},
             {"text_encoder", text.ToJson()}}},
           {"aux",
            {{"mode", aux},
@@ -169,7 +173,8 @@ nlohmann::json EditorOptions::ToJson() const {
            {{"velocity", velocity_weight},
             {"foot_contact", foot_contact_weight},
             {"foot_velocity", foot_velocity_weight},
-            {"contacts", contacts_weight}}},
+            {"contacts", contacts_weight},
+            {"legs", leg_weight}}},
           {"diffusion",
            {{"steps", diffusion_steps},
             {"drop_text", drop_text},
@@ -243,7 +248,11 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
     basis_ = register_buffer("frame_basis", torch::eye(kEditFeatureDim).narrow(1, 0, o.components));
     basis_scale_ = register_buffer("frame_scale", torch::ones({o.components}));
   }
-  target_in_ = register_module("target_in", torch::nn::Linear(diffusion_dim(), o.dim));
+  if (o.concat_source && !o.uses_source())
+    throw std::invalid_argument(
+        "model.concat_source needs a variant that sees the source (mdt or tmed)");
+  target_in_ = register_module(
+      "target_in", torch::nn::Linear((o.concat_source ? 2 : 1) * diffusion_dim(), o.dim));
   out_ = register_module("out", torch::nn::Linear(o.dim, diffusion_dim()));
   if (o.contacts_weight > 0)
     contact_out_ = register_module("contact_out", torch::nn::Linear(o.dim, kContactJoints));
@@ -425,6 +434,15 @@ torch::Tensor SourcePadding(const Condition& c) {
 
 }  // namespace
 
+torch::Tensor EditorNetImpl::TargetTokens(const torch::Tensor& xt,
+                                          const torch::Tensor& target_padding, const Condition& c) {
+  if (!o_.concat_source) return nn::ApplyLinear(target_in_, xt);
+  auto aligned = Encode(AlignSource(c.source, c.source_padding, target_padding)).to(xt.dtype());
+  if (c.drop_source.defined())
+    aligned = aligned * (1 - c.drop_source.view({1, -1, 1}).to(aligned.dtype()));
+  return nn::ApplyLinear(target_in_, torch::cat({xt, aligned}, 2));
+}
+
 Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t,
                                      const torch::Tensor& target_padding, const Condition& c) {
   const int64_t n = xt.size(1), ts = c.source.size(0), tt = xt.size(0);
@@ -450,7 +468,7 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   const auto src = o_.enhanced_motion ? enhanced_source : source;
   auto x = torch::cat(
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
-       Place(nn::ApplyLinear(target_in_, xt), kTarget)},
+       Place(TargetTokens(xt, target_padding, c), kTarget)},
       0);
   const auto padding = torch::cat({source_padding, AnyPadding(n, 1), target_padding}, 1);
   const auto silu_cond = torch::silu(cond);  // every block's adaLN input, computed once
@@ -481,7 +499,7 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
   }
   int64_t prefix = 0;
   for (const auto& part : parts) prefix += part.size(0);
-  parts.push_back(Place(nn::ApplyLinear(target_in_, xt), kTarget));
+  parts.push_back(Place(TargetTokens(xt, target_padding, c), kTarget));
   masks.push_back(target_padding);
   auto x = torch::cat(parts, 0);
   x = encoder_->forward(x, torch::cat(masks, 1)).narrow(0, prefix, tt);
@@ -491,10 +509,12 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
 }
 
 torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,
-                               const torch::Tensor& padding, const torch::Tensor& weight) {
+                               const torch::Tensor& padding, const torch::Tensor& weight,
+                               const torch::Tensor& columns) {
   const auto keep = padding.logical_not().t().unsqueeze(2).to(prediction.dtype());  // [T, N, 1]
   const auto frames = keep.sum(0).squeeze(1).clamp_min(1.0);                        // [N]
-  const auto squared = (prediction - target).pow(2) * keep;
+  auto squared = (prediction - target).pow(2) * keep;
+  if (columns.defined()) squared = squared * columns.to(squared.dtype());
   std::vector<torch::Tensor> groups;
   for (const auto& g : MotionFixFeatureGroups()) {
     const std::vector<int64_t> dims = {0, 2};
@@ -540,6 +560,14 @@ std::map<std::string, torch::Tensor> SimilarityLoss(
         ((torch::sigmoid(prediction) - similarity).pow(2) * w).sum() / w.sum().clamp_min(1.0);
   }
   return out;
+}
+
+torch::Tensor LegColumnWeights(double leg_weight) {
+  const auto parts = PartColumns();
+  const auto legs = parts[static_cast<int64_t>(BodyPart::kLeftLeg)].logical_or(
+      parts[static_cast<int64_t>(BodyPart::kRightLeg)]);
+  return torch::where(legs, torch::full({kEditFeatureDim}, leg_weight),
+                      torch::ones({kEditFeatureDim}));
 }
 
 torch::Tensor PartColumns() {

@@ -28,6 +28,13 @@ struct EditorOptions {
   std::string variant = "mdt";  // mdt | tmed | mdm
   int64_t dim = 512, cond_layers = 4, layers = 8, heads = 8, ff = 1024, sim_hidden = 1024;
   double dropout = 0.1;
+  // true: each noisy target token also reads the source frame aligned to it (AlignSource; zeros
+  // where the source is dropped): target_in takes [x_t, aligned source], as InstructPix2Pix
+  // (Brooks et al. 2023) concatenates the source image to the noisy one. Not in the paper, where
+  // the source reaches the target tokens only through attention (issue 15: with the source as the
+  // prior, the clean estimate's legs lean about half way back to the source, the same in every
+  // training seed). mdt and tmed; false (the reference) reads x_t alone.
+  bool concat_source = false;
   // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
   std::string aux = "classes";
   int classes = 3;
@@ -53,6 +60,11 @@ struct EditorOptions {
   // stand, where the post-process can only guess from height and speed (issue 15: the edits'
   // sliding stance feet move too fast for its speed test). 0 (the reference): no head.
   double contacts_weight = 0;
+  // The x0 loss's squared errors on the legs' columns (the left and right leg parts' rotations
+  // and joint positions, PartColumns) count this many times in their groups' means. 1 (the
+  // reference) weighs every column alike, which gives the legs about 8% of the loss; issue 15
+  // measured that the feet slide from the legs' error, systematic across training seeds.
+  double leg_weight = 1;
   double snr_shift =
       1;  // > 1: the cosine schedule shifted towards noise (CosineSchedule checks the range)
   // The training steps' density, proportional to t^k (SampleTrainingStep); 0: uniform (the
@@ -205,6 +217,10 @@ class EditorNetImpl : public torch::nn::Module {
   // embedding: positions that do not depend on the other examples of the batch (source frame i and
   // target frame i share the sinusoid of i, which also makes copying a frame an easy alignment).
   torch::Tensor Place(const torch::Tensor& x, Segment segment) const;
+  // The noisy target's tokens [Tt, N, d] before placing: target_in of x_t (with concat_source, of
+  // [x_t, the aligned source]).
+  torch::Tensor TargetTokens(const torch::Tensor& xt, const torch::Tensor& target_padding,
+                             const Condition& c);
   Prediction ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t,
                         const torch::Tensor& target_padding, const Condition& c);
   Prediction ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t,
@@ -236,9 +252,15 @@ std::pair<torch::Tensor, torch::Tensor> PrincipalFrameBasis(const torch::Tensor&
 
 // Masked MSE on x0 averaged per feature group (the 207-d layout's five), then over the groups, per
 // example, then over the examples (each times `weight` [N] when given). prediction/target
-// [T, N, 207], padding [N, T].
+// [T, N, 207], padding [N, T]; `columns` [207], when given, multiplies each column's squared
+// errors before the groups' means.
 torch::Tensor GroupedMaskedMse(const torch::Tensor& prediction, const torch::Tensor& target,
-                               const torch::Tensor& padding, const torch::Tensor& weight = {});
+                               const torch::Tensor& padding, const torch::Tensor& weight = {},
+                               const torch::Tensor& columns = {});
+
+// The x0 loss's column weights [207]: `leg_weight` on the legs' columns (PartColumns' left and
+// right legs), 1 elsewhere.
+torch::Tensor LegColumnWeights(double leg_weight);
 
 // GroupedMaskedMse of the first differences over time (frames t and t - 1 both real).
 torch::Tensor VelocityMse(const torch::Tensor& prediction, const torch::Tensor& target,

@@ -126,10 +126,11 @@ class EditorModel : public plugin::Model {
     Prediction p = net_->forward(xt, t, batch.tensors.at("target_padding"), c);
     p.x0 = net_->Decode(p.x0);  // the loss is on the 207-d frame whatever the diffusion's space
     std::map<std::string, torch::Tensor> out;
-    out["x0"] = GroupedMaskedMse(p.x0, target, batch.tensors.at("target_padding"),
-                                 options_.min_snr_gamma > 0
-                                     ? MinSnrWeights(schedule_, t, options_.min_snr_gamma)
-                                     : torch::Tensor());
+    out["x0"] = GroupedMaskedMse(
+        p.x0, target, batch.tensors.at("target_padding"),
+        options_.min_snr_gamma > 0 ? MinSnrWeights(schedule_, t, options_.min_snr_gamma)
+                                   : torch::Tensor(),
+        options_.leg_weight != 1 ? LegColumnWeights(options_.leg_weight) : torch::Tensor());
     auto loss = out["x0"];
     if (options_.velocity_weight > 0) {
       out["velocity"] = VelocityMse(p.x0, target, batch.tensors.at("target_padding"));

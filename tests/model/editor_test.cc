@@ -140,9 +140,11 @@ struct TinyTriplets {
 };
 
 TEST(Editor, EveryVariantOverfitsAFewTriplets) {
-  for (const std::string variant : {"mdt", "tmed", "mdm"}) {
+  for (const std::string variant : {"mdt", "tmed", "mdm", "mdt concat_source"}) {
     torch::manual_seed(2);
-    EditorNet net(Tiny(variant, "none"));
+    EditorOptions options = Tiny(variant.substr(0, variant.find(' ')), "none");
+    options.concat_source = variant.find("concat_source") != std::string::npos;
+    EditorNet net(options);
     const TinyTriplets data;
     net->text_encoder()->Fit(data.texts);
     const CosineSchedule schedule(50);
@@ -155,7 +157,7 @@ TEST(Editor, EveryVariantOverfitsAFewTriplets) {
       torch::manual_seed(step % 4);
       const auto xt = schedule.QSample(data.target, t, torch::randn_like(data.target));
       Condition c{data.texts,
-                  variant == "mdm" ? torch::Tensor() : data.source,
+                  options.variant == "mdm" ? torch::Tensor() : data.source,
                   data.source_padding,
                   {},
                   {}};
@@ -169,6 +171,39 @@ TEST(Editor, EveryVariantOverfitsAFewTriplets) {
     }
     EXPECT_LT(last, 0.2 * first) << variant << ": first " << first << " last " << last;
   }
+}
+
+// model.concat_source: the target tokens also read the aligned source frame (InstructPix2Pix's
+// concatenation); where the source is dropped (guidance's unconditional branches) that half reads
+// zeros, so the estimate does not depend on the source's content at all.
+TEST(Editor, TheConcatenatedSourceChangesTheEstimateUnlessTheSourceIsDropped) {
+  for (const std::string variant : {"mdt", "tmed"}) {
+    torch::manual_seed(4);
+    EditorOptions options = Tiny(variant, "none");
+    options.concat_source = true;
+    EditorNet net(options);
+    const TinyTriplets data;
+    net->text_encoder()->Fit(data.texts);
+    net->eval();
+    torch::NoGradGuard no_grad;
+    const auto t = torch::full({3}, 5, torch::kInt64);
+    const auto xt = data.target.clone();
+    const auto estimate = [&](const torch::Tensor& source, bool dropped) {
+      Condition c{data.texts, source, data.source_padding, torch::zeros({3}, torch::kBool),
+                  torch::full({3}, dropped, torch::kBool)};
+      return net->forward(xt, t, data.target_padding, c).x0;
+    };
+    const auto other = data.source + 1.0;
+    EXPECT_GT((estimate(data.source, false) - estimate(other, false)).abs().max().item<double>(),
+              1e-3)
+        << variant;
+    EXPECT_TRUE(torch::equal(estimate(data.source, true), estimate(other, true))) << variant;
+  }
+  nlohmann::json mdm = {{"variant", "mdm"}, {"model", {{"concat_source", true}}}};
+  EXPECT_THROW(EditorNet{EditorOptions::FromJson(mdm)}, std::invalid_argument);
+  EXPECT_TRUE(EditorOptions::FromJson({{"model", {{"concat_source", true}}}})
+                  .ToJson()["model"]["concat_source"]
+                  .get<bool>());
 }
 
 // Issue 15: training in bf16 (plugins/common/precision.h). Under the guard the matrix products run
@@ -988,6 +1023,27 @@ TEST(Editor, GroupedMseAveragesPerGroupThenOverGroups) {
   auto padding = torch::zeros({1, 3}, torch::kBool);
   padding[0][2] = true;
   EXPECT_NEAR(GroupedMaskedMse(prediction, target, padding).item<double>(), 0.1, 1e-7);
+}
+
+TEST(Editor, TheLegWeightMultipliesTheLegsColumnsErrorsAlone) {
+  // Error 1 on the left knee's first rotation column (joint 4) and on the left elbow's (joint 18),
+  // one real frame: body_pose's mean is (w + 1) / 126, the other groups 0, over 5 groups.
+  auto prediction = torch::zeros({1, 1, kEditFeatureDim});
+  const auto target = torch::zeros({1, 1, kEditFeatureDim});
+  prediction[0][0][15 + 6 * 3] = 1.0;
+  prediction[0][0][15 + 6 * 17] = 1.0;
+  const auto padding = torch::zeros({1, 1}, torch::kBool);
+  for (double w : {1.0, 4.0}) {
+    EXPECT_NEAR(
+        GroupedMaskedMse(prediction, target, padding, {}, LegColumnWeights(w)).item<double>(),
+        (w + 1) / 126 / 5, 1e-7)
+        << "legs " << w;
+  }
+  // The legs' columns are both legs' rotations and joint positions: 2 x (4 joints x 6 + 4 x 3).
+  EXPECT_EQ(LegColumnWeights(3).eq(3).sum().item<int64_t>(), 2 * (4 * 6 + 4 * 3));
+  EXPECT_EQ(EditorOptions::FromJson({{"loss", {{"legs", 4}}}}).leg_weight, 4);
+  EXPECT_EQ(EditorOptions::FromJson({{"loss", {{"legs", 4}}}}).ToJson()["loss"]["legs"], 4);
+  EXPECT_THROW(EditorOptions::FromJson({{"loss", {{"legs", 0}}}}), std::invalid_argument);
 }
 
 TEST(Editor, VelocityLossSeesJitterNotOffsets) {
