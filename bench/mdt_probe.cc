@@ -366,7 +366,8 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
 
 // How many numbers a frame needs for its feet to stand: the targets through a rank-K linear code
 // of a frame (their projection onto the top K principal directions of the training split's
-// normalised frames, sources and targets, about the frames' mean), with their x0 MSE and skate.
+// normalised frames, sources and targets, about the probed targets' own mean), with their x0 MSE
+// and skate.
 // A trunk d wide carries each frame as d numbers; if even the best linear code of K = d numbers
 // slides, precision is lost in the code, not the training.
 Status PrintRankFloor(const Args& a, const Probe& p) {
@@ -377,7 +378,8 @@ Status PrintRankFloor(const Args& a, const Probe& p) {
   data.fps = p.options.fps;
   EditDataset train(data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
   if (train.size() < 2) return InvalidArgument("--rank: the training split has under 2 triplets");
-  const auto covariance = train.FrameCovariance(p.mean, p.stddev, 2000).to(torch::kFloat64);
+  constexpr int64_t kTriplets = 2000;  // the covariance's training triplets, at most
+  const auto covariance = train.FrameCovariance(p.mean, p.stddev, kTriplets).to(torch::kFloat64);
   const auto [values, vectors] = torch::linalg_eigh(covariance);  // ascending
   const auto& target = p.batch.tensors.at("target");
   const auto& padding = p.batch.tensors.at("target_padding");
@@ -388,7 +390,7 @@ Status PrintRankFloor(const Args& a, const Probe& p) {
   std::printf(
       "rank-K code of a frame (the training split's principal directions, %lld triplets):\n"
       "%6s %10s %10s %8s\n",
-      static_cast<long long>(std::min<int64_t>(train.size(), 2000)), "K", "variance", "x0 MSE",
+      static_cast<long long>(std::min<int64_t>(train.size(), kTriplets)), "K", "variance", "x0 MSE",
       "skate");
   for (int64_t k : {16L, 32L, 64L, 96L, 128L, 160L, 192L, 207L}) {
     const auto v = vectors.narrow(1, kEditFeatureDim - k, k);  // the K largest

@@ -405,7 +405,7 @@ def source_lean(stage_dir, stage_motions, reference, sources):
     fraction of the error along the source's leg rotations minus the reference's), and the skate of
     the reference carrying the lean alone and the rest alone."""
     errors = leg_errors(stage_dir, stage_motions, reference)
-    away = leg_errors(stage_dir + " (its sources)", [(i, *sources[i][:2], sources[i][2]) for i in errors], reference)
+    away = leg_errors(stage_dir + " (its sources)", [(i, *sources[i]) for i in errors], reference)
     offsets, rows = leg_offsets(), []
     for i, e in errors.items():
         d = away[i][:len(e)]

@@ -331,8 +331,13 @@ torch::Tensor EditorNetImpl::Place(const torch::Tensor& x, Segment segment) cons
 
 Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& t,
                                   const torch::Tensor& target_padding, const Condition& c) {
-  Prediction p = o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c)
-                                     : ForwardEncoder(xt, t, target_padding, c);
+  // One alignment serves both of the source's uses: the prior's base and the concatenated input.
+  const torch::Tensor aligned = o_.concat_source || o_.preconditioning == "source"
+                                    ? AlignedSource(target_padding, c)
+                                    : torch::Tensor();
+  const torch::Tensor concatenated = o_.concat_source ? aligned : torch::Tensor();
+  Prediction p = o_.variant == "mdt" ? ForwardMdt(xt, t, target_padding, c, concatenated)
+                                     : ForwardEncoder(xt, t, target_padding, c, concatenated);
   if (o_.preconditioning == "edm") {
     const auto [skip, out] = schedule_.Preconditioning(t, o_.sigma_data);
     p.x0 = skip * xt + out * p.x0;
@@ -340,9 +345,7 @@ Prediction EditorNetImpl::forward(const torch::Tensor& xt, const torch::Tensor& 
   }
   torch::Tensor base;  // the estimate's prior mean: the aligned source, or 0
   if (o_.preconditioning == "source") {
-    base = Encode(AlignSource(c.source, c.source_padding, target_padding));
-    if (c.drop_source.defined())
-      base = base * (1 - c.drop_source.view({1, -1, 1}).to(base.dtype()));
+    base = aligned;
     p.x0 = base + p.x0;
   }
   if (skip_.defined()) {
@@ -434,17 +437,22 @@ torch::Tensor SourcePadding(const Condition& c) {
 
 }  // namespace
 
-torch::Tensor EditorNetImpl::TargetTokens(const torch::Tensor& xt,
-                                          const torch::Tensor& target_padding, const Condition& c) {
-  if (!o_.concat_source) return nn::ApplyLinear(target_in_, xt);
-  auto aligned = Encode(AlignSource(c.source, c.source_padding, target_padding)).to(xt.dtype());
+torch::Tensor EditorNetImpl::AlignedSource(const torch::Tensor& target_padding,
+                                           const Condition& c) const {
+  auto aligned = Encode(AlignSource(c.source, c.source_padding, target_padding));
   if (c.drop_source.defined())
     aligned = aligned * (1 - c.drop_source.view({1, -1, 1}).to(aligned.dtype()));
-  return nn::ApplyLinear(target_in_, torch::cat({xt, aligned}, 2));
+  return aligned;
+}
+
+torch::Tensor EditorNetImpl::TargetTokens(const torch::Tensor& xt, const torch::Tensor& aligned) {
+  if (!aligned.defined()) return nn::ApplyLinear(target_in_, xt);
+  return nn::ApplyLinear(target_in_, torch::cat({xt, aligned.to(xt.dtype())}, 2));
 }
 
 Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t,
-                                     const torch::Tensor& target_padding, const Condition& c) {
+                                     const torch::Tensor& target_padding, const Condition& c,
+                                     const torch::Tensor& aligned) {
   const int64_t n = xt.size(1), ts = c.source.size(0), tt = xt.size(0);
   auto [text, unused] = EncodeText(c);
   (void)unused;
@@ -468,7 +476,7 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   const auto src = o_.enhanced_motion ? enhanced_source : source;
   auto x = torch::cat(
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
-       Place(TargetTokens(xt, target_padding, c), kTarget)},
+       Place(TargetTokens(xt, aligned), kTarget)},
       0);
   const auto padding = torch::cat({source_padding, AnyPadding(n, 1), target_padding}, 1);
   const auto silu_cond = torch::silu(cond);  // every block's adaLN input, computed once
@@ -481,7 +489,8 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
 }
 
 Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t,
-                                         const torch::Tensor& target_padding, const Condition& c) {
+                                         const torch::Tensor& target_padding, const Condition& c,
+                                         const torch::Tensor& aligned) {
   const int64_t n = xt.size(1), tt = xt.size(0);
   auto [text, tokens] = EncodeText(c);
   const auto time = TimeEmbedding(t).unsqueeze(0);  // [1, N, d]
@@ -499,7 +508,7 @@ Prediction EditorNetImpl::ForwardEncoder(const torch::Tensor& xt, const torch::T
   }
   int64_t prefix = 0;
   for (const auto& part : parts) prefix += part.size(0);
-  parts.push_back(Place(TargetTokens(xt, target_padding, c), kTarget));
+  parts.push_back(Place(TargetTokens(xt, aligned), kTarget));
   masks.push_back(target_padding);
   auto x = torch::cat(parts, 0);
   x = encoder_->forward(x, torch::cat(masks, 1)).narrow(0, prefix, tt);

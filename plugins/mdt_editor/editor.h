@@ -217,14 +217,18 @@ class EditorNetImpl : public torch::nn::Module {
   // embedding: positions that do not depend on the other examples of the batch (source frame i and
   // target frame i share the sinusoid of i, which also makes copying a frame an easy alignment).
   torch::Tensor Place(const torch::Tensor& x, Segment segment) const;
+  // The source aligned to the target's frames in the diffusion's coordinates, zeros where it is
+  // dropped [Tt, N, diffusion_dim()]: the source prior's base and concat_source's second half.
+  torch::Tensor AlignedSource(const torch::Tensor& target_padding, const Condition& c) const;
   // The noisy target's tokens [Tt, N, d] before placing: target_in of x_t (with concat_source, of
-  // [x_t, the aligned source]).
-  torch::Tensor TargetTokens(const torch::Tensor& xt, const torch::Tensor& target_padding,
-                             const Condition& c);
+  // [x_t, aligned]; `aligned` is AlignedSource's, undefined without concat_source).
+  torch::Tensor TargetTokens(const torch::Tensor& xt, const torch::Tensor& aligned);
   Prediction ForwardMdt(const torch::Tensor& xt, const torch::Tensor& t,
-                        const torch::Tensor& target_padding, const Condition& c);
+                        const torch::Tensor& target_padding, const Condition& c,
+                        const torch::Tensor& aligned);
   Prediction ForwardEncoder(const torch::Tensor& xt, const torch::Tensor& t,
-                            const torch::Tensor& target_padding, const Condition& c);
+                            const torch::Tensor& target_padding, const Condition& c,
+                            const torch::Tensor& aligned);
 
   EditorOptions o_;
   CosineSchedule schedule_;

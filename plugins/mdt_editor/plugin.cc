@@ -41,6 +41,7 @@ class EditorModel : public plugin::Model {
     net_ = EditorNet(options_);
     mean_ = net_->register_buffer("feature_mean", torch::zeros({kEditFeatureDim}));
     std_ = net_->register_buffer("feature_std", torch::ones({kEditFeatureDim}));
+    if (options_.leg_weight != 1) leg_columns_ = LegColumnWeights(options_.leg_weight);
   }
 
   std::string Name() const override { return "mdt_editor"; }
@@ -126,11 +127,11 @@ class EditorModel : public plugin::Model {
     Prediction p = net_->forward(xt, t, batch.tensors.at("target_padding"), c);
     p.x0 = net_->Decode(p.x0);  // the loss is on the 207-d frame whatever the diffusion's space
     std::map<std::string, torch::Tensor> out;
-    out["x0"] = GroupedMaskedMse(
-        p.x0, target, batch.tensors.at("target_padding"),
-        options_.min_snr_gamma > 0 ? MinSnrWeights(schedule_, t, options_.min_snr_gamma)
-                                   : torch::Tensor(),
-        options_.leg_weight != 1 ? LegColumnWeights(options_.leg_weight) : torch::Tensor());
+    out["x0"] = GroupedMaskedMse(p.x0, target, batch.tensors.at("target_padding"),
+                                 options_.min_snr_gamma > 0
+                                     ? MinSnrWeights(schedule_, t, options_.min_snr_gamma)
+                                     : torch::Tensor(),
+                                 leg_columns_);
     auto loss = out["x0"];
     if (options_.velocity_weight > 0) {
       out["velocity"] = VelocityMse(p.x0, target, batch.tensors.at("target_padding"));
@@ -187,6 +188,7 @@ class EditorModel : public plugin::Model {
   CosineSchedule schedule_;
   EditorNet net_{nullptr};
   torch::Tensor mean_, std_;
+  torch::Tensor leg_columns_;  // the x0 loss's column weights with loss.legs, undefined at 1
   bool stats_ready_ = false;
 };
 
