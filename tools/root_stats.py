@@ -186,6 +186,14 @@ def smoothed(x, sigma):
     return sum(w * padded[k:k + len(x)] for k, w in enumerate(kernel / kernel.sum()))
 
 
+def skate_carrying(trans, rotations, fps, joints, error, shift, offsets):
+    """The skate of a motion (trans [T, 3], rotations [T, J, 3, 3]) with `joints` turned by `error`
+    [T, len(joints), 3] (R exp(e)) and its translation moved by `shift` (grounded=False)."""
+    carried = rotations.copy()
+    carried[:, joints] = rotations[:, joints] @ rotation_matrices(error.reshape(-1, 3)).reshape(error.shape + (3,))
+    return skate(feet(trans + shift, carried, offsets), fps, grounded=False)
+
+
 def error_band_skates(stage_dir, stage_motions, reference):
     """The skate of the reference's motions carrying this stage's error: whole, legs alone, pelvis
     alone, then the slower and the faster part for each of BAND_SECONDS (means over the motions)."""
@@ -201,9 +209,7 @@ def error_band_skates(stage_dir, stage_motions, reference):
         shift = trans[:frames] - ref_trans
 
         def skate_with(e, d):
-            carried = ref_rotations.copy()
-            carried[:, joints] = ref_rotations[:, joints] @ rotation_matrices(e.reshape(-1, 3)).reshape(e.shape + (3,))
-            return skate(feet(ref_trans + d, carried, offsets), fps, grounded=False)
+            return skate_carrying(ref_trans, ref_rotations, fps, joints, e, d, offsets)
 
         legs, pelvis = error.copy(), np.zeros_like(error)
         legs[:, 0], pelvis[:, 0] = 0, error[:, 0]
@@ -363,9 +369,7 @@ def carrying_leg_error(reference, i, error, offsets):
     """The skate of reference motion i with its leg joints turned by `error` [T, 6, 3]."""
     trans, rotations, fps = reference[i]
     frames = len(error)
-    carried = rotations[:frames].copy()
-    carried[:, LEG_JOINTS] = carried[:, LEG_JOINTS] @ rotation_matrices(error.reshape(-1, 3)).reshape(error.shape + (3,))
-    return skate(feet(trans[:frames], carried, offsets), fps, grounded=False)
+    return skate_carrying(trans[:frames], rotations[:frames], fps, LEG_JOINTS, error, 0, offsets)
 
 
 def seed_agreement(stages, loaded, reference):
