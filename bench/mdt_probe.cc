@@ -366,8 +366,8 @@ void PrintSampledEdits(Probe& p, const CosineSchedule& schedule, int64_t ddim, d
 
 // How many numbers a frame needs for its feet to stand: the targets through a rank-K linear code
 // of a frame (their projection onto the top K principal directions of the training split's
-// normalised frames, sources and targets, about the probed targets' own mean), with their x0 MSE
-// and skate.
+// normalised frames, sources and targets, about those frames' mean: the code knows nothing of
+// the probed targets), with their x0 MSE and skate.
 // A trunk d wide carries each frame as d numbers; if even the best linear code of K = d numbers
 // slides, precision is lost in the code, not the training.
 Status PrintRankFloor(const Args& a, const Probe& p) {
@@ -379,13 +379,14 @@ Status PrintRankFloor(const Args& a, const Probe& p) {
   EditDataset train(data, std::vector<std::string>(a.dirs.begin() + 1, a.dirs.end()));
   if (train.size() < 2) return InvalidArgument("--rank: the training split has under 2 triplets");
   constexpr int64_t kTriplets = 2000;  // the covariance's training triplets, at most
-  const auto covariance = train.FrameCovariance(p.mean, p.stddev, kTriplets).to(torch::kFloat64);
+  torch::Tensor centre;                // the training frames' mean, normalised
+  const auto covariance =
+      train.FrameCovariance(p.mean, p.stddev, kTriplets, &centre).to(torch::kFloat64);
   const auto [values, vectors] = torch::linalg_eigh(covariance);  // ascending
   const auto& target = p.batch.tensors.at("target");
   const auto& padding = p.batch.tensors.at("target_padding");
-  const auto keep = padding.logical_not().t().unsqueeze(2).to(torch::kFloat64);
   const auto x = target.to(torch::kFloat64);
-  const auto centre = (x * keep).sum(std::vector<int64_t>{0, 1}) / keep.sum();
+  centre = centre.to(torch::kFloat64);
   const double total = values.sum().item<double>();
   std::printf(
       "rank-K code of a frame (the training split's principal directions, %lld triplets):\n"

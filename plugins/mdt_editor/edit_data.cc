@@ -255,7 +255,7 @@ std::pair<torch::Tensor, torch::Tensor> EditDataset::ComputeStats(int64_t limit)
 }
 
 torch::Tensor EditDataset::FrameCovariance(const torch::Tensor& mean, const torch::Tensor& stddev,
-                                           int64_t limit) const {
+                                           int64_t limit, torch::Tensor* frame_mean) const {
   auto scatter = torch::zeros({kMotionFixFeatureDim, kMotionFixFeatureDim}, torch::kFloat64);
   auto sum = torch::zeros({kMotionFixFeatureDim}, torch::kFloat64);
   int64_t count = 0;
@@ -278,6 +278,7 @@ torch::Tensor EditDataset::FrameCovariance(const torch::Tensor& mean, const torc
   }
   if (count < 2) throw std::runtime_error("FrameCovariance: fewer than 2 training frames");
   const auto m = sum / static_cast<double>(count);
+  if (frame_mean != nullptr) *frame_mean = m.to(torch::kFloat32);
   return ((scatter - static_cast<double>(count) * torch::outer(m, m)) /
           static_cast<double>(count - 1))
       .to(torch::kFloat32);

@@ -68,9 +68,9 @@ class EditDataset : public plugin::Dataset {
   // column constant over them gets std 1.
   std::pair<torch::Tensor, torch::Tensor> ComputeStats(int64_t limit = 400) const;
   // The covariance [207, 207] of the frames normalised with these statistics ((x - mean) /
-  // (2 std)), over the same motions as ComputeStats.
+  // (2 std)), over the same motions as ComputeStats; their mean [207] in `frame_mean` if given.
   torch::Tensor FrameCovariance(const torch::Tensor& mean, const torch::Tensor& stddev,
-                                int64_t limit = 400) const;
+                                int64_t limit = 400, torch::Tensor* frame_mean = nullptr) const;
   void SetStats(torch::Tensor mean, torch::Tensor std) {
     mean_ = std::move(mean), std_ = std::move(std);
   }
