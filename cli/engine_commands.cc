@@ -316,7 +316,7 @@ std::string Supervise(const std::string& control, int64_t job_id, const std::str
 // `run`: a coordinator in this process and N worker processes on this machine; resumes an
 // unfinished job of the same pipeline from the journal.
 int RunPipeline(const RunArgs& a) {
-  auto text = ReadFile(a.pipeline);
+  auto text = coordinator::ReadPipelineFile(a.pipeline);
   if (!text.ok()) return Fail(text.status());
   const coordinator::KindRegistry kinds = coordinator::CoordinatorKinds(a.plugin_dirs);
   auto spec = coordinator::ParsePipeline(*text, a.overrides, a.pipeline, kinds);
@@ -476,7 +476,7 @@ struct SubmitArgs {
 };
 
 int RunSubmit(const SubmitArgs& a) {
-  auto text = ReadFile(a.pipeline);
+  auto text = coordinator::ReadPipelineFile(a.pipeline);
   if (!text.ok()) return Fail(text.status());
   wire::ControlRequest request;
   request.mutable_submit()->set_pipeline_yaml(*text);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <optional>
 #include <regex>
 #include <set>
@@ -15,6 +16,7 @@ namespace motionpipe::coordinator {
 namespace {
 
 using Json = nlohmann::ordered_json;
+namespace fs = std::filesystem;
 
 std::string PathJoin(const std::string& path, const std::string& key) {
   return path.empty() ? key : path + "." + key;
@@ -160,6 +162,55 @@ void ReadStageSettings(const Json& map, const std::string& path, StageSpec* stag
     ReadInt(map["threads"], PathJoin(path, "threads"), 0, &stage->threads, errors);
 }
 
+// A stage node's input names (a list or one name; what is not a name is ReadInputs' to report).
+std::vector<std::string> InputNames(const Json& node) {
+  std::vector<std::string> inputs;
+  if (node.contains("inputs") && node["inputs"].is_array()) {
+    for (const Json& i : node["inputs"]) {
+      if (i.is_string()) inputs.push_back(i.get<std::string>());
+    }
+  } else if (node.contains("inputs") && node["inputs"].is_string()) {
+    inputs.push_back(node["inputs"].get<std::string>());
+  }
+  return inputs;
+}
+
+// `targets: [stage, ...]` keeps those stages and every stage they need through their inputs, and
+// drops the rest: a part of a pipeline (one claim's rows of a claims config) without a copy of it.
+void SelectTargets(Json* doc, std::vector<std::string>* errors) {
+  if (!doc->contains("targets")) return;
+  const Json& targets = (*doc)["targets"];
+  if (!targets.is_array() || targets.empty()) {
+    errors->push_back("targets: must be a non-empty list of stage names");
+    return;
+  }
+  if (!doc->contains("stages") || !(*doc)["stages"].is_object()) return;  // reported later
+  Json& stages = (*doc)["stages"];
+  std::set<std::string> keep;
+  std::vector<std::string> pending;
+  for (size_t k = 0; k < targets.size(); ++k) {
+    if (!targets[k].is_string() || !stages.contains(targets[k].get<std::string>())) {
+      errors->push_back("targets[" + std::to_string(k) + "]: not a stage of this pipeline (" +
+                        targets[k].dump() + ")");
+      continue;
+    }
+    pending.push_back(targets[k].get<std::string>());
+  }
+  while (!pending.empty()) {
+    const std::string name = pending.back();
+    pending.pop_back();
+    if (!keep.insert(name).second) continue;
+    // An input that is not a stage is left for CheckInputs to report, with its path.
+    for (const std::string& input : InputNames(stages[name]))
+      if (stages.contains(input)) pending.push_back(input);
+  }
+  if (keep.empty()) return;
+  Json kept = Json::object();
+  for (const auto& [name, node] : stages.items())
+    if (keep.count(name)) kept[name] = node;
+  stages = std::move(kept);
+}
+
 // `seeds: N` on a stage replicates it N times: `name`, `name-s2`, ..., `name-sN`, replicate k with
 // params.seed = (params.seed or the pipeline's seed) + k - 1. A seeded stage whose input is seeded
 // too takes the input's replicate k (both must have the same N), and top-level string params naming
@@ -186,14 +237,7 @@ void ExpandSeeds(Json* stages, uint64_t pipeline_seed, std::vector<std::string>*
       out[name] = node;
       continue;
     }
-    std::vector<std::string> inputs;
-    if (node.contains("inputs") && node["inputs"].is_array()) {
-      for (const Json& i : node["inputs"]) {
-        if (i.is_string()) inputs.push_back(i.get<std::string>());
-      }
-    } else if (node.contains("inputs") && node["inputs"].is_string()) {
-      inputs.push_back(node["inputs"].get<std::string>());
-    }
+    const std::vector<std::string> inputs = InputNames(node);
     const auto own = seeds.find(name);
     if (own == seeds.end()) {  // unseeded: waits for every replicate of its seeded inputs
       Json copy = node;
@@ -553,7 +597,49 @@ void CheckTaskCount(const std::vector<StageSpec>& stages, std::vector<std::strin
   }
 }
 
+// `doc`, read from `path`, with its bases merged under it; `chain` holds the files that derive
+// from it, to name a cycle.
+Result<Json> MergeBases(Json doc, const std::string& path, std::vector<std::string>* chain) {
+  if (!doc.is_object() || !doc.contains("base")) return doc;
+  const Json& base = doc["base"];
+  if (!base.is_string() || base.get<std::string>().empty())
+    return InvalidArgument(path + ": base: must be the path of a pipeline file, relative to " +
+                           "this one (got " + base.dump() + ")");
+  if (!doc.contains("name"))
+    return InvalidArgument(path + ": name: required in a derived pipeline (its outputs would " +
+                           "go under its base's name)");
+  const std::string base_path =
+      (fs::path(path).parent_path() / base.get<std::string>()).lexically_normal().string();
+  chain->push_back(fs::path(path).lexically_normal().string());
+  if (std::find(chain->begin(), chain->end(), base_path) != chain->end()) {
+    std::string cycle;
+    for (const std::string& file : *chain) cycle += file + " -> ";
+    return InvalidArgument(path + ": base: a cycle: " + cycle + base_path);
+  }
+  auto text = ReadFile(base_path);
+  if (!text.ok()) return text.status().WithContext(path + ": base");
+  auto parsed = ParseYaml(*text, base_path);
+  if (!parsed.ok()) return parsed.status().WithContext(path + ": base");
+  if (!parsed->is_object())
+    return InvalidArgument(path + ": base: " + base_path + " is not a pipeline (a YAML map)");
+  MP_ASSIGN_OR_RETURN(Json merged, MergeBases(std::move(*parsed), base_path, chain));
+  doc.erase("base");
+  merged.merge_patch(doc);
+  return merged;
+}
+
 }  // namespace
+
+Result<std::string> ReadPipelineFile(const std::string& path) {
+  auto text = ReadFile(path);
+  if (!text.ok()) return text.status();
+  auto doc = ParseYaml(*text, path);
+  // Without a base (or unparsable: ParsePipeline reports it), the file's own text.
+  if (!doc.ok() || !doc->is_object() || !doc->contains("base")) return text;
+  std::vector<std::string> chain;
+  MP_ASSIGN_OR_RETURN(Json merged, MergeBases(std::move(*doc), path, &chain));
+  return merged.dump(2);
+}
 
 // Every problem of the file is collected (each with its YAML path) and reported together.
 Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
@@ -569,10 +655,17 @@ Result<PipelineSpec> ParsePipeline(const std::string& yaml_text,
   for (const std::string& o : overrides)
     MP_RETURN_IF_ERROR(ApplyOverride(&doc, o).WithContext(origin));
   Interpolate(&doc, Json(doc), "", &errors);
+  if (doc.contains("base")) {
+    errors.push_back(
+        "base: a derived pipeline is resolved when its file is read (motionpipe run / submit, "
+        "ReadPipelineFile), not in pipeline text");
+    doc.erase("base");
+  }
   CheckKeys(doc,
             {"name", "description", "output_root", "seed", "schedule", "scale", "scales", "vars",
-             "defaults", "stages"},
+             "defaults", "targets", "stages"},
             "", &errors);
+  SelectTargets(&doc, &errors);
 
   PipelineSpec spec;
   ReadHeader(doc, &spec, &errors);

@@ -15,6 +15,10 @@
 //     corpus:  {kind: corpus, params: {clips: 1500}}
 //     filter:  {kind: filter, inputs: [corpus], shards: 8, params: {...}}
 //     mdt:     {kind: train, inputs: [filter], seeds: 3, params: {...}}   # mdt, mdt-s2, mdt-s3
+//   targets: [mdt]                  # optional: only these stages and what they need run
+//
+// A file may instead derive from another: `base: ../claims_edit.yaml` plus its own name and the
+// keys it changes (ReadPipelineFile below); `stages: {mdm: null}` drops a stage of the base.
 #pragma once
 
 #include <functional>
@@ -81,6 +85,14 @@ class KindRegistry {
  private:
   std::map<std::string, StagePlanner> planners_;
 };
+
+// Reads a pipeline file. A file with `base: PATH` (relative to the file's own directory) derives
+// from that pipeline: it is a JSON merge patch (RFC 7386) over it, so maps merge key by key (vars,
+// stages, a stage's params), null removes a key (a stage, a var) and anything else replaces (a
+// list of inputs); bases may chain, and a derived file names itself. What comes back is
+// self-contained, without `base`, as the journal keeps it; a file without `base` comes back as its
+// own text (so a pipeline's fingerprint does not change with this reader).
+Result<std::string> ReadPipelineFile(const std::string& path);
 
 // Parses, overrides, interpolates, validates and plans. InvalidArgument lists every problem as
 // "origin: path: message" lines.

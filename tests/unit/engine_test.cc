@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 
 #include "cron.h"
 #include "executor.h"
@@ -155,8 +156,8 @@ TEST(Pipeline, EveryShippedConfigParsesAndPlans) {
   for (const std::string dir : {"configs", "configs/experiments"}) {
     for (const auto& entry : fs::directory_iterator(motionpipe::testing::SourceDir() + "/" + dir)) {
       if (entry.path().extension() != ".yaml") continue;
-      auto text = ReadFile(entry.path().string());
-      ASSERT_TRUE(text.ok()) << entry.path();
+      auto text = ReadPipelineFile(entry.path().string());
+      ASSERT_TRUE(text.ok()) << text.status().ToString();
       auto spec = ParsePipeline(*text, {}, entry.path().string(), kinds);
       EXPECT_TRUE(spec.ok()) << spec.status().ToString();
       if (spec.ok()) {
@@ -187,6 +188,112 @@ TEST(Pipeline, OverridesAndInterpolation) {
   EXPECT_EQ(partial->output_root, "runs/small");
   EXPECT_FALSE(ParsePipeline(PipelineIn("out"), {"novalue"}, "p.yaml", Kinds()).ok());
   EXPECT_FALSE(ParsePipeline(PipelineIn("out"), {"name.sub=1"}, "p.yaml", Kinds()).ok());
+}
+
+// A derived pipeline (`base:`) is a merge patch over its base, resolved when its file is read:
+// vars and a stage's params merge, null drops a stage, a list replaces; bases chain; what is kept
+// is self-contained. A file without a base reads as its own text (its fingerprint unchanged).
+TEST(Pipeline, DerivedPipelineMergesOverItsBase) {
+  const std::string dir = ::testing::TempDir() + "/derived_pipelines";
+  fs::remove_all(dir);
+  fs::create_directories(dir + "/experiments");
+  const std::string base_text = R"(name: claims
+seed: 3
+vars: {steps: 100, option: false}
+stages:
+  data: {kind: noop}
+  mdt: {kind: noop, inputs: [data], params: {steps: "${vars.steps}", option: "${vars.option}"}}
+  tmed: {kind: noop, inputs: [data], params: {steps: "${vars.steps}"}}
+  mdm: {kind: noop, inputs: [data]}
+  report: {kind: noop, inputs: [mdt, tmed, mdm]}
+)";
+  ASSERT_TRUE(WriteFileAtomic(dir + "/claims.yaml", base_text).ok());
+  ASSERT_TRUE(WriteFileAtomic(dir + "/experiments/cut.yaml",
+                              "base: ../claims.yaml\nname: cut\nvars: {option: true}\n"
+                              "stages:\n  mdm: null\n  report: {inputs: [mdt, tmed]}\n"
+                              "  tmed: {params: {steps: 7}}\n")
+                  .ok());
+  ASSERT_TRUE(WriteFileAtomic(dir + "/experiments/cut2.yaml",
+                              "base: cut.yaml\nname: cut2\nvars: {steps: 5}\n")
+                  .ok());
+
+  auto own = ReadPipelineFile(dir + "/claims.yaml");
+  ASSERT_TRUE(own.ok()) << own.status().ToString();
+  EXPECT_EQ(*own, base_text);
+
+  auto text = ReadPipelineFile(dir + "/experiments/cut2.yaml");
+  ASSERT_TRUE(text.ok()) << text.status().ToString();
+  EXPECT_EQ(text->find("base"), std::string::npos) << *text;
+  auto spec = ParsePipeline(*text, {}, "cut2.yaml", Kinds());
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  EXPECT_EQ(spec->name, "cut2");
+  EXPECT_EQ(spec->seed, 3u);  // from the base
+  std::map<std::string, StageSpec> stages;
+  for (const StageSpec& st : spec->stages) stages[st.name] = st;
+  ASSERT_EQ(stages.size(), 4u);  // mdm dropped
+  EXPECT_EQ(stages.count("mdm"), 0u);
+  EXPECT_EQ(stages["report"].inputs, (std::vector<std::string>{"mdt", "tmed"}));
+  EXPECT_EQ(stages["mdt"].params["steps"], 5);      // cut2's var through the base's stage
+  EXPECT_EQ(stages["mdt"].params["option"], true);  // cut's var
+  EXPECT_EQ(stages["tmed"].params["steps"], 7);     // cut's param beats any var
+  EXPECT_EQ(stages["tmed"].kind, "noop");           // the rest of the base's stage kept
+
+  // Problems name the file: a cycle, a missing base, a derived file without a name.
+  ASSERT_TRUE(WriteFileAtomic(dir + "/a.yaml", "base: b.yaml\nname: a\n").ok());
+  ASSERT_TRUE(WriteFileAtomic(dir + "/b.yaml", "base: a.yaml\nname: b\n").ok());
+  auto cycle = ReadPipelineFile(dir + "/a.yaml");
+  ASSERT_FALSE(cycle.ok());
+  EXPECT_NE(cycle.status().message().find("a cycle"), std::string::npos)
+      << cycle.status().message();
+  ASSERT_TRUE(WriteFileAtomic(dir + "/lost.yaml", "base: nowhere.yaml\nname: lost\n").ok());
+  auto lost = ReadPipelineFile(dir + "/lost.yaml");
+  ASSERT_FALSE(lost.ok());
+  EXPECT_NE(lost.status().message().find("lost.yaml: base"), std::string::npos)
+      << lost.status().message();
+  EXPECT_NE(lost.status().message().find("nowhere.yaml"), std::string::npos)
+      << lost.status().message();
+  ASSERT_TRUE(WriteFileAtomic(dir + "/anon.yaml", "base: claims.yaml\nvars: {steps: 1}\n").ok());
+  auto anon = ReadPipelineFile(dir + "/anon.yaml");
+  ASSERT_FALSE(anon.ok());
+  EXPECT_NE(anon.status().message().find("name: required"), std::string::npos)
+      << anon.status().message();
+  // Pipeline text (the journal's, a submission's) must come resolved.
+  auto raw = ParsePipeline("base: claims.yaml\nname: x\nstages: {a: {kind: noop}}\n", {}, "x.yaml",
+                           Kinds());
+  ASSERT_FALSE(raw.ok());
+  EXPECT_NE(raw.status().message().find("x.yaml: base:"), std::string::npos)
+      << raw.status().message();
+  fs::remove_all(dir);
+}
+
+// `targets:` keeps the named stages and what they need through their inputs, seeds and all.
+TEST(Pipeline, TargetsKeepWhatTheyNeed) {
+  const std::string yaml = R"(
+name: part
+stages:
+  data: {kind: noop}
+  judge: {kind: noop, inputs: [data]}
+  mdt: {kind: noop, inputs: data, seeds: 2}
+  mdm: {kind: noop, inputs: [data], seeds: 2}
+  eval_mdt: {kind: noop, inputs: [judge, mdt], seeds: 2}
+  eval_mdm: {kind: noop, inputs: [judge, mdm], seeds: 2}
+  report: {kind: noop, inputs: [eval_mdt, eval_mdm]}
+)";
+  auto spec = ParsePipeline(yaml, {"targets=[eval_mdt]"}, "part.yaml", Kinds());
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  std::set<std::string> names;
+  for (const StageSpec& st : spec->stages) names.insert(st.name);
+  EXPECT_EQ(names,
+            (std::set<std::string>{"data", "judge", "mdt", "mdt-s2", "eval_mdt", "eval_mdt-s2"}));
+  auto all = ParsePipeline(yaml, {}, "part.yaml", Kinds());
+  ASSERT_TRUE(all.ok());
+  EXPECT_EQ(all->stages.size(), 11u);
+  auto unknown = ParsePipeline(yaml, {"targets=[eval_mdt, nosuch]"}, "part.yaml", Kinds());
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().message().find("part.yaml: targets[1]: not a stage"),
+            std::string::npos)
+      << unknown.status().message();
+  EXPECT_FALSE(ParsePipeline(yaml, {"targets=report"}, "part.yaml", Kinds()).ok());
 }
 
 TEST(Pipeline, SeedsReplicateStagesAndTheirChains) {
