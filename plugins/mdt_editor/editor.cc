@@ -37,7 +37,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
                     "text_encoder_from", "freeze_text_encoder", "fps"});
   RequireKnownKeys(j.value("model", nlohmann::json::object()), "model.",
                    {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout",
-                    "text_encoder", "concat_source"});
+                    "text_encoder", "concat_source", "text_tokens"});
   RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
@@ -61,6 +61,12 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.sim_hidden = m.value("sim_hidden", o.sim_hidden);
   o.dropout = m.value("dropout", o.dropout);
   o.concat_source = m.value("concat_source", o.concat_source);
+  o.text_tokens = m.value("text_tokens", o.text_tokens);
+  if (o.text_tokens && o.variant != "mdt")
+    throw std::invalid_argument(
+        "model.text_tokens: only the mdt variant has a condition transformer (TMED reads the "
+        "tokens already; got variant '" +
+        o.variant + "')");
   const nlohmann::json a = j.value("aux", nlohmann::json::object());
   o.aux = a.value("mode", o.variant == "mdt" ? o.aux : std::string("none"));
   o.classes = a.value("classes", o.classes);
@@ -156,6 +162,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"sim_hidden", sim_hidden},
             {"dropout", dropout},
             {"concat_source", concat_source},
+            {"text_tokens", text_tokens},
             {"text_encoder", text.ToJson()}}},
           {"aux",
            {{"mode", aux},
@@ -454,17 +461,30 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
                                      const torch::Tensor& target_padding, const Condition& c,
                                      const torch::Tensor& aligned) {
   const int64_t n = xt.size(1), ts = c.source.size(0), tt = xt.size(0);
-  auto [text, unused] = EncodeText(c);
-  (void)unused;
+  auto [text, tokens] = EncodeText(c);
   const auto source_padding = SourcePadding(c);
   auto source = nn::ApplyLinear(source_in_, c.source);  // [Ts, N, d]
   if (c.drop_source.defined())
     source = source * (1 - c.drop_source.view({1, -1, 1}).to(source.dtype()));
-  // Condition transformer over [text token; source frames].
-  auto h = torch::cat({text.unsqueeze(0), source}, 0) + nn::PositionalEncoding(ts + 1, o_.dim);
-  h = condition_->forward(h, torch::cat({AnyPadding(n, 1), source_padding}, 1));
+  // Condition transformer over [text token; source frames] at positions 0..Ts, with
+  // model.text_tokens the tokens between them (their own positions and the text segment's
+  // embedding; the source keeps its positions, whatever the texts' lengths).
+  const auto positions = nn::PositionalEncoding(ts + 1, o_.dim);
+  std::vector<torch::Tensor> parts = {text.unsqueeze(0) + positions.narrow(0, 0, 1)};
+  std::vector<torch::Tensor> masks = {AnyPadding(n, 1)};
+  const int64_t words = o_.text_tokens ? tokens.tokens.size(0) : 0;
+  if (o_.text_tokens) {
+    parts.push_back(tokens.tokens + nn::PositionalEncoding(words, o_.dim) +
+                    segments_[kText].view({1, 1, -1}));
+    // A dropped text's tokens are masked, not only zeroed: how many there were is a trace of it.
+    masks.push_back(c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1}))
+                                          : tokens.padding);
+  }
+  parts.push_back(source + positions.narrow(0, 1, ts));
+  masks.push_back(source_padding);
+  const auto h = condition_->forward(torch::cat(parts, 0), torch::cat(masks, 1));
   const auto enhanced_text = h[0];
-  const auto enhanced_source = h.narrow(0, 1, ts);
+  const auto enhanced_source = h.narrow(0, 1 + words, ts);
   Prediction p;
   if (o_.aux != "none") {
     auto s = nn::ApplySequential(sim_head_, enhanced_source).transpose(0, 1);  // [N, Ts, K]

@@ -35,6 +35,13 @@ struct EditorOptions {
   // prior, the clean estimate's legs lean about half way back to the source, the same in every
   // training seed). mdt and tmed; false (the reference) reads x_t alone.
   bool concat_source = false;
+  // true: the MDT's condition transformer reads the text's tokens after its pooled token,
+  // [text token; text tokens; source frames], so the enhanced text token and the enhanced source
+  // frames attend to the words themselves. The paper pools first (one CLIP sentence embedding,
+  // REFERENCE 3.2); ours is the mean of a one-layer learned encoder's tokens, and TMED, which
+  // attends to the tokens, edits better once both read the source frame by frame (issue 15). mdt
+  // only; false (the reference) reads the pooled token alone.
+  bool text_tokens = false;
   // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
   std::string aux = "classes";
   int classes = 3;

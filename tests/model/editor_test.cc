@@ -140,10 +140,12 @@ struct TinyTriplets {
 };
 
 TEST(Editor, EveryVariantOverfitsAFewTriplets) {
-  for (const std::string variant : {"mdt", "tmed", "mdm", "mdt concat_source"}) {
+  for (const std::string variant :
+       {"mdt", "tmed", "mdm", "mdt concat_source", "mdt concat_source text_tokens"}) {
     torch::manual_seed(2);
     EditorOptions options = Tiny(variant.substr(0, variant.find(' ')), "none");
     options.concat_source = variant.find("concat_source") != std::string::npos;
+    options.text_tokens = variant.find("text_tokens") != std::string::npos;
     EditorNet net(options);
     const TinyTriplets data;
     net->text_encoder()->Fit(data.texts);
@@ -203,6 +205,45 @@ TEST(Editor, TheConcatenatedSourceChangesTheEstimateUnlessTheSourceIsDropped) {
   EXPECT_THROW(EditorNet{EditorOptions::FromJson(mdm)}, std::invalid_argument);
   EXPECT_TRUE(EditorOptions::FromJson({{"model", {{"concat_source", true}}}})
                   .ToJson()["model"]["concat_source"]
+                  .get<bool>());
+}
+
+// model.text_tokens: the MDT's condition transformer also reads the text's tokens. A triplet's
+// estimate must not depend on the other texts of its batch (their lengths set the token count,
+// and the source frames keep their positions after any number of tokens), the text must matter,
+// and where it is dropped (guidance's branches without it) its words must not.
+TEST(Editor, TextTokensReachTheMdtWithoutTyingATripletToItsBatch) {
+  const TinyTriplets data;
+  torch::manual_seed(6);
+  EditorOptions options = Tiny("mdt", "none");
+  options.text_tokens = true;
+  EditorNet net(options);
+  net->text_encoder()->Fit(data.texts);
+  // adaLN-Zero and the zero output layer start the estimate at the source prior: move every
+  // weight a little so that it depends on the condition.
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
+  }
+  net->eval();
+  torch::NoGradGuard no_grad;
+  const auto t = torch::full({3}, 5, torch::kInt64);
+  const auto estimate = [&](const std::vector<std::string>& texts, bool dropped) {
+    Condition c{texts, data.source, data.source_padding, torch::full({3}, dropped, torch::kBool),
+                torch::zeros({3}, torch::kBool)};
+    return net->forward(data.target, t, data.target_padding, c).x0;
+  };
+  std::vector<std::string> longer = data.texts;
+  longer[1] += " and then raise the right arm and bend the knees more";
+  const auto base = estimate(data.texts, false), other = estimate(longer, false);
+  EXPECT_LT((base.select(1, 0) - other.select(1, 0)).abs().max().item<double>(), 1e-5);
+  EXPECT_GT((base.select(1, 1) - other.select(1, 1)).abs().max().item<double>(), 1e-4);
+  EXPECT_LT((estimate(data.texts, true) - estimate(longer, true)).abs().max().item<double>(), 1e-5);
+
+  nlohmann::json tmed = {{"variant", "tmed"}, {"model", {{"text_tokens", true}}}};
+  EXPECT_THROW(EditorOptions::FromJson(tmed), std::invalid_argument);
+  EXPECT_TRUE(EditorOptions::FromJson({{"model", {{"text_tokens", true}}}})
+                  .ToJson()["model"]["text_tokens"]
                   .get<bool>());
 }
 
