@@ -177,6 +177,7 @@ int RunEdit(const EditArgs& a) {
   auto found = FindClip(*clips, a.clip_id, a.source_path);
   if (!found.ok()) return Fail(found.status());
   const Clip& source = **found;
+  if (Status s = CheckPostProcesses(a.post); !s.ok()) return Fail(s);
   const worker::PluginHost host = LoadPlugins(a.plugin_dirs);
   nlohmann::json options = nlohmann::json::object();
   if (a.body_parts) options["body_parts"] = true;
@@ -258,6 +259,7 @@ int RunGenerate(const GenerateArgs& a) {
   if (a.texts.size() > 2) return Usage("generate: at most two --text (two simultaneous actions)");
   if (!EndsWith(a.out, ".npz") && !EndsWith(a.out, ".bvh"))
     return Usage(a.out + ": the output must end in .npz (clip file) or .bvh");
+  if (Status s = CheckPostProcesses(a.post); !s.ok()) return Fail(s);
   const worker::PluginHost host = LoadPlugins(a.plugin_dirs);
   nlohmann::json options = nlohmann::json::object();
   if (a.compositing) options["compositing"] = true;

@@ -1,5 +1,6 @@
 #include "post_process.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 
@@ -45,17 +46,39 @@ bool IsTripletFile(const std::string& path) {
   return name.rfind("triplets", 0) == 0 && fs::path(path).extension() == ".npz";
 }
 
+// A --match-legs path's triplet files: a stage's directory (its result's triplets, else its
+// tasks'), a folder or file of them; empty for a motion file.
+Result<std::vector<std::string>> MatchTripletFiles(const std::string& path) {
+  std::error_code ec;
+  const bool dir = fs::is_directory(path, ec);
+  if (!dir && !IsTripletFile(path)) return std::vector<std::string>{};
+  std::vector<std::string> files =
+      dir ? StageTripletFiles(layout::StageOutputDirs(path)) : std::vector{path};
+  if (files.empty()) return NotFound(path + ": --match-legs: holds no triplet files");
+  return files;
+}
+
+Status NoMatchMotions(const PostProcessArgs& args) {
+  return NotFound("--match-legs: no motions (no triplets of split '" + args.match_split +
+                  "' and no motion files)");
+}
+
+// The --clean-legs checkpoint, checked to be a leg_cleanup one.
+Result<std::string> CleanupCheckpoint(const PostProcessArgs& args) {
+  MP_ASSIGN_OR_RETURN(const std::string checkpoint, worker::ResolveCheckpoint(args.clean_legs));
+  MP_ASSIGN_OR_RETURN(const std::string name, worker::CheckpointModelName(checkpoint));
+  if (name != "leg_cleanup")
+    return InvalidArgument("--clean-legs: " + checkpoint + " is a " + name +
+                           " checkpoint, not a leg_cleanup one");
+  return checkpoint;
+}
+
 // The match_legs database at `fps` from the arguments' paths.
 Status FillDatabase(const PostProcessArgs& args, double fps, LegDatabase* database) {
   int64_t motions = 0;
   for (const std::string& path : args.match_legs) {
-    std::error_code ec;
-    const bool dir = fs::is_directory(path, ec);
-    if (dir || IsTripletFile(path)) {
-      // A stage's directory (its result's triplets, else its tasks'), or a folder or file of them.
-      const std::vector<std::string> files =
-          dir ? StageTripletFiles(layout::StageOutputDirs(path)) : std::vector{path};
-      if (files.empty()) return NotFound(path + ": --match-legs: holds no triplet files");
+    MP_ASSIGN_OR_RETURN(const std::vector<std::string> files, MatchTripletFiles(path));
+    if (!files.empty()) {
       MP_ASSIGN_OR_RETURN(
           const int64_t triplets,
           AddTripletSides(
@@ -70,9 +93,7 @@ Status FillDatabase(const PostProcessArgs& args, double fps, LegDatabase* databa
       ++motions;
     }
   }
-  if (motions == 0)
-    return NotFound("--match-legs: no motions (no triplets of split '" + args.match_split +
-                    "' and no motion files)");
+  if (motions == 0) return NoMatchMotions(args);
   std::printf("match_legs: database of %lld motions, %lld frames at %.0f fps\n",
               static_cast<long long>(motions), static_cast<long long>(database->frames()), fps);
   return Status::Ok();
@@ -88,15 +109,30 @@ void PrintPlausibility(const char* what, const Motion& motion) {
 
 }  // namespace
 
+Status CheckPostProcesses(const PostProcessArgs& args) {
+  if (!args.clean_legs.empty()) MP_RETURN_IF_ERROR(CleanupCheckpoint(args).status());
+  int64_t motions = 0;
+  for (const std::string& path : args.match_legs) {
+    MP_ASSIGN_OR_RETURN(const std::vector<std::string> files, MatchTripletFiles(path));
+    for (const std::string& file : files) {
+      MP_ASSIGN_OR_RETURN(const TripletColumns columns,
+                          ReadTripletColumns(file, {0, -1, /*motions=*/false, false}));
+      motions += std::count(columns.splits.begin(), columns.splits.end(), args.match_split);
+    }
+    if (files.empty()) {
+      MP_ASSIGN_OR_RETURN(const std::vector<Clip> clips, LoadMotionFile(path, 30));
+      motions += static_cast<int64_t>(clips.size());
+    }
+  }
+  if (!args.match_legs.empty() && motions == 0) return NoMatchMotions(args);
+  return Status::Ok();
+}
+
 Result<Motion> ApplyPostProcesses(const PostProcessArgs& args, const worker::PluginHost& host,
                                   const Motion& raw) {
   Motion motion = raw;
   if (!args.clean_legs.empty()) {
-    MP_ASSIGN_OR_RETURN(const std::string checkpoint, worker::ResolveCheckpoint(args.clean_legs));
-    MP_ASSIGN_OR_RETURN(const std::string name, worker::CheckpointModelName(checkpoint));
-    if (name != "leg_cleanup")
-      return InvalidArgument("--clean-legs: " + checkpoint + " is a " + name +
-                             " checkpoint, not a leg_cleanup one");
+    MP_ASSIGN_OR_RETURN(const std::string checkpoint, CleanupCheckpoint(args));
     MP_ASSIGN_OR_RETURN(auto cleanup, worker::LoadGenerator(host, checkpoint));
     plugin::GenerateRequest request;
     request.source = &motion;

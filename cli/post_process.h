@@ -29,6 +29,11 @@ struct PostProcessArgs {
 // Declares --clean-legs, --match-legs, --match-split and --foot-lock on `cmd`.
 void AddPostProcessOptions(CLI::App* cmd, PostProcessArgs* args);
 
+// The post-processes' inputs checked before the model runs (the --clean-legs checkpoint's kind,
+// the --match-legs paths and the --match-split triplets they hold), so that a wrong one is refused
+// at once, naming it, and not after an edit or a generation has been computed.
+Status CheckPostProcesses(const PostProcessArgs& args);
+
 // The motion cleaned (a leg_cleanup checkpoint), given matched legs (motion matching against the
 // database, brought to the motion's rate), then planted, in that order, each when asked for. Prints
 // one line per step that ran (what it changed) and the plausibility of the raw and the final motion

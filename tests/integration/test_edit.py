@@ -667,17 +667,20 @@ class EditTest(EngineTest):
         self.assertRegex(plain, r"plausibility: foot skate \d\.\d{3}")
         with np.load(post) as z, np.load(self.path("a.npz")) as raw_edit:
             self.assertTrue(np.array_equal(z["poses"], raw_edit["poses"]))
-        # Wrong post-process inputs are errors that name them, and nothing is written.
+        # Wrong post-process inputs are errors that name them, refused before any model is loaded or
+        # run (with a model path that does not exist, the post-process's error comes first; the edit
+        # took minutes with the default 300-step DDPM on a busy machine), and nothing is written.
         os.remove(post)
-        refused = self.cli("edit", "--model", model, "--source", CMU, "--text", "x", "--out", post,
+        no_model = os.path.join(job, "no_such_model")
+        refused = self.cli("edit", "--model", no_model, "--source", CMU, "--text", "x", "--out", post,
                            "--clean-legs", model, check=False)
         self.assertEqual(refused.returncode, 1)
         self.assertIn("is a mdt_editor checkpoint, not a leg_cleanup one", refused.stderr)
-        refused = self.cli("edit", "--model", model, "--source", CMU, "--text", "x", "--out", post,
+        refused = self.cli("edit", "--model", no_model, "--source", CMU, "--text", "x", "--out", post,
                            "--match-legs", self.path("nowhere.bvh"), check=False)
         self.assertEqual(refused.returncode, 1)
         self.assertIn("nowhere.bvh", refused.stderr)
-        refused = self.cli("edit", "--model", model, "--source", CMU, "--text", "x", "--out", post,
+        refused = self.cli("edit", "--model", no_model, "--source", CMU, "--text", "x", "--out", post,
                            "--match-legs", os.path.join(job, "corpus"), "--match-split", "nosuch", check=False)
         self.assertEqual(refused.returncode, 1)
         self.assertIn("no triplets of split 'nosuch'", refused.stderr)
