@@ -91,6 +91,7 @@ struct RunArgs {
   double heartbeat = 1.0;
   bool quiet = false;
   bool dry_run = false;
+  bool print_resolved = false;
 };
 
 // `run --dry-run`: the pipeline as planned (after overrides and validation), one line per stage
@@ -321,6 +322,10 @@ int RunPipeline(const RunArgs& a) {
   const coordinator::KindRegistry kinds = coordinator::CoordinatorKinds(a.plugin_dirs);
   auto spec = coordinator::ParsePipeline(*text, a.overrides, a.pipeline, kinds);
   if (!spec.ok()) return Fail(spec.status());
+  if (a.print_resolved) {  // what the journal would keep: bases merged, overrides and vars applied
+    std::printf("%s\n", nlohmann::ordered_json::parse(spec->resolved).dump(2).c_str());
+    return kExitOk;
+  }
   if (a.dry_run) return DryRun(*spec);
   if (a.quiet) SetLogLevel(std::max(LogLevel::kWarn, GetLogLevel()));
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
@@ -391,6 +396,10 @@ void AddRun(CLI::App& app, int* exit_code) {
                 "No progress display, and only warnings and errors in the log");
   cmd->add_flag("--dry-run", a.dry_run,
                 "Validate the pipeline and print its stages and task counts; start nothing");
+  cmd->add_flag("--print-resolved", a.print_resolved,
+                "Validate the pipeline and print it as the journal would keep it (a derived "
+                "pipeline's bases merged, overrides, vars and targets applied), as JSON; start "
+                "nothing");
   cmd->callback([exit_code] { *exit_code = RunPipeline(a); });
 }
 

@@ -73,6 +73,23 @@ class LocalRun(EngineTest):
         self.assertEqual(result.returncode, 1)
         self.assertIn("stages.check.inputs[0]: unknown stage 'wirte'", result.stderr)
 
+    def test_a_derived_pipeline_runs_as_its_base_with_its_changes(self):
+        self.write_pipeline("p.yaml", PIPELINE)
+        derived = self.write_pipeline("d.yaml", "base: p.yaml\nname: derived\nstages:\n  write: {params: {tasks: 3}}\n")
+        result = subprocess.run([MOTIONPIPE, "run", derived, "--print-resolved"], capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        resolved = json.loads(result.stdout)
+        self.assertNotIn("base", resolved)
+        self.assertEqual(resolved["name"], "derived")
+        self.assertEqual(resolved["seed"], 3)  # the base's
+        self.assertEqual(resolved["stages"]["write"], {"kind": "test.write", "params": {"tasks": 3, "bytes": 128}})
+        self.assertEqual(resolved["stages"]["check"]["inputs"], ["write"])
+        result = subprocess.run([MOTIONPIPE, "run", derived, "--dry-run", "targets=[write]"], capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stdout + result.stderr)
+        self.assertRegex(result.stdout, r"pipeline 'derived': 1 stage\(s\)")
+        self.assertRegex(result.stdout, r"write +test\.write +3 ")
+        self.assertFalse(os.path.exists(self.path("out")))  # no job, no journal
+
     def test_an_interrupted_run_resumes(self):
         pipeline = self.write_pipeline("p.yaml", PIPELINE.replace("bytes: 128}", "bytes: 128, ms: 20}"))
         run = subprocess.Popen([MOTIONPIPE, "run", pipeline, "-q", "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
