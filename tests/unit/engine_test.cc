@@ -239,24 +239,20 @@ stages:
   EXPECT_EQ(stages["tmed"].kind, "noop");           // the rest of the base's stage kept
 
   // Problems name the file: a cycle, a missing base, a derived file without a name.
-  ASSERT_TRUE(WriteFileAtomic(dir + "/a.yaml", "base: b.yaml\nname: a\n").ok());
+  const auto refusal = [&](const std::string& name, const std::string& yaml) {
+    EXPECT_TRUE(WriteFileAtomic(dir + "/" + name, yaml).ok());
+    auto read = ReadPipelineFile(dir + "/" + name);
+    EXPECT_FALSE(read.ok()) << name;
+    return read.ok() ? std::string() : read.status().message();
+  };
   ASSERT_TRUE(WriteFileAtomic(dir + "/b.yaml", "base: a.yaml\nname: b\n").ok());
-  auto cycle = ReadPipelineFile(dir + "/a.yaml");
-  ASSERT_FALSE(cycle.ok());
-  EXPECT_NE(cycle.status().message().find("a cycle"), std::string::npos)
-      << cycle.status().message();
-  ASSERT_TRUE(WriteFileAtomic(dir + "/lost.yaml", "base: nowhere.yaml\nname: lost\n").ok());
-  auto lost = ReadPipelineFile(dir + "/lost.yaml");
-  ASSERT_FALSE(lost.ok());
-  EXPECT_NE(lost.status().message().find("lost.yaml: base"), std::string::npos)
-      << lost.status().message();
-  EXPECT_NE(lost.status().message().find("nowhere.yaml"), std::string::npos)
-      << lost.status().message();
-  ASSERT_TRUE(WriteFileAtomic(dir + "/anon.yaml", "base: claims.yaml\nvars: {steps: 1}\n").ok());
-  auto anon = ReadPipelineFile(dir + "/anon.yaml");
-  ASSERT_FALSE(anon.ok());
-  EXPECT_NE(anon.status().message().find("name: required"), std::string::npos)
-      << anon.status().message();
+  const std::string cycle = refusal("a.yaml", "base: b.yaml\nname: a\n");
+  EXPECT_NE(cycle.find("a cycle"), std::string::npos) << cycle;
+  const std::string lost = refusal("lost.yaml", "base: nowhere.yaml\nname: lost\n");
+  EXPECT_NE(lost.find("lost.yaml: base"), std::string::npos) << lost;
+  EXPECT_NE(lost.find("nowhere.yaml"), std::string::npos) << lost;
+  const std::string anon = refusal("anon.yaml", "base: claims.yaml\nvars: {steps: 1}\n");
+  EXPECT_NE(anon.find("name: required"), std::string::npos) << anon;
   // Pipeline text (the journal's, a submission's) must come resolved.
   auto raw = ParsePipeline("base: claims.yaml\nname: x\nstages: {a: {kind: noop}}\n", {}, "x.yaml",
                            Kinds());
