@@ -37,7 +37,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
                     "text_encoder_from", "freeze_text_encoder", "fps"});
   RequireKnownKeys(j.value("model", nlohmann::json::object()), "model.",
                    {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout",
-                    "text_encoder", "concat_source", "text_tokens"});
+                    "text_encoder", "concat_source", "text_tokens", "dit_text_tokens"});
   RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
@@ -66,6 +66,12 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
     throw std::invalid_argument(
         "model.text_tokens: only the mdt variant has a condition transformer (TMED reads the "
         "tokens already; got variant '" +
+        o.variant + "')");
+  o.dit_text_tokens = m.value("dit_text_tokens", o.dit_text_tokens);
+  if (o.dit_text_tokens && o.variant != "mdt")
+    throw std::invalid_argument(
+        "model.dit_text_tokens: only the mdt variant has a DiT (TMED reads the tokens already; got "
+        "variant '" +
         o.variant + "')");
   const nlohmann::json a = j.value("aux", nlohmann::json::object());
   o.aux = a.value("mode", o.variant == "mdt" ? o.aux : std::string("none"));
@@ -163,6 +169,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"dropout", dropout},
             {"concat_source", concat_source},
             {"text_tokens", text_tokens},
+            {"dit_text_tokens", dit_text_tokens},
             {"text_encoder", text.ToJson()}}},
           {"aux",
            {{"mode", aux},
@@ -490,19 +497,29 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
     auto s = nn::ApplySequential(sim_head_, enhanced_source).transpose(0, 1);  // [N, Ts, K]
     p.similarity = o_.aux == "regression" ? s.squeeze(2) : s;
   }
-  // DiT over [source; separator; noisy target], conditioned on timestep (+ text).
+  // DiT over [source; separator; noisy target] (with model.dit_text_tokens the text's tokens
+  // first), conditioned on timestep (+ text).
   auto cond = TimeEmbedding(t);
   if (o_.adaln_text) cond = cond + TextCondition(o_.enhanced_text ? enhanced_text : text);
   const auto src = o_.enhanced_motion ? enhanced_source : source;
-  auto x = torch::cat(
+  std::vector<torch::Tensor> sequence, paddings;
+  if (o_.dit_text_tokens) {
+    sequence.push_back(Place(o_.text_tokens ? h.narrow(0, 1, words) : tokens.tokens, kText));
+    paddings.push_back(c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1}))
+                                             : tokens.padding);
+  }
+  const int64_t prefix = (o_.dit_text_tokens ? tokens.tokens.size(0) : 0) + ts + 1;
+  sequence.insert(
+      sequence.end(),
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
-       Place(TargetTokens(xt, aligned), kTarget)},
-      0);
-  const auto padding = torch::cat({source_padding, AnyPadding(n, 1), target_padding}, 1);
+       Place(TargetTokens(xt, aligned), kTarget)});
+  paddings.insert(paddings.end(), {source_padding, AnyPadding(n, 1), target_padding});
+  auto x = torch::cat(sequence, 0);
+  const auto padding = torch::cat(paddings, 1);
   const auto silu_cond = torch::silu(cond);  // every block's adaLN input, computed once
   for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, silu_cond, padding);
   const auto m = nn::ApplyLinear(final_modulation_, silu_cond).unsqueeze(0).chunk(2, 2);
-  x = Modulate(x.narrow(0, ts + 1, tt), m[1], m[0]);
+  x = Modulate(x.narrow(0, prefix, tt), m[1], m[0]);
   p.x0 = nn::ApplyLinear(out_, x);
   if (contact_out_) p.contacts = nn::ApplyLinear(contact_out_, x);
   return p;

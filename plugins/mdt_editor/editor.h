@@ -42,6 +42,14 @@ struct EditorOptions {
   // attends to the tokens, edits better once both read the source frame by frame (issue 15). mdt
   // only; false (the reference) reads the pooled token alone.
   bool text_tokens = false;
+  // true: the MDT's DiT also reads the text's tokens, [text tokens; source; separator; noisy
+  // target] (the condition transformer's outputs for them with text_tokens, their projections
+  // without), so that every noisy target token attends to the words in every DiT layer, as TMED's
+  // do, instead of meeting the text only as adaLN's per-example scale, shift and gate and through
+  // the enhanced source. Not in the paper, whose DiT reads [source; separator; target] (REFERENCE
+  // 3.2); issue 15's last untested suspect of why TMED edits better once both read the source
+  // frame by frame. mdt only; false (the reference).
+  bool dit_text_tokens = false;
   // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
   std::string aux = "classes";
   int classes = 3;

@@ -208,43 +208,68 @@ TEST(Editor, TheConcatenatedSourceChangesTheEstimateUnlessTheSourceIsDropped) {
                   .get<bool>());
 }
 
-// model.text_tokens: the MDT's condition transformer also reads the text's tokens. A triplet's
-// estimate must not depend on the other texts of its batch (their lengths set the token count,
-// and the source frames keep their positions after any number of tokens), the text must matter,
-// and where it is dropped (guidance's branches without it) its words must not.
+// model.text_tokens: the MDT's condition transformer also reads the text's tokens;
+// model.dit_text_tokens: its DiT does (the condition transformer's outputs for them with
+// text_tokens, their projections without). A triplet's estimate must not depend on the other texts
+// of its batch (their lengths set the token count, and the source and target frames keep their
+// positions after any number of tokens), the text must matter, and where it is dropped (guidance's
+// branches without it) its words must not.
 TEST(Editor, TextTokensReachTheMdtWithoutTyingATripletToItsBatch) {
   const TinyTriplets data;
-  torch::manual_seed(6);
-  EditorOptions options = Tiny("mdt", "none");
-  options.text_tokens = true;
-  EditorNet net(options);
-  net->text_encoder()->Fit(data.texts);
-  // adaLN-Zero and the zero output layer start the estimate at the source prior: move every
-  // weight a little so that it depends on the condition.
-  {
+  for (const auto& [text_tokens, dit_text_tokens] :
+       std::vector<std::pair<bool, bool>>{{true, false}, {false, true}, {true, true}}) {
+    SCOPED_TRACE("text_tokens " + std::to_string(text_tokens) + ", dit_text_tokens " +
+                 std::to_string(dit_text_tokens));
+    // The same weights with and without the DiT's tokens (the option adds no parameter).
+    const auto make = [&](bool in_dit) {
+      torch::manual_seed(6);
+      EditorOptions options = Tiny("mdt", "none");
+      options.text_tokens = text_tokens;
+      options.dit_text_tokens = in_dit;
+      EditorNet net(options);
+      net->text_encoder()->Fit(data.texts);
+      // adaLN-Zero and the zero output layer start the estimate at the source prior: move every
+      // weight a little so that it depends on the condition.
+      torch::NoGradGuard no_grad;
+      for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
+      net->eval();
+      return net;
+    };
+    EditorNet net = make(dit_text_tokens);
     torch::NoGradGuard no_grad;
-    for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
+    const auto t = torch::full({3}, 5, torch::kInt64);
+    const auto estimate_of = [&](EditorNet& of, const std::vector<std::string>& texts,
+                                 bool dropped) {
+      Condition c{texts, data.source, data.source_padding, torch::full({3}, dropped, torch::kBool),
+                  torch::zeros({3}, torch::kBool)};
+      return of->forward(data.target, t, data.target_padding, c).x0;
+    };
+    const auto estimate = [&](const std::vector<std::string>& texts, bool dropped) {
+      return estimate_of(net, texts, dropped);
+    };
+    if (dit_text_tokens) {  // the tokens reach the DiT
+      EditorNet without = make(false);
+      EXPECT_GT((estimate(data.texts, false) - estimate_of(without, data.texts, false))
+                    .abs()
+                    .max()
+                    .item<double>(),
+                1e-4);
+    }
+    std::vector<std::string> longer = data.texts;
+    longer[1] += " and then raise the right arm and bend the knees more";
+    const auto base = estimate(data.texts, false), other = estimate(longer, false);
+    EXPECT_LT((base.select(1, 0) - other.select(1, 0)).abs().max().item<double>(), 1e-5);
+    EXPECT_GT((base.select(1, 1) - other.select(1, 1)).abs().max().item<double>(), 1e-4);
+    EXPECT_LT((estimate(data.texts, true) - estimate(longer, true)).abs().max().item<double>(),
+              1e-5);
   }
-  net->eval();
-  torch::NoGradGuard no_grad;
-  const auto t = torch::full({3}, 5, torch::kInt64);
-  const auto estimate = [&](const std::vector<std::string>& texts, bool dropped) {
-    Condition c{texts, data.source, data.source_padding, torch::full({3}, dropped, torch::kBool),
-                torch::zeros({3}, torch::kBool)};
-    return net->forward(data.target, t, data.target_padding, c).x0;
-  };
-  std::vector<std::string> longer = data.texts;
-  longer[1] += " and then raise the right arm and bend the knees more";
-  const auto base = estimate(data.texts, false), other = estimate(longer, false);
-  EXPECT_LT((base.select(1, 0) - other.select(1, 0)).abs().max().item<double>(), 1e-5);
-  EXPECT_GT((base.select(1, 1) - other.select(1, 1)).abs().max().item<double>(), 1e-4);
-  EXPECT_LT((estimate(data.texts, true) - estimate(longer, true)).abs().max().item<double>(), 1e-5);
-
-  nlohmann::json tmed = {{"variant", "tmed"}, {"model", {{"text_tokens", true}}}};
-  EXPECT_THROW(EditorOptions::FromJson(tmed), std::invalid_argument);
-  EXPECT_TRUE(EditorOptions::FromJson({{"model", {{"text_tokens", true}}}})
-                  .ToJson()["model"]["text_tokens"]
-                  .get<bool>());
+  for (const std::string key : {"text_tokens", "dit_text_tokens"}) {
+    nlohmann::json tmed = {{"variant", "tmed"}, {"model", {{key, true}}}};
+    EXPECT_THROW(EditorOptions::FromJson(tmed), std::invalid_argument) << key;
+    EXPECT_TRUE(
+        EditorOptions::FromJson({{"model", {{key, true}}}}).ToJson()["model"][key].get<bool>())
+        << key;
+  }
 }
 
 // Issue 15: training in bf16 (plugins/common/precision.h). Under the guard the matrix products run
