@@ -35,9 +35,10 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(j, "",
                    {"variant", "model", "aux", "features", "adaln_text", "diffusion", "loss",
                     "text_encoder_from", "freeze_text_encoder", "fps"});
-  RequireKnownKeys(j.value("model", nlohmann::json::object()), "model.",
-                   {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout",
-                    "text_encoder", "concat_source", "text_tokens", "dit_text_tokens"});
+  RequireKnownKeys(
+      j.value("model", nlohmann::json::object()), "model.",
+      {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout", "text_encoder",
+       "concat_source", "text_tokens", "dit_text_tokens", "time_token", "dit_dropout"});
   RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
@@ -68,11 +69,15 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
         "tokens already; got variant '" +
         o.variant + "')");
   o.dit_text_tokens = m.value("dit_text_tokens", o.dit_text_tokens);
-  if (o.dit_text_tokens && o.variant != "mdt")
+  o.time_token = m.value("time_token", o.time_token);
+  o.dit_dropout = m.value("dit_dropout", o.dit_dropout);
+  if ((o.dit_text_tokens || o.time_token || o.dit_dropout != 0) && o.variant != "mdt")
     throw std::invalid_argument(
-        "model.dit_text_tokens: only the mdt variant has a DiT (TMED reads the tokens already; got "
+        "model.dit_text_tokens, time_token and dit_dropout: only the mdt variant has a DiT (got "
         "variant '" +
         o.variant + "')");
+  if (o.dit_dropout < 0 || o.dit_dropout >= 1)
+    throw std::invalid_argument("model.dit_dropout must be in [0, 1)");
   const nlohmann::json a = j.value("aux", nlohmann::json::object());
   o.aux = a.value("mode", o.variant == "mdt" ? o.aux : std::string("none"));
   o.classes = a.value("classes", o.classes);
@@ -170,6 +175,8 @@ nlohmann::json EditorOptions::ToJson() const {
             {"concat_source", concat_source},
             {"text_tokens", text_tokens},
             {"dit_text_tokens", dit_text_tokens},
+            {"time_token", time_token},
+            {"dit_dropout", dit_dropout},
             {"text_encoder", text.ToJson()}}},
           {"aux",
            {{"mode", aux},
@@ -234,8 +241,9 @@ torch::Tensor GatedResidual(const torch::Tensor& x, const torch::Tensor& gate,
   return x + gate * y;
 }
 
-DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) {
-  attention_ = register_module("attn", nn::SelfAttention(dim, heads, 0.0));
+DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff, double dropout)
+    : dropout_(dropout) {
+  attention_ = register_module("attn", nn::SelfAttention(dim, heads, dropout));
   fc1_ = register_module("fc1", torch::nn::Linear(dim, ff));
   fc2_ = register_module("fc2", torch::nn::Linear(ff, dim));
   modulation_ = register_module("adaLN_modulation", torch::nn::Linear(dim, 6 * dim));
@@ -247,9 +255,12 @@ DiTBlockImpl::DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff) {
 torch::Tensor DiTBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& silu_c,
                                     const torch::Tensor& padding) {
   const auto m = nn::ApplyLinear(modulation_, silu_c).unsqueeze(0).chunk(6, 2);  // each [1, N, d]
-  auto h = GatedResidual(x, m[2], attention_->forward(Modulate(x, m[1], m[0]), padding));
-  const auto mlp = nn::ApplyLinear(fc2_, GeluTanh(nn::ApplyLinear(fc1_, Modulate(h, m[4], m[3]))));
-  return GatedResidual(h, m[5], mlp);
+  const bool train = is_training();
+  auto h = GatedResidual(
+      x, m[2], nn::Dropout(attention_->forward(Modulate(x, m[1], m[0]), padding), dropout_, train));
+  const auto mlp = nn::ApplyLinear(
+      fc2_, nn::Dropout(GeluTanh(nn::ApplyLinear(fc1_, Modulate(h, m[4], m[3]))), dropout_, train));
+  return GatedResidual(h, m[5], nn::Dropout(mlp, dropout_, train));
 }
 
 EditorNetImpl::EditorNetImpl(const EditorOptions& o)
@@ -299,7 +310,8 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
                               torch::nn::Linear(o.sim_hidden, o.sim_hidden), torch::nn::SiLU(),
                               torch::nn::Linear(o.sim_hidden, o.sim_outputs())));
     blocks_ = register_module("blocks", torch::nn::ModuleList());
-    for (int64_t k = 0; k < o.layers; ++k) blocks_->push_back(DiTBlock(o.dim, o.heads, o.ff));
+    for (int64_t k = 0; k < o.layers; ++k)
+      blocks_->push_back(DiTBlock(o.dim, o.heads, o.ff, o.dit_dropout));
     final_modulation_ = register_module("final_modulation", torch::nn::Linear(o.dim, 2 * o.dim));
     // The text token is post-LayerNorm (entries of unit spread, norm about sqrt(d)); the timestep
     // embedding's norm is a unit or two. DiT's class embeddings start at N(0, 0.02): text_cond's
@@ -499,16 +511,22 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   }
   // DiT over [source; separator; noisy target] (with model.dit_text_tokens the text's tokens
   // first), conditioned on timestep (+ text).
-  auto cond = TimeEmbedding(t);
+  const auto cond_time = TimeEmbedding(t);
+  auto cond = cond_time;
   if (o_.adaln_text) cond = cond + TextCondition(o_.enhanced_text ? enhanced_text : text);
   const auto src = o_.enhanced_motion ? enhanced_source : source;
   std::vector<torch::Tensor> sequence, paddings;
+  if (o_.time_token) {
+    sequence.push_back(Place(cond_time.unsqueeze(0), kTime));
+    paddings.push_back(AnyPadding(n, 1));
+  }
   if (o_.dit_text_tokens) {
     sequence.push_back(Place(o_.text_tokens ? h.narrow(0, 1, words) : tokens.tokens, kText));
     paddings.push_back(c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1}))
                                              : tokens.padding);
   }
-  const int64_t prefix = (o_.dit_text_tokens ? tokens.tokens.size(0) : 0) + ts + 1;
+  const int64_t prefix =
+      (o_.time_token ? 1 : 0) + (o_.dit_text_tokens ? tokens.tokens.size(0) : 0) + ts + 1;
   sequence.insert(
       sequence.end(),
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),

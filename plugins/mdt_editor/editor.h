@@ -50,6 +50,14 @@ struct EditorOptions {
   // 3.2); issue 15's last untested suspect of why TMED edits better once both read the source
   // frame by frame. mdt only; false (the reference).
   bool dit_text_tokens = false;
+  // true: the MDT's DiT also reads the timestep embedding as its first token (TMED's timestep
+  // token), beside adaLN's use of it. Not in the paper (DiT conditions on the timestep through
+  // adaLN alone); false (the reference). mdt only.
+  bool time_token = false;
+  // Dropout in the DiT blocks: on the attention weights, the attention's output and the MLP's
+  // hidden and output, as in the encoder layers of the condition transformer and of TMED. DiT
+  // has none (0, the reference); mdt only.
+  double dit_dropout = 0;
   // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
   std::string aux = "classes";
   int classes = 3;
@@ -188,7 +196,7 @@ struct Prediction {
 // MLP.
 class DiTBlockImpl : public torch::nn::Module {
  public:
-  DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff);
+  DiTBlockImpl(int64_t dim, int64_t heads, int64_t ff, double dropout = 0);
   // x [T, N, d]; silu_c = SiLU(condition) [N, d] (the caller computes it once for every block).
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& silu_c,
                         const torch::Tensor& padding);
@@ -196,6 +204,7 @@ class DiTBlockImpl : public torch::nn::Module {
  private:
   nn::SelfAttention attention_{nullptr};
   torch::nn::Linear fc1_{nullptr}, fc2_{nullptr}, modulation_{nullptr};
+  double dropout_;
 };
 TORCH_MODULE(DiTBlock);
 

@@ -272,6 +272,49 @@ TEST(Editor, TextTokensReachTheMdtWithoutTyingATripletToItsBatch) {
   }
 }
 
+// model.time_token puts the timestep embedding first in the DiT's sequence (TMED's timestep
+// token), model.dit_dropout drops in the DiT blocks as in the encoder layers. Neither adds a
+// parameter, so the same weights with and without show each one's effect: the token changes the
+// estimate, the dropout only in training.
+TEST(Editor, TheDitsTimeTokenAndDropoutActWhereTheySay) {
+  const TinyTriplets data;
+  const auto make = [&](bool time_token, double dit_dropout) {
+    torch::manual_seed(8);
+    EditorOptions options = Tiny("mdt", "none");
+    options.time_token = time_token;
+    options.dit_dropout = dit_dropout;
+    EditorNet net(options);
+    net->text_encoder()->Fit(data.texts);
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
+    net->eval();
+    return net;
+  };
+  torch::NoGradGuard no_grad;
+  const auto estimate = [&](EditorNet& net) {
+    const auto t = torch::tensor({5, 20, 40}, torch::kInt64);
+    Condition c{data.texts, data.source, data.source_padding, torch::zeros({3}, torch::kBool),
+                torch::zeros({3}, torch::kBool)};
+    torch::manual_seed(1);
+    return net->forward(data.target, t, data.target_padding, c).x0;
+  };
+  EditorNet plain = make(false, 0), timed = make(true, 0), dropping = make(false, 0.3);
+  const auto base = estimate(plain);
+  EXPECT_GT((estimate(timed) - base).abs().max().item<double>(), 1e-4);
+  EXPECT_TRUE(torch::equal(estimate(dropping), base));  // eval: no dropout
+  dropping->train();
+  plain->train();  // the condition transformer's own dropout draws alike in both
+  EXPECT_GT((estimate(dropping) - estimate(plain)).abs().max().item<double>(), 1e-4);
+  for (const auto& [key, value] : std::vector<std::pair<std::string, nlohmann::json>>{
+           {"time_token", true}, {"dit_dropout", 0.1}}) {
+    nlohmann::json tmed = {{"variant", "tmed"}, {"model", {{key, value}}}};
+    EXPECT_THROW(EditorOptions::FromJson(tmed), std::invalid_argument) << key;
+    EXPECT_EQ(EditorOptions::FromJson({{"model", {{key, value}}}}).ToJson()["model"][key], value)
+        << key;
+  }
+  EXPECT_THROW(EditorOptions::FromJson({{"model", {{"dit_dropout", 1.0}}}}), std::invalid_argument);
+}
+
 // Issue 15: training in bf16 (plugins/common/precision.h). Under the guard the matrix products run
 // in bfloat16 while the weights and their gradients stay float32, the guard restores autocast's
 // state, and the MDT's loss and gradients on a batch agree with float32's (a broken cast, or
