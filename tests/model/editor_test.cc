@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include "../../plugins/common/fused.h"
 #include "../../plugins/common/precision.h"
@@ -139,6 +140,23 @@ struct TinyTriplets {
   }
 };
 
+// A tiny MDT (options set by `configure`) with every weight moved a little from its seeded start,
+// in eval mode: adaLN-Zero and the zero output layer start the estimate at the source prior, and
+// the moved weights make it depend on the condition. Options that add no parameter give the same
+// weights with and without them.
+EditorNet PerturbedMdt(const TinyTriplets& data, uint64_t seed,
+                       const std::function<void(EditorOptions&)>& configure) {
+  torch::manual_seed(seed);
+  EditorOptions options = Tiny("mdt", "none");
+  configure(options);
+  EditorNet net(options);
+  net->text_encoder()->Fit(data.texts);
+  torch::NoGradGuard no_grad;
+  for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
+  net->eval();
+  return net;
+}
+
 TEST(Editor, EveryVariantOverfitsAFewTriplets) {
   for (const std::string variant :
        {"mdt", "tmed", "mdm", "mdt concat_source", "mdt concat_source text_tokens"}) {
@@ -222,18 +240,10 @@ TEST(Editor, TextTokensReachTheMdtWithoutTyingATripletToItsBatch) {
                  std::to_string(dit_text_tokens));
     // The same weights with and without the DiT's tokens (the option adds no parameter).
     const auto make = [&](bool in_dit) {
-      torch::manual_seed(6);
-      EditorOptions options = Tiny("mdt", "none");
-      options.text_tokens = text_tokens;
-      options.dit_text_tokens = in_dit;
-      EditorNet net(options);
-      net->text_encoder()->Fit(data.texts);
-      // adaLN-Zero and the zero output layer start the estimate at the source prior: move every
-      // weight a little so that it depends on the condition.
-      torch::NoGradGuard no_grad;
-      for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
-      net->eval();
-      return net;
+      return PerturbedMdt(data, 6, [&](EditorOptions& o) {
+        o.text_tokens = text_tokens;
+        o.dit_text_tokens = in_dit;
+      });
     };
     EditorNet net = make(dit_text_tokens);
     torch::NoGradGuard no_grad;
@@ -279,16 +289,10 @@ TEST(Editor, TextTokensReachTheMdtWithoutTyingATripletToItsBatch) {
 TEST(Editor, TheDitsTimeTokenAndDropoutActWhereTheySay) {
   const TinyTriplets data;
   const auto make = [&](bool time_token, double dit_dropout) {
-    torch::manual_seed(8);
-    EditorOptions options = Tiny("mdt", "none");
-    options.time_token = time_token;
-    options.dit_dropout = dit_dropout;
-    EditorNet net(options);
-    net->text_encoder()->Fit(data.texts);
-    torch::NoGradGuard no_grad;
-    for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.05);
-    net->eval();
-    return net;
+    return PerturbedMdt(data, 8, [&](EditorOptions& o) {
+      o.time_token = time_token;
+      o.dit_dropout = dit_dropout;
+    });
   };
   torch::NoGradGuard no_grad;
   const auto estimate = [&](EditorNet& net) {
