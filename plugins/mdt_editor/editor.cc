@@ -38,7 +38,7 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   RequireKnownKeys(
       j.value("model", nlohmann::json::object()), "model.",
       {"dim", "cond_layers", "layers", "heads", "ff", "sim_hidden", "dropout", "text_encoder",
-       "concat_source", "text_tokens", "dit_text_tokens", "time_token", "dit_dropout"});
+       "concat_source", "text_tokens", "dit_text_tokens", "time_token", "dit_dropout", "trunk"});
   RequireKnownKeys(j.value("aux", nlohmann::json::object()), "aux.",
                    {"mode", "classes", "weight", "class_weights"});
   RequireKnownKeys(j.value("features", nlohmann::json::object()), "features.", {"text", "motion"});
@@ -71,10 +71,14 @@ EditorOptions EditorOptions::FromJson(const nlohmann::json& j) {
   o.dit_text_tokens = m.value("dit_text_tokens", o.dit_text_tokens);
   o.time_token = m.value("time_token", o.time_token);
   o.dit_dropout = m.value("dit_dropout", o.dit_dropout);
-  if ((o.dit_text_tokens || o.time_token || o.dit_dropout != 0) && o.variant != "mdt")
+  o.trunk = m.value("trunk", o.trunk);
+  if (o.trunk != "dit" && o.trunk != "encoder")
+    throw std::invalid_argument("model.trunk must be dit or encoder (got '" + o.trunk + "')");
+  if ((o.dit_text_tokens || o.time_token || o.dit_dropout != 0 || o.trunk != "dit") &&
+      o.variant != "mdt")
     throw std::invalid_argument(
-        "model.dit_text_tokens, time_token and dit_dropout: only the mdt variant has a DiT (got "
-        "variant '" +
+        "model.dit_text_tokens, time_token, dit_dropout and trunk: only the mdt variant has a DiT "
+        "(got variant '" +
         o.variant + "')");
   if (o.dit_dropout < 0 || o.dit_dropout >= 1)
     throw std::invalid_argument("model.dit_dropout must be in [0, 1)");
@@ -177,6 +181,7 @@ nlohmann::json EditorOptions::ToJson() const {
             {"dit_text_tokens", dit_text_tokens},
             {"time_token", time_token},
             {"dit_dropout", dit_dropout},
+            {"trunk", trunk},
             {"text_encoder", text.ToJson()}}},
           {"aux",
            {{"mode", aux},
@@ -309,6 +314,10 @@ EditorNetImpl::EditorNetImpl(const EditorOptions& o)
         torch::nn::Sequential(torch::nn::Linear(o.dim, o.sim_hidden), torch::nn::SiLU(),
                               torch::nn::Linear(o.sim_hidden, o.sim_hidden), torch::nn::SiLU(),
                               torch::nn::Linear(o.sim_hidden, o.sim_outputs())));
+    if (o.trunk == "encoder") {  // TMED's layers over the noisy target; no adaLN
+      encoder_ = register_module("encoder", nn::Encoder(layer));
+      return;
+    }
     blocks_ = register_module("blocks", torch::nn::ModuleList());
     for (int64_t k = 0; k < o.layers; ++k)
       blocks_->push_back(DiTBlock(o.dim, o.heads, o.ff, o.dit_dropout));
@@ -509,24 +518,27 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
     auto s = nn::ApplySequential(sim_head_, enhanced_source).transpose(0, 1);  // [N, Ts, K]
     p.similarity = o_.aux == "regression" ? s.squeeze(2) : s;
   }
-  // DiT over [source; separator; noisy target] (with model.dit_text_tokens the text's tokens
-  // first), conditioned on timestep (+ text).
+  // DiT over [source; separator; noisy target] (with model.time_token the timestep and with
+  // model.dit_text_tokens the text's tokens first), conditioned on timestep (+ text); or, with
+  // model.trunk encoder, TMED's encoder layers over [timestep; text tokens; source; separator;
+  // noisy target].
+  const bool encoder_trunk = o_.trunk == "encoder";
+  const bool time_token = o_.time_token || encoder_trunk;
+  const bool text_in_trunk = o_.dit_text_tokens || encoder_trunk;
   const auto cond_time = TimeEmbedding(t);
-  auto cond = cond_time;
-  if (o_.adaln_text) cond = cond + TextCondition(o_.enhanced_text ? enhanced_text : text);
   const auto src = o_.enhanced_motion ? enhanced_source : source;
   std::vector<torch::Tensor> sequence, paddings;
-  if (o_.time_token) {
+  if (time_token) {
     sequence.push_back(Place(cond_time.unsqueeze(0), kTime));
     paddings.push_back(AnyPadding(n, 1));
   }
-  if (o_.dit_text_tokens) {
+  if (text_in_trunk) {
     sequence.push_back(Place(o_.text_tokens ? h.narrow(0, 1, words) : tokens.tokens, kText));
     paddings.push_back(c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1}))
                                              : tokens.padding);
   }
   const int64_t prefix =
-      (o_.time_token ? 1 : 0) + (o_.dit_text_tokens ? tokens.tokens.size(0) : 0) + ts + 1;
+      (time_token ? 1 : 0) + (text_in_trunk ? tokens.tokens.size(0) : 0) + ts + 1;
   sequence.insert(
       sequence.end(),
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
@@ -534,10 +546,16 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   paddings.insert(paddings.end(), {source_padding, AnyPadding(n, 1), target_padding});
   auto x = torch::cat(sequence, 0);
   const auto padding = torch::cat(paddings, 1);
-  const auto silu_cond = torch::silu(cond);  // every block's adaLN input, computed once
-  for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, silu_cond, padding);
-  const auto m = nn::ApplyLinear(final_modulation_, silu_cond).unsqueeze(0).chunk(2, 2);
-  x = Modulate(x.narrow(0, prefix, tt), m[1], m[0]);
+  if (encoder_trunk) {
+    x = encoder_->forward(x, padding).narrow(0, prefix, tt);
+  } else {
+    auto cond = cond_time;
+    if (o_.adaln_text) cond = cond + TextCondition(o_.enhanced_text ? enhanced_text : text);
+    const auto silu_cond = torch::silu(cond);  // every block's adaLN input, computed once
+    for (const auto& block : *blocks_) x = block->as<DiTBlock>()->forward(x, silu_cond, padding);
+    const auto m = nn::ApplyLinear(final_modulation_, silu_cond).unsqueeze(0).chunk(2, 2);
+    x = Modulate(x.narrow(0, prefix, tt), m[1], m[0]);
+  }
   p.x0 = nn::ApplyLinear(out_, x);
   if (contact_out_) p.contacts = nn::ApplyLinear(contact_out_, x);
   return p;

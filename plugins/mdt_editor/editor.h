@@ -58,6 +58,12 @@ struct EditorOptions {
   // hidden and output, as in the encoder layers of the condition transformer and of TMED. DiT
   // has none (0, the reference); mdt only.
   double dit_dropout = 0;
+  // The MDT's trunk over the noisy target: "dit" (the paper's DiT blocks with adaLN-Zero) or
+  // "encoder": TMED's post-LN encoder layers (model.layers, model.dropout) over [timestep token;
+  // text tokens; enhanced source; separator; noisy target], no adaLN, so that the MDT differs from
+  // TMED only by its condition transformer and auxiliary task. Not in the paper; issue 15's test
+  // of whether the DiT block is what edits worse than TMED at this budget. mdt only.
+  std::string trunk = "dit";
   // Auxiliary similarity task: classes (K bins of the normalised curve), regression, or none.
   std::string aux = "classes";
   int classes = 3;

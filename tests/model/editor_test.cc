@@ -319,6 +319,35 @@ TEST(Editor, TheDitsTimeTokenAndDropoutActWhereTheySay) {
   EXPECT_THROW(EditorOptions::FromJson({{"model", {{"dit_dropout", 1.0}}}}), std::invalid_argument);
 }
 
+// model.trunk encoder: TMED's encoder layers over [timestep; text tokens; source; separator;
+// noisy target] replace the DiT (no adaLN parameters), and the estimate still depends on the
+// timestep, the text and the source, and not on the other texts of its batch.
+TEST(Editor, TheEncoderTrunkReadsTimestepTextAndSource) {
+  const TinyTriplets data;
+  EditorNet net = PerturbedMdt(data, 10, [](EditorOptions& o) { o.trunk = "encoder"; });
+  for (const auto& item : net->named_parameters())
+    EXPECT_EQ(item.key().find("adaLN"), std::string::npos) << item.key();
+  torch::NoGradGuard no_grad;
+  const auto estimate = [&](const std::vector<std::string>& texts, const torch::Tensor& source,
+                            int64_t step) {
+    Condition c{texts, source, data.source_padding, torch::zeros({3}, torch::kBool),
+                torch::zeros({3}, torch::kBool)};
+    return net->forward(data.target, torch::full({3}, step, torch::kInt64), data.target_padding, c)
+        .x0;
+  };
+  std::vector<std::string> longer = data.texts;
+  longer[1] += " and then raise the right arm and bend the knees more";
+  const auto base = estimate(data.texts, data.source, 5);
+  const auto other = estimate(longer, data.source, 5);
+  EXPECT_LT((base.select(1, 0) - other.select(1, 0)).abs().max().item<double>(), 1e-5);
+  EXPECT_GT((base.select(1, 1) - other.select(1, 1)).abs().max().item<double>(), 1e-4);
+  EXPECT_GT((estimate(data.texts, data.source, 40) - base).abs().max().item<double>(), 1e-4);
+  EXPECT_GT((estimate(data.texts, data.source + 1.0, 5) - base).abs().max().item<double>(), 1e-4);
+  EXPECT_THROW(EditorOptions::FromJson({{"model", {{"trunk", "unet"}}}}), std::invalid_argument);
+  EXPECT_THROW(EditorOptions::FromJson({{"variant", "tmed"}, {"model", {{"trunk", "encoder"}}}}),
+               std::invalid_argument);
+}
+
 // Issue 15: training in bf16 (plugins/common/precision.h). Under the guard the matrix products run
 // in bfloat16 while the weights and their gradients stay float32, the guard restores autocast's
 // state, and the MDT's loss and gradients on a batch agree with float32's (a broken cast, or
