@@ -501,12 +501,14 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   std::vector<torch::Tensor> parts = {text.unsqueeze(0) + positions.narrow(0, 0, 1)};
   std::vector<torch::Tensor> masks = {AnyPadding(n, 1)};
   const int64_t words = o_.text_tokens ? tokens.tokens.size(0) : 0;
+  // A dropped text's tokens are masked wherever they are read, not only zeroed: how many there
+  // were is a trace of it.
+  const auto word_mask =
+      c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1})) : tokens.padding;
   if (o_.text_tokens) {
     parts.push_back(tokens.tokens + nn::PositionalEncoding(words, o_.dim) +
                     segments_[kText].view({1, 1, -1}));
-    // A dropped text's tokens are masked, not only zeroed: how many there were is a trace of it.
-    masks.push_back(c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1}))
-                                          : tokens.padding);
+    masks.push_back(word_mask);
   }
   parts.push_back(source + positions.narrow(0, 1, ts));
   masks.push_back(source_padding);
@@ -534,11 +536,10 @@ Prediction EditorNetImpl::ForwardMdt(const torch::Tensor& xt, const torch::Tenso
   }
   if (text_in_trunk) {
     sequence.push_back(Place(o_.text_tokens ? h.narrow(0, 1, words) : tokens.tokens, kText));
-    paddings.push_back(c.drop_text.defined() ? tokens.padding.logical_or(c.drop_text.view({-1, 1}))
-                                             : tokens.padding);
+    paddings.push_back(word_mask);
   }
-  const int64_t prefix =
-      (time_token ? 1 : 0) + (text_in_trunk ? tokens.tokens.size(0) : 0) + ts + 1;
+  int64_t prefix = ts + 1;  // the target's offset: every token before it
+  for (const auto& part : sequence) prefix += part.size(0);
   sequence.insert(
       sequence.end(),
       {Place(src, kSource), Place(separator_.view({1, 1, -1}).expand({1, n, o_.dim}), kSeparator),
